@@ -1,0 +1,71 @@
+"""ctui command line.
+
+``ctui`` with no argument opens the TUI on the bundled sample series; ``ctui PATH`` or
+``ctui open PATH`` opens any input :func:`ctui.engine.loaders.load` accepts.
+
+Each subcommand lives in ``ctui/commands/<name>.py`` with ``register(subparsers)``
+and ``run(args) -> int``; those modules import nothing heavy at top level, so
+``ctui --help`` stays fast. User errors (:class:`ctui.engine.errors.CtuiError`) are
+printed as one line on stderr with exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from . import __version__
+
+COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ctui",
+        description="Turn CT and MRI slice series into measured 3D models, from the terminal.",
+        epilog="With no command, opens the TUI on the bundled sample series; `ctui PATH` opens PATH.",
+    )
+    parser.add_argument("--version", action="version", version=f"ctui {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            mod = importlib.import_module(f"ctui.commands.{name}")
+        except ModuleNotFoundError as exc:  # a command not written yet
+            if exc.name != f"ctui.commands.{name}":
+                raise
+            continue
+        mod.register(sub)
+    return parser
+
+
+class _UsageError(Exception):
+    pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:
+        argv = ["open"]
+    elif argv[0] not in COMMANDS and not argv[0].startswith("-"):
+        argv = ["open", *argv]
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    from .engine.errors import CtuiError
+
+    try:
+        rc = args.func(args)
+    except CtuiError as exc:
+        print(f"ctui {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"ctui {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,37 @@
+"""Shared test fixtures.
+
+``shared_data`` points at ``../shared/data`` (real public data sets); tests that need
+it skip with a reason when it is absent. ``egl_ok`` tells whether an EGL context can
+be created.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("CTUI_SHARED_DATA", ROOT.parent / "shared" / "data"))
+SAMPLE_DATA = ROOT / "sample_data"
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real data folder {SHARED_DATA} is missing")
+    return SHARED_DATA
+
+
+def shared(name: str) -> Path:
+    """Path of one data set in ../shared/data, or skip the test with a reason."""
+    p = SHARED_DATA / name
+    if not p.exists():
+        pytest.skip(f"real data set {p} is missing")
+    return p
+
+
+@pytest.fixture(scope="session")
+def sample_dir() -> Path:
+    return SAMPLE_DATA
