@@ -339,9 +339,11 @@ def _truth(volume, xc, yc, zc, drift_map, noise_sd, seed) -> dict[str, Any]:
 
 
 def _uid(*parts: object) -> str:
-    from pydicom.uid import generate_uid
+    from pydicom.uid import PYDICOM_ROOT_UID, generate_uid
 
-    return generate_uid(prefix=None, entropy_srcs=["ctui-phantom", *map(str, parts)])
+    # deterministic (hash of the sources) so regenerated files are byte-identical;
+    # prefix=None would ignore entropy_srcs and draw a random UUID
+    return generate_uid(prefix=PYDICOM_ROOT_UID, entropy_srcs=["ctui-phantom", *map(str, parts)])
 
 
 def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, description: str = "ctui synthetic phantom") -> list[Path]:
