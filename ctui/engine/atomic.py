@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import IO, Iterator
@@ -31,6 +32,54 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
+def _lock(fd: int) -> bool:
+    try:
+        import fcntl
+
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except (ImportError, OSError):
+        return False
+
+
+def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 1.0) -> int:
+    """Remove temporary files left beside ``path`` by writers that died mid-save.
+
+    A temp file ``.NAME.*.tmp*`` is stale when no process holds its lock (the lock
+    dies with its process) and it is older than ``min_age_s`` (which covers the instant
+    between another writer creating and locking it). Returns how many were removed.
+    """
+    import time
+
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    prefix = f".{target.name}."
+    removed = 0
+    try:
+        names = [n for n in os.listdir(folder) if n.startswith(prefix) and ".tmp" in n[len(prefix):]]
+    except OSError:
+        return 0
+    now = time.time()
+    for name in names:
+        p = folder / name
+        try:
+            st = os.lstat(p)
+            if not stat.S_ISREG(st.st_mode) or now - st.st_mtime < min_age_s:
+                continue
+            fd = os.open(p, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        except OSError:
+            continue
+        try:
+            if _lock(fd):
+                os.unlink(p)
+                removed += 1
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it onto ``path``.
@@ -43,11 +92,15 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     folder = target.parent if str(target.parent) else Path(".")
     if suffix is None:
         suffix = "".join(target.suffixes) or ""
+    clean_stale_temps(target)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=folder)
     except OSError as exc:
         raise CtuiError(f"{target}: cannot write ({exc.strerror or exc})") from exc
-    os.close(fd)
+    # Hold an exclusive lock on the temp file while it is in flight: the kernel drops
+    # it when this process dies (even SIGKILL), which tells clean_stale_temps that a
+    # leftover is stale.
+    _lock(fd)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -64,6 +117,8 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         raise
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
