@@ -1,0 +1,47 @@
+"""``ctui [PATH]`` / ``ctui open PATH|PROJECT.ctui``: the terminal app."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+GRAPHICS = ("auto", "sixel", "kitty", "halfblock", "ascii")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "open",
+        help="open the TUI on a series, or resume a .ctui project",
+        description="Open the terminal app on PATH (any series `load` accepts), or resume a "
+        "PROJECT.ctui. With no PATH: the bundled sample series.",
+    )
+    p.add_argument("path", nargs="?", help="series folder/file, or a .ctui project (default: bundled sample)")
+    p.add_argument("--graphics", choices=GRAPHICS, default=None,
+                   help="how images reach the terminal (default: $CTUI_GRAPHICS or auto)")
+    p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) to open when PATH holds several")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ctui.engine.errors import CtuiError
+    from ctui.screens.graphics import prepare_graphics
+
+    try:
+        mode = prepare_graphics(args.graphics)  # before Textual owns the terminal
+    except ValueError as exc:
+        raise CtuiError(str(exc)) from None
+    path = args.path
+    project = None
+    if path is not None:
+        if not os.path.exists(path):
+            raise CtuiError("no such file or folder", path=path)
+        if path.endswith(".ctui") or path.endswith(".ctui.autosave"):
+            project, path = path, None
+    from ctui.screens.app import CtuiApp
+
+    options = {}
+    if args.series:
+        options["series"] = args.series
+    app = CtuiApp(path, project=project, graphics=mode, **options)
+    app.run()
+    return int(app.return_code or 0)

@@ -1,0 +1,362 @@
+"""The ctui Textual app: loading, the workspace, project save/autosave, quit guard,
+help and the command palette."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from textual import work
+from textual.app import App, ComposeResult, SystemCommand
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import Screen
+from textual.widgets import Footer, Label, ProgressBar, Static
+
+from ctui.engine.errors import CtuiError
+
+from .graphics import colour_advice
+from .session import Session, engine, load_volume
+
+AUTOSAVE_SECONDS = 180.0
+
+
+class LoadingScreen(Screen):
+    """Shown while a series loads (progress bar), or the reasons it could not load."""
+
+    DEFAULT_CSS = """
+    LoadingScreen { align: center middle; }
+    LoadingScreen > Vertical { width: 80%; height: auto; border: round $accent; padding: 1 2; }
+    LoadingScreen ProgressBar { margin: 1 0; }
+    """
+    BINDINGS = [Binding("o", "app.open", "Open another"), Binding("q", "app.quit", "Quit")]
+
+    def __init__(self, what: str) -> None:
+        super().__init__()
+        self.what = what
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(f"Loading [b]{self.what}[/b] ...", id="load-title")
+            yield ProgressBar(total=None, id="load-progress", show_eta=False)
+            yield Static("", id="load-reasons")
+        yield Footer()
+
+    def show_error(self, title: str, reasons: list[str]) -> None:
+        self.query_one("#load-title", Label).update(f"[b red]{title}[/b red]")
+        self.query_one("#load-progress").display = False
+        body = "\n".join(f"• {r}" for r in reasons) + "\n\n[dim]o opens another path, q quits[/dim]"
+        self.query_one("#load-reasons", Static).update(body)
+
+
+class CtuiApp(App):
+    """ctui: slice series to measured 3D models, from the keyboard."""
+
+    TITLE = "ctui"
+    CSS = """
+    Screen { background: $background; }
+    """
+    BINDINGS = [
+        Binding("question_mark", "help", "Help"),
+        Binding("ctrl+s", "save", "Save project"),
+        Binding("q", "request_quit", "Quit"),
+        Binding("ctrl+q", "request_quit", "Quit", show=False, priority=True),
+        Binding("ctrl+p", "command_palette", "Commands", show=False),
+    ]
+
+    def __init__(self, path: str | None = None, *, project: str | None = None, graphics: str | None = None,
+                 session: Session | None = None, autosave_s: float = AUTOSAVE_SECONDS, **load_options: Any) -> None:
+        super().__init__()
+        self.path = path
+        self.project_file = project
+        self.graphics = graphics
+        self.load_options = load_options
+        self.session: Session | None = session
+        self.workspace = None
+        self.autosave_s = autosave_s
+        self._last_autosave = time.monotonic()
+        self._colour_warned = False
+        self.errors: list[str] = []  # every error notified (tests read it)
+
+    # ------------------------------------------------------------------ start
+    def on_mount(self) -> None:
+        if self.session is not None:
+            self._start_workspace(self.session)
+        elif self.project_file:
+            self.push_screen(LoadingScreen(self.project_file))
+            self.load_project_worker(self.project_file)
+        else:
+            self.push_screen(LoadingScreen(self.path or "the bundled sample series"))
+            self.load_worker(self.path)
+        self.set_interval(30.0, self._autosave_tick)
+        self.call_after_refresh(self._check_colours)
+
+    def _check_colours(self) -> None:
+        if self._colour_warned:
+            return
+        advice = colour_advice(getattr(self.console, "color_system", None))
+        if advice and not self.is_headless:
+            self._colour_warned = True
+            self.notify(advice, title="Colours", severity="warning", timeout=15)
+
+    def notify(self, message: str, *, title: str = "", severity: str = "information", timeout: float | None = None, markup: bool = False) -> None:  # type: ignore[override]
+        if severity == "error":
+            self.errors.append(str(message))
+        super().notify(str(message), title=title, severity=severity, timeout=timeout, markup=markup)
+
+    @work(thread=True, exclusive=True, group="load")
+    def load_worker(self, path: str | None, options: dict | None = None) -> None:
+        options = dict(self.load_options if options is None else options)
+
+        def progress(*a: Any) -> None:
+            if len(a) >= 2 and a[1]:
+                self.call_from_thread(self._load_progress, float(a[0]), float(a[1]))
+
+        try:
+            vol = load_volume(path, progress=progress, **options)
+        except CtuiError as exc:
+            self.call_from_thread(self._load_failed, path, [str(exc)])
+            return
+        except Exception as exc:  # a loader bug must not become a traceback
+            self.call_from_thread(self._load_failed, path, [f"{type(exc).__name__}: {exc}"])
+            return
+        src = path
+        if src is None:
+            try:
+                from .session import sample_source
+
+                src = sample_source()
+            except CtuiError:
+                src = ""
+        sess = Session(vol, source_path=str(src or ""), source_options=options)
+        self.call_from_thread(self._start_workspace, sess)
+
+    def _load_progress(self, done: float, total: float) -> None:
+        if isinstance(self.screen, LoadingScreen):
+            self.screen.query_one("#load-progress", ProgressBar).update(total=total, progress=done)
+
+    def _load_failed(self, path: str | None, reasons: list[str]) -> None:
+        self.errors.extend(reasons)
+        if isinstance(self.screen, LoadingScreen):
+            self.screen.show_error(f"Could not open {path or 'the sample series'}", reasons)
+        else:
+            self.notify(f"Could not open {path}: {'; '.join(reasons)}", severity="error", timeout=10)
+
+    @work(thread=True, exclusive=True, group="load")
+    def load_project_worker(self, path: str) -> None:
+        try:
+            proj = engine("project").load_project(path)
+            vol = load_volume(proj.source_path, **(proj.source_options or {}))
+            sess = session_from_project(proj, vol, path)
+        except CtuiError as exc:
+            self.call_from_thread(self._load_failed, path, [str(exc)])
+            return
+        except Exception as exc:
+            self.call_from_thread(self._load_failed, path, [f"{type(exc).__name__}: {exc}"])
+            return
+        self.call_from_thread(self._start_workspace, sess)
+
+    def _start_workspace(self, session: Session) -> None:
+        from .workspace import WorkspaceScreen
+
+        self.session = session
+        for w in session.volume.warnings[:3]:
+            self.notify(w, title="Series", severity="warning", timeout=6)
+        if session.volume.skipped:
+            self.notify(f"{len(session.volume.skipped)} file(s) skipped (see ctui info)", severity="warning", timeout=6)
+        ws = WorkspaceScreen(session)
+        self.workspace = ws
+        # replace whatever is on the stack (loading screen, old workspace)
+        while len(self.screen_stack) > 1:
+            self.pop_screen()
+        self.push_screen(ws)
+
+    def open_path(self, path: str) -> None:
+        """Open another series or project (from the open screen)."""
+        if path.endswith(".ctui"):
+            self.push_screen(LoadingScreen(path))
+            self.load_project_worker(path)
+        else:
+            self.push_screen(LoadingScreen(path))
+            self.load_worker(path, {})
+
+    # ------------------------------------------------------------------ actions
+    def action_open(self) -> None:
+        from .open_screen import OpenScreen
+
+        start = None
+        if self.session is not None and self.session.source_path:
+            start = str(Path(self.session.source_path).parent)
+
+        def done(path: str | None) -> None:
+            if not path:
+                return
+            if self.session is not None and self.session.dirty:
+                from .dialogs import ConfirmScreen
+
+                self.push_screen(ConfirmScreen("Discard unsaved work and open another series?", "Discard", "Keep"),
+                                 lambda ok: ok and self.open_path(path))
+            else:
+                self.open_path(path)
+
+        self.push_screen(OpenScreen(start), done)
+
+    def action_help(self) -> None:
+        from .dialogs import TextScreen, bindings_help
+
+        screen = self.screen
+        text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
+        if self.workspace is not None and screen is not self.workspace:
+            text += f"[b]Slice workspace[/b]\n{bindings_help(self.workspace)}\n\n"
+        text += "[b]Command palette[/b]: Ctrl+P lists every action by name.\n"
+        text += "Graphics: --graphics auto|sixel|kitty|halfblock|ascii or CTUI_GRAPHICS.\n"
+        self.push_screen(TextScreen("ctui help", text))
+
+    def action_save(self, then_quit: bool = False) -> None:
+        s = self.session
+        if s is None:
+            return
+        if s.project_path:
+            self._save_to(s.project_path, then_quit)
+            return
+        from .dialogs import PromptScreen
+
+        default = str(Path.cwd() / (Path(s.source_path or "project").name.replace(" ", "_") + ".ctui"))
+
+        def done(val: str | None) -> None:
+            if val:
+                p = val.strip()
+                if not p.endswith(".ctui"):
+                    p += ".ctui"
+                self._save_to(p, then_quit)
+
+        self.push_screen(PromptScreen("Save project as", default), done)
+
+    def _save_to(self, path: str, then_quit: bool = False) -> None:
+        s = self.session
+        try:
+            proj = project_from_session(s)
+            engine("project").save_project(path, proj)
+        except (CtuiError, OSError, ValueError) as exc:
+            self.notify(f"Project not saved: {exc}", severity="error", timeout=10)
+            return
+        s.project_path = path
+        s.dirty = False
+        try:
+            engine("project").remove_autosave(path)
+        except Exception:
+            pass
+        self.notify(f"Project saved: {path}", timeout=3)
+        if self.workspace is not None:
+            self.workspace.update_panel()
+        if then_quit:
+            self.exit()
+
+    def _autosave_tick(self) -> None:
+        s = self.session
+        if s is None or not s.dirty or time.monotonic() - self._last_autosave < self.autosave_s:
+            return
+        self._last_autosave = time.monotonic()
+        self.autosave_worker()
+
+    @work(thread=True, exclusive=True, group="autosave")
+    def autosave_worker(self) -> None:
+        s = self.session
+        try:
+            project = engine("project")
+            proj = project_from_session(s)
+            target = project.autosave(proj, s.project_path or s.source_path)
+        except Exception as exc:
+            self.call_from_thread(self.notify, f"Autosave failed: {exc}", severity="warning")
+            return
+        self.call_from_thread(self.notify, f"Autosaved to {target}", timeout=2)
+
+    def action_request_quit(self) -> None:
+        s = self.session
+        if s is not None and s.dirty:
+            from .dialogs import ChoiceScreen
+
+            def done(choice: str | None) -> None:
+                if choice == "save":
+                    self.action_save(then_quit=True)
+                elif choice == "quit":
+                    self.exit()
+
+            self.push_screen(ChoiceScreen("Unsaved work. Quit anyway?", [
+                ("save", "Save the project, then quit"),
+                ("quit", "Quit without saving"),
+                ("cancel", "Keep working"),
+            ]), done)
+            return
+        self.exit()
+
+    # ------------------------------------------------------------------ command palette
+    def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
+        yield from super().get_system_commands(screen)
+        seen = {"quit", "help", "command_palette"}
+        targets = [screen] + ([self.workspace] if self.workspace is not None and self.workspace is not screen else [])
+        for node in targets:
+            for b in node.BINDINGS:
+                key, action, desc = (b.key, b.action, b.description) if isinstance(b, Binding) else b
+                if action in seen:
+                    continue
+                seen.add(action)
+                keys = key.split(",")[0]
+                yield SystemCommand(f"{desc or action}", f"key {keys}", self._palette_callback(node, action))
+        yield SystemCommand("Save project", "Ctrl+S", self.action_save)
+        yield SystemCommand("Help: all keys", "?", self.action_help)
+        yield SystemCommand("Open series or project", "o", self.action_open)
+
+    def _palette_callback(self, node, action: str):
+        async def run() -> None:
+            await node.run_action(action)
+
+        return run
+
+
+# ---------------------------------------------------------------------- projects
+def project_from_session(s: Session):
+    """A ctui.engine.project.Project of the session's state."""
+    project = engine("project")
+    seg = s.seg
+    labels = getattr(seg, "labels", None)
+    objects = seg.object_list() if seg is not None else []
+    return project.Project(
+        source_path=str(s.source_path),
+        source_options=dict(s.source_options or {}),
+        pipeline=s.pipeline.to_dict() if s.pipeline is not None else {},
+        labels=labels,
+        objects=objects,
+        propagation={"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None,
+                     "connectivity": s.connectivity, "current": s.current},
+        drift=dict(s.drift_info or {}),
+        window=tuple(s.window),
+        meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view},
+    )
+
+
+def session_from_project(proj, volume, path: str) -> Session:
+    """Rebuild a Session from a loaded Project and its source volume."""
+    pipeline_mod = engine("pipeline")
+    selection = engine("selection")
+    labels = proj.labels
+    if labels is not None and tuple(labels.shape) != tuple(volume.shape):
+        raise CtuiError(f"labels {labels.shape} do not match the series {volume.shape}", path=path)
+    seg = selection.Segmentation(volume.shape, labels=labels, objects=proj.objects or [])
+    prop = proj.propagation or {}
+    meta = proj.meta or {}
+    s = Session(volume, source_path=proj.source_path, source_options=dict(proj.source_options or {}),
+                pipeline=pipeline_mod.Pipeline.from_dict(proj.pipeline or {}), seg=seg,
+                z=int(meta.get("z", 0)), x=int(meta.get("x", 0)), y=int(meta.get("y", 0)))
+    if proj.window:
+        s.window = (float(proj.window[0]), float(proj.window[1]))
+    s.tolerance = float(prop.get("tolerance", s.tolerance))
+    s.range_ = tuple(prop["range"]) if prop.get("range") else None
+    s.connectivity = int(prop.get("connectivity", 8))
+    s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
+    s.view = str(meta.get("view", s.view))
+    s.drift_info = dict(proj.drift or {})
+    s.project_path = path
+    return s

@@ -1,0 +1,173 @@
+"""ImageView: one widget that shows a numpy RGB image in any graphics mode.
+
+Half-block and ascii are drawn by ctui's own renderer (:mod:`ctui.screens.cells`)
+with Textual's Line API; sixel and kitty hand a pre-sized PIL image (resized with
+OpenCV to exactly the widget's pixel size) to textual-image's widgets.
+
+The image may carry pixel spacing (physical aspect), a zoom/pan and a cursor (the red
+circle); the widget fits it to whatever size it has, so resizing the terminal just
+works.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from textual.geometry import Size
+from textual.strip import Strip
+from textual.widget import Widget
+
+from . import cells
+from .graphics import cell_pixels, graphics_mode
+
+
+class ImageView(Widget):
+    """Shows ``rgb`` (h, w, 3) uint8 fitted to the widget.
+
+    Attributes set by the owner: ``spacing_yx``, ``zoom``, ``center`` (x, y),
+    ``cursor`` (x, y) or None. Call :meth:`set_image` (it refreshes). ``painted``
+    holds (token, perf_counter time) of the last completed paint, for benchmarks.
+    """
+
+    DEFAULT_CSS = """
+    ImageView { width: 1fr; height: 1fr; background: black; }
+    ImageView > .tii { width: 1fr; height: 1fr; }
+    """
+
+    def __init__(self, *, mode: str | None = None, name: str | None = None, id: str | None = None, classes: str | None = None) -> None:
+        super().__init__(name=name, id=id, classes=classes)
+        self.mode = mode or graphics_mode()
+        self.rgb: np.ndarray | None = None
+        self.spacing_yx: tuple[float, float] = (1.0, 1.0)
+        self.zoom: float = 1.0
+        self.center: tuple[float, float] | None = None
+        self.cursor: tuple[float, float] | None = None
+        self.token: object = None
+        self.painted: tuple[object, float] = (None, 0.0)
+        self.view_map: cells.ViewMap | None = None
+        self._strips: list[Strip] | None = None
+        self._strips_key: tuple | None = None
+        self._tii = None  # textual-image child widget for sixel/kitty
+        self._tii_key: tuple | None = None
+
+    # ----------------------------------------------------------------- public
+    def set_image(self, rgb: np.ndarray | None, *, token: object = None, spacing_yx=None, zoom=None, center=None, cursor=...) -> None:
+        """Replace the image (and optionally the view parameters); repaints."""
+        self.rgb = rgb
+        self.token = token
+        if spacing_yx is not None:
+            self.spacing_yx = (float(spacing_yx[0]), float(spacing_yx[1]))
+        if zoom is not None:
+            self.zoom = float(zoom)
+        if center is not None:
+            self.center = center
+        if cursor is not ...:
+            self.cursor = cursor
+        self._invalidate()
+
+    def set_view(self, *, zoom=None, center=None, cursor=...) -> None:
+        if zoom is not None:
+            self.zoom = float(zoom)
+        if center is not None:
+            self.center = center
+        if cursor is not ...:
+            self.cursor = cursor
+        self._invalidate()
+
+    def target_pixels(self) -> tuple[int, int]:
+        """(width, height) of this widget in display pixels for the current mode."""
+        w, h = self.size.width, self.size.height
+        if self.mode in ("sixel", "kitty"):
+            cw, ch = cell_pixels()
+            return max(w * cw, 1), max(h * ch, 1)
+        return max(w, 1), max(2 * h, 1)
+
+    # --------------------------------------------------------------- internals
+    def _invalidate(self) -> None:
+        self._strips = None
+        if self.mode in ("sixel", "kitty"):
+            self._update_tii()
+        self.refresh()
+
+    def _grid(self, out_size: tuple[int, int]) -> np.ndarray | None:
+        if self.rgb is None:
+            return None
+        grid, vm = cells.render_view(
+            self.rgb, out_size, spacing_yx=self.spacing_yx, zoom=self.zoom, center=self.center
+        )
+        self.view_map = vm
+        if self.cursor is not None and self.mode != "ascii":
+            if grid is self.rgb:
+                grid = grid.copy()
+            cells.draw_cursor(grid, vm, *self.cursor)
+        return grid
+
+    def compose(self):
+        if self.mode in ("sixel", "kitty"):
+            from textual_image.widget import SixelImage, TGPImage
+
+            cls = SixelImage if self.mode == "sixel" else TGPImage
+            self._tii = cls(classes="tii")
+            yield self._tii
+
+    def on_resize(self) -> None:
+        self._invalidate()
+
+    def _update_tii(self) -> None:
+        if self._tii is None or self.size.width == 0:
+            return
+        key = (id(self.rgb), self.token, self.size, self.zoom, self.center, self.cursor)
+        if key == self._tii_key:
+            return
+        self._tii_key = key
+        grid = self._grid(self.target_pixels())
+        if grid is None:
+            self._tii.image = None
+            return
+        from PIL import Image as PILImage
+
+        self._tii.image = PILImage.fromarray(np.ascontiguousarray(grid))
+        self.painted = (self.token, time.perf_counter())
+
+    def _ensure_strips(self) -> list[Strip]:
+        size = self.size
+        key = (size.width, size.height)
+        if self._strips is not None and self._strips_key == key:
+            return self._strips
+        W, H = size.width, size.height
+        grid = self._grid((W, 2 * H)) if W and H else None
+        if grid is None:
+            self._strips = [Strip.blank(W)] * H
+        elif self.mode == "ascii":
+            cc = None
+            if self.cursor is not None and self.view_map is not None:
+                xd, yd = self.view_map.to_display(*self.cursor)
+                cc = (int(xd), int(yd) // 2)
+            self._strips = cells.ascii_strips(grid, cursor_cell=cc)
+        else:
+            self._strips = cells.halfblock_strips(grid)
+        self._strips_key = key
+        return self._strips
+
+    def render_line(self, y: int) -> Strip:
+        if self.mode in ("sixel", "kitty"):
+            return Strip.blank(self.size.width)
+        strips = self._ensure_strips()
+        if y == len(strips) - 1:
+            self.painted = (self.token, time.perf_counter())
+        if 0 <= y < len(strips):
+            return strips[y]
+        return Strip.blank(self.size.width)
+
+    def get_content_height(self, container: Size, viewport: Size, width: int) -> int:
+        return container.height
+
+    def display_to_image(self, col: int, row: int) -> tuple[float, float] | None:
+        """Image pixel under a widget cell (for mouse clicks)."""
+        if self.view_map is None:
+            return None
+        if self.mode in ("sixel", "kitty"):
+            cw, ch = cell_pixels()
+            return self.view_map.to_image((col + 0.5) * cw, (row + 0.5) * ch)
+        return self.view_map.to_image(col + 0.5, 2 * row + 1.0)

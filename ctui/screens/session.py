@@ -1,0 +1,155 @@
+"""The TUI's working state and its (thin) calls into the engine.
+
+A :class:`Session` holds the loaded volume, the slice pipeline, the segmentation, the
+cursor and the view settings. Every computation is an engine call
+(``ctui.engine.loaders``, ``pipeline``, ``selection``, ``propagate``, ``drift``,
+``project``...); engine modules are imported lazily so the app still starts while a
+module is missing, and the action that needs it reports that as a notification.
+"""
+
+from __future__ import annotations
+
+import importlib
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ctui.engine.errors import CtuiError
+from ctui.engine.volume import Volume
+from ctui.engine.windows import CT_PRESETS, apply_window
+
+VIEWS = ("original", "overlay", "intermediate", "final")
+
+
+def engine(name: str):
+    """Import ``ctui.engine.<name>`` or raise a CtuiError saying it is not available."""
+    try:
+        return importlib.import_module(f"ctui.engine.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.startswith("ctui.engine"):
+            raise CtuiError(f"ctui.engine.{name} is not available in this build") from None
+        raise
+
+
+def sample_source() -> str:
+    """Path of the bundled sample series."""
+    return str(engine("phantom").sample_path())
+
+
+def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
+    """Load a series with ``ctui.engine.loaders.load`` (the bundled sample when None)."""
+    if path is None:
+        path = sample_source()
+    try:
+        loaders = engine("loaders")
+    except CtuiError:
+        # TEMPORARY until ctui.engine.loaders lands: the phantom's own Volume
+        if path == sample_source():
+            return engine("phantom").make_phantom()[0]
+        raise
+    return loaders.load(path, progress=progress, **options)
+
+
+@dataclass
+class Session:
+    volume: Volume
+    source_path: str = ""
+    source_options: dict = field(default_factory=dict)
+    z: int = 0
+    x: int = 0
+    y: int = 0
+    window: tuple[float, float] = (40.0, 400.0)
+    view: str = "overlay"
+    zoom: float = 1.0
+    project_path: str | None = None
+    dirty: bool = False
+    tolerance: float = 60.0
+    range_: tuple[float, float] | None = None
+    connectivity: int = 8
+    current: int = 1
+    pipeline: Any = None
+    seg: Any = None
+    drift_info: dict | None = None
+    _lock: Any = field(default_factory=threading.RLock)
+
+    def __post_init__(self) -> None:
+        nz, ny, nx = self.volume.shape
+        self.z = min(max(self.z, 0), nz - 1) if self.z else nz // 2
+        self.x = self.x or nx // 2
+        self.y = self.y or ny // 2
+        if self.volume.window:
+            self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
+        if self.pipeline is None:
+            try:
+                self.pipeline = engine("pipeline").Pipeline()
+            except CtuiError:
+                self.pipeline = None
+        if self.seg is None:
+            try:
+                self.seg = engine("selection").Segmentation(self.volume.shape)
+            except CtuiError:
+                self.seg = None
+
+    # ------------------------------------------------------------ geometry
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.volume.shape
+
+    def clamp(self) -> None:
+        nz, ny, nx = self.shape
+        self.z = int(min(max(self.z, 0), nz - 1))
+        self.y = int(min(max(self.y, 0), ny - 1))
+        self.x = int(min(max(self.x, 0), nx - 1))
+
+    def position_mm(self) -> tuple[float, float, float]:
+        p = self.volume.index_to_mm((self.z, self.y, self.x))
+        return float(p[0]), float(p[1]), float(p[2])
+
+    def value(self) -> float:
+        return float(self.volume.data[self.z, self.y, self.x])
+
+    # ------------------------------------------------------------ images
+    def labels(self) -> np.ndarray | None:
+        if self.seg is None:
+            return None
+        return getattr(self.seg, "labels", None)
+
+    def display(self, image: np.ndarray) -> np.ndarray:
+        """A pipeline-domain image as uint8 through the user's display window."""
+        if image.dtype == np.uint8:
+            return image
+        return apply_window(image, self.window)
+
+    def stage_views(self, z: int | None = None):
+        """ctui.engine.pipeline.SliceViews of slice z (cached by the engine)."""
+        z = self.z if z is None else z
+        with self._lock:
+            return self.pipeline.run_slice(self.volume, z)
+
+    def pipeline_steps(self) -> list[str]:
+        if self.pipeline is None:
+            return []
+        out = []
+        for i, st in enumerate(getattr(self.pipeline, "steps", []) or []):
+            d = st if isinstance(st, dict) else (st.to_dict() if hasattr(st, "to_dict") else vars(st))
+            params = d.get("params") or {}
+            ptxt = " ".join(f"{k}={v}" for k, v in params.items() if v is not None and k != "kernel")
+            if params.get("kernel") is not None:
+                ptxt += " kernel=custom"
+            out.append(f"{i + 1}. s{d.get('stage', 1)} {d.get('name') or d.get('filter')} {ptxt}".rstrip())
+        return out
+
+    def window_presets(self) -> list[tuple[str, tuple[float, float]]]:
+        items = []
+        if self.volume.window:
+            items.append(("default", tuple(self.volume.window)))
+        if self.volume.modality == "CT":
+            items += list(CT_PRESETS.items())
+        else:
+            from ctui.engine.windows import auto_window
+
+            items.append(("auto", auto_window(self.volume.data, modality=self.volume.modality)))
+        return items  # type: ignore[return-value]
