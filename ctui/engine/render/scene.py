@@ -237,6 +237,14 @@ class Scene:
     mode: str = "surface"
     options: RenderOptions = field(default_factory=RenderOptions)
 
+    def __post_init__(self) -> None:
+        self.meshes = self.mesh_items()
+
+    def mesh_items(self) -> list[SceneMesh]:
+        """``meshes`` with any bare Mesh wrapped in a SceneMesh (in place)."""
+        self.meshes = [m if isinstance(m, SceneMesh) else SceneMesh(m) for m in self.meshes]
+        return self.meshes
+
     # ------------------------------------------------------------------ building
     @classmethod
     def from_meshes(cls, meshes: Any, **kwargs: Any) -> "Scene":
@@ -261,7 +269,7 @@ class Scene:
         """A copy safe to hand to the render thread: settings are copied, the mesh and
         volume arrays are shared (they are never modified by the renderer)."""
         return Scene(
-            meshes=[dataclasses.replace(m) for m in self.meshes],
+            meshes=[dataclasses.replace(m) for m in self.mesh_items()],
             volume=dataclasses.replace(self.volume) if self.volume is not None else None,
             camera=copy.deepcopy(self.camera), light=copy.deepcopy(self.light),
             material=copy.deepcopy(self.material), mode=self.mode, options=copy.deepcopy(self.options),
@@ -271,7 +279,7 @@ class Scene:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(min_xyz, max_xyz) mm of the visible meshes and the volume box."""
         pts = []
-        for m in self.meshes:
+        for m in self.mesh_items():
             if m.visible and m.mesh.n_vertices:
                 lo, hi = m.mesh.bounds()
                 pts += [np.asarray(lo, float), np.asarray(hi, float)]
