@@ -31,7 +31,7 @@ class LoadingScreen(Screen):
     LoadingScreen > Vertical { width: 80%; height: auto; border: round $accent; padding: 1 2; }
     LoadingScreen ProgressBar { margin: 1 0; }
     """
-    BINDINGS = [Binding("o", "app.open", "Open another"), Binding("q", "app.quit", "Quit")]
+    BINDINGS = [Binding("o", "app.open", "Open another"), Binding("escape", "back", "Back"), Binding("q", "app.quit", "Quit")]
 
     def __init__(self, what: str) -> None:
         super().__init__()
@@ -43,6 +43,10 @@ class LoadingScreen(Screen):
             yield ProgressBar(total=None, id="load-progress", show_eta=False)
             yield Static("", id="load-reasons")
         yield Footer()
+
+    def action_back(self) -> None:
+        if len(self.app.screen_stack) > 2:
+            self.app.pop_screen()
 
     def show_error(self, title: str, reasons: list[str]) -> None:
         self.query_one("#load-title", Label).update(f"[b red]{title}[/b red]")
@@ -173,14 +177,13 @@ class CtuiApp(App):
             self.pop_screen()
         self.push_screen(ws)
 
-    def open_path(self, path: str) -> None:
+    def open_path(self, path: str, series: str | None = None) -> None:
         """Open another series or project (from the open screen)."""
-        if path.endswith(".ctui"):
-            self.push_screen(LoadingScreen(path))
+        self.push_screen(LoadingScreen(path))
+        if path.endswith(".ctui") or path.endswith(".ctui.autosave"):
             self.load_project_worker(path)
         else:
-            self.push_screen(LoadingScreen(path))
-            self.load_worker(path, {})
+            self.load_worker(path, {"series": series} if series else {})
 
     # ------------------------------------------------------------------ actions
     def action_open(self) -> None:
@@ -190,16 +193,17 @@ class CtuiApp(App):
         if self.session is not None and self.session.source_path:
             start = str(Path(self.session.source_path).parent)
 
-        def done(path: str | None) -> None:
-            if not path:
+        def done(choice: tuple | None) -> None:
+            if not choice:
                 return
+            path, series = choice
             if self.session is not None and self.session.dirty:
                 from .dialogs import ConfirmScreen
 
                 self.push_screen(ConfirmScreen("Discard unsaved work and open another series?", "Discard", "Keep"),
-                                 lambda ok: ok and self.open_path(path))
+                                 lambda ok: ok and self.open_path(path, series))
             else:
-                self.open_path(path)
+                self.open_path(path, series)
 
         self.push_screen(OpenScreen(start), done)
 

@@ -73,6 +73,7 @@ class Session:
     pipeline: Any = None
     seg: Any = None
     drift_info: dict | None = None
+    original_data: Any = None  # volume data before a drift correction
     _lock: Any = field(default_factory=threading.RLock)
 
     def __post_init__(self) -> None:

@@ -76,6 +76,8 @@ class WorkspaceScreen(Screen):
         Binding("less_than_sign", "propagate('backward')", "Propagate back", show=False),
         Binding("greater_than_sign", "propagate('forward')", "Propagate fwd", show=False),
         Binding("p", "propagate('both')", "Propagate"),
+        Binding("a", "accept", "Accept proposal", show=False),
+        Binding("x", "reject", "Reject proposal", show=False),
         Binding("escape", "cancel", "Cancel", show=False),
         Binding("d", "drift", "Drift"),
         Binding("r", "render3d", "3D"),
@@ -92,6 +94,7 @@ class WorkspaceScreen(Screen):
         self._volumes_cache: tuple[int, dict] | None = None
         self._labels_version = 0
         self._prop = None  # running propagation handle
+        self.proposal = None  # pending propagation result (ctui.engine.propagate.Proposal)
         self._views_token = 0
         self.last_views = None
 
@@ -148,7 +151,11 @@ class WorkspaceScreen(Screen):
             from ctui.engine.pipeline import overlay
 
             lab = s.labels()
-            return overlay(gray, None if lab is None else lab[s.z])
+            lab2 = None if lab is None else lab[s.z]
+            if self.proposal is not None and self.proposal.masks.get(s.z) is not None:
+                lab2 = lab2.copy()
+                lab2[self.proposal.slice_mask(s.z) & (lab2 == 0)] = self.proposal.object_id
+            return overlay(gray, lab2)
         return None
 
     def refresh_view(self) -> None:
@@ -527,6 +534,16 @@ class WorkspaceScreen(Screen):
         if not self._need_seg():
             return
         start_propagation(self, direction)
+
+    def action_accept(self) -> None:
+        from .propagation import accept
+
+        accept(self)
+
+    def action_reject(self) -> None:
+        from .propagation import reject
+
+        reject(self)
 
     def action_cancel(self) -> None:
         if self._prop is not None:

@@ -1,0 +1,128 @@
+"""Export (``e``): mesh (STL/PLY/OBJ), label map (NIfTI/NRRD), MRIC contours, or the
+current image (PNG). Each writer is the engine's (atomic); the TUI asks what and where,
+runs it in a worker and reports the file written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .session import engine
+
+KINDS = [
+    ("mesh-stl", "Mesh of the current object: STL", ".stl"),
+    ("mesh-ply", "Mesh of the current object: PLY", ".ply"),
+    ("mesh-obj", "Mesh of the current object: OBJ", ".obj"),
+    ("labels-nii", "Label map: NIfTI (.nii.gz)", ".nii.gz"),
+    ("labels-nrrd", "Label map: NRRD (.seg.nrrd, 3D Slicer segmentation)", ".seg.nrrd"),
+    ("mric", "Contours: MRIC", ".mric"),
+    ("image", "Current slice view: PNG", ".png"),
+]
+
+
+def default_name(session, suffix: str, kind: str) -> str:
+    stem = Path(session.source_path or "ctui").name.replace(" ", "_") or "ctui"
+    if kind.startswith("mesh"):
+        stem += f"-object{session.current}"
+    elif kind == "image":
+        stem += f"-slice{session.z + 1}"
+    return str(Path.cwd() / f"{stem}{suffix}")
+
+
+def export_mesh(session, path: str, object_id: int):
+    """Smoothed surface of one object written with ``meshio.save_mesh``; returns the Mesh."""
+    labels = session.labels()
+    if labels is None or not (labels == object_id).any():
+        raise ValueError(f"object {object_id} is empty: nothing to export")
+    v = session.volume
+    mesh = engine("surface").mask_surface(labels == object_id, spacing=v.spacing, origin=v.origin, direction=v.direction)
+    mesh.object_id = int(object_id)
+    engine("meshio").save_mesh(path, mesh)
+    return mesh
+
+
+def export_labels(session, path: str):
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    names = {i: o.name for i, o in session.seg.objects.items()} if session.seg is not None else None
+    return engine("labelio").save_labels(path, labels, session.volume, names=names)
+
+
+def export_mric(session, path: str):
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    slices = engine("borders").borders_for_mric(labels)
+    ny, nx = labels.shape[1:]
+    from ctui.engine.windows import apply_window
+
+    image = apply_window(session.volume.data[session.z], session.window)
+    return engine("mric").write_mric(path, slices, width=nx, height=ny, image=image)
+
+
+def export_image(rgb: np.ndarray, path: str):
+    import cv2
+
+    from ctui.engine.atomic import write_bytes
+
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]) if rgb.ndim == 3 else rgb)
+    if not ok:
+        raise ValueError("PNG encoding failed")
+    write_bytes(path, buf.tobytes())
+    return Path(path)
+
+
+def run_export(ws, kind: str, path: str) -> str:
+    """Do one export (called in a worker thread); returns a message."""
+    s = ws.s
+    if kind.startswith("mesh"):
+        mesh = export_mesh(s, path, s.current)
+        return f"Wrote {path}: {len(mesh.faces)} triangles, {mesh.volume_mm3() / 1000:.2f} ml"
+    if kind.startswith("labels"):
+        export_labels(s, path)
+        return f"Wrote label map {path}"
+    if kind == "mric":
+        export_mric(s, path)
+        return f"Wrote MRIC contours {path}"
+    if kind == "image":
+        iv = ws.main_view
+        rgb = iv.rgb
+        if rgb is None:
+            raise ValueError("no image shown")
+        export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
+        return f"Wrote {path}"
+    raise ValueError(f"unknown export {kind}")
+
+
+def export_dialog(ws) -> None:
+    from .dialogs import ChoiceScreen, PromptScreen
+
+    app = ws.app
+
+    def chose(kind: str | None) -> None:
+        if not kind:
+            return
+        suffix = dict((k, sfx) for k, _, sfx in KINDS)[kind]
+
+        def got_path(path: str | None) -> None:
+            if not path:
+                return
+            path = str(Path(path.strip()).expanduser())
+
+            def work() -> None:
+                try:
+                    msg = run_export(ws, kind, path)
+                except Exception as exc:  # a clear notification, the work stays in memory
+                    app.call_from_thread(app.notify, f"Export failed: {exc}", severity="error", timeout=10)
+                    return
+                ws.last_export = path
+                app.call_from_thread(app.notify, msg, timeout=5)
+                app.call_from_thread(ws.set_status, msg)
+
+            app.run_worker(work, thread=True, group="export", name=f"export {kind}")
+
+        app.push_screen(PromptScreen(f"Export to ({suffix})", default_name(ws.s, suffix, kind)), got_path)
+
+    app.push_screen(ChoiceScreen("Export", [(k, label) for k, label, _ in KINDS]), chose)

@@ -1,0 +1,193 @@
+"""Measure screen (``M``): volume (voxels and mesh, Gauss theorem) and area per object
+(``ctui.engine.measure.object_stats``), and for a tubular object the section-area plot
+along its centreline (``ctui.engine.centreline`` + ``ctui.engine.sections``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Label, Static
+
+from ctui.engine.colors import object_color
+
+from .imageview import ImageView
+from .plot import line_plot
+from .session import engine
+
+
+def is_tubular(stats: dict) -> bool:
+    """Elongated objects (longest principal axis >= 3x the second) get a section plot."""
+    ax = sorted((float(v) for v in (stats.get("principal_axes_mm") or [])), reverse=True)
+    return len(ax) >= 2 and ax[1] > 0 and ax[0] / ax[1] >= 3.0
+
+
+class MeasureScreen(Screen):
+    DEFAULT_CSS = """
+    MeasureScreen #ms-table { height: auto; max-height: 14; }
+    MeasureScreen #ms-body { height: 1fr; }
+    MeasureScreen #ms-plot { width: 1fr; }
+    MeasureScreen #ms-info { width: 42; padding: 0 1; background: $panel; }
+    MeasureScreen #ms-status { height: 1; background: $boost; padding: 0 1; }
+    """
+    BINDINGS = [
+        Binding("c", "sections", "Sections of selected"),
+        Binding("s", "save", "Save CSV+PNG"),
+        Binding("escape,M", "close", "Back"),
+    ]
+
+    def __init__(self, session) -> None:
+        super().__init__()
+        self.s = session
+        self.stats: dict[int, dict] = {}
+        self.sections: list[dict] | None = None
+        self.sections_obj: int | None = None
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label("[b]Measurements[/b] (mesh volume by the Gauss theorem on a smoothed surface)")
+            yield DataTable(id="ms-table", cursor_type="row")
+            with Horizontal(id="ms-body"):
+                yield ImageView(id="ms-plot")
+                yield Static(id="ms-info")
+            yield Static("", id="ms-status")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        t = self.query_one(DataTable)
+        t.add_columns("obj", "name", "voxels", "vol vox ml", "vol mesh ml", "diff %", "area mm²", "closed", "axes mm", "slices")
+        t.focus()
+        self.measure()
+
+    def _status(self, text: str) -> None:
+        self.query_one("#ms-status", Static).update(text)
+
+    @work(thread=True, exclusive=True, group="measure")
+    def measure(self) -> None:
+        s = self.s
+        labels = s.labels()
+        if labels is None or not labels.any():
+            self.app.call_from_thread(self._status, "No objects yet: fill (Enter) and propagate (p) first")
+            return
+        meas = engine("measure")
+        ids = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=11)[1:]) + 1]
+        v = s.volume
+        for oid in ids:
+            self.app.call_from_thread(self._status, f"Measuring object {oid} ...")
+            try:
+                st = meas.object_stats(labels, oid, spacing=v.spacing, origin=v.origin, direction=v.direction)
+            except Exception as exc:
+                self.app.call_from_thread(self.app.notify, f"Object {oid}: {exc}", severity="error")
+                continue
+            st.pop("mesh", None)
+            self.app.call_from_thread(self._add_row, oid, st)
+        self.app.call_from_thread(self._status, "c: sections along the centreline of the selected object; s saves")
+        tub = [oid for oid in ids if oid in self.stats and is_tubular(self.stats[oid])]
+        if tub:
+            self._sections_of(tub[0])
+
+    def _add_row(self, oid: int, st: dict) -> None:
+        self.stats[oid] = st
+        name = self.s.seg.objects[oid].name if self.s.seg and oid in self.s.seg.objects else f"object {oid}"
+        rng = self.s.seg.slice_range(oid) if self.s.seg else None
+        axes = "/".join(f"{a:.0f}" for a in (st.get("principal_axes_mm") or []))
+
+        def f(key, fmt="{:.2f}"):
+            val = st.get(key)
+            return "-" if val is None or (isinstance(val, float) and math.isnan(val)) else fmt.format(val)
+
+        c = object_color(oid)
+        self.query_one(DataTable).add_row(
+            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"),
+            f("volume_difference_percent", "{:+.2f}"), f("area_mm2", "{:.0f}"), str(st.get("mesh_closed", "-")), axes,
+            f"{rng[0] + 1}..{rng[1] + 1}" if rng else "-", key=str(oid))
+        warn = st.get("warnings") or []
+        if warn:
+            self.app.notify(f"Object {oid}: {'; '.join(warn)}", severity="warning", timeout=6)
+
+    def action_sections(self) -> None:
+        t = self.query_one(DataTable)
+        if not self.stats:
+            return
+        try:
+            oid = int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value)
+        except Exception:
+            oid = min(self.stats)
+        self.sections_worker(oid)
+
+    @work(thread=True, exclusive=True, group="sections")
+    def sections_worker(self, oid: int) -> None:
+        self._sections_of(oid)
+
+    def _sections_of(self, oid: int) -> None:
+        s = self.s
+        v = s.volume
+        self.app.call_from_thread(self._status, f"Centreline and sections of object {oid} ...")
+        try:
+            mask = s.labels() == oid
+            path = engine("centreline").centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
+            rows = engine("sections").sections_along_path(mask, path, spacing=v.spacing, origin=v.origin,
+                                                          direction=v.direction, step_mm=1.0)
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"Sections of object {oid} failed: {exc}", severity="error")
+            return
+        self.app.call_from_thread(self._show_sections, oid, rows, path)
+
+    def _show_sections(self, oid: int, rows: list[dict], path) -> None:
+        self.sections, self.sections_obj = rows, oid
+        iv = self.query_one("#ms-plot", ImageView)
+        sm = [r["s_mm"] for r in rows]
+        area = [r["area_mm2"] for r in rows]
+        img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": True}])
+        iv.set_image(img, token=("sections", oid, len(rows)))
+        a = np.array(area, float)
+        ok = a[np.isfinite(a)]
+        length = float(sm[-1]) if sm else 0.0
+        lines = [f"[b]Sections of object {oid}[/b]", f"path {length:.1f} mm, {len(rows)} sections", "",
+                 f"area {lim[2]:.0f}..{lim[3]:.0f} mm² (y axis)", f"arc 0..{length:.0f} mm (x axis)"]
+        if ok.size:
+            lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
+        try:
+            steps = engine("sections").find_steps(np.array(sm), a)
+            if steps:
+                lines += ["", "[b]steps[/b]"]
+                for st in steps[:6]:
+                    lines.append(" " + ", ".join(f"{k} {val:.1f}" for k, val in st.items() if isinstance(val, (int, float))))
+        except Exception:
+            pass
+        lines += ["", "[dim]c sections of selected row, s save CSV + PNG, Esc back[/dim]"]
+        self.query_one("#ms-info", Static).update("\n".join(lines))
+        self._status(f"Sections of object {oid}: {len(rows)} along {length:.0f} mm")
+
+    def action_save(self) -> None:
+        from .dialogs import PromptScreen
+
+        if not self.sections:
+            self.app.notify("No sections computed yet (c)", timeout=3)
+            return
+
+        def done(path: str | None) -> None:
+            if path:
+                self._save(path.strip())
+
+        self.app.push_screen(PromptScreen("Save sections as CSV (a PNG plot is written beside it)", f"ctui-sections-{self.sections_obj}.csv"), done)
+
+    @work(thread=True, group="ms-save")
+    def _save(self, path: str) -> None:
+        sec = engine("sections")
+        try:
+            sec.write_sections_csv(path, self.sections)
+            png = path.rsplit(".", 1)[0] + ".png"
+            sec.plot_sections(png, self.sections, title=f"object {self.sections_obj}")
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"Not saved: {exc}", severity="error")
+            return
+        self.app.call_from_thread(self.app.notify, f"Saved {path} and {png}")
+
+    def action_close(self) -> None:
+        self.app.pop_screen()

@@ -1,0 +1,143 @@
+"""Propagation from the workspace: a thread worker driving
+``ctui.engine.propagate.propagate_object`` with a progress bar and cancel (Escape),
+then a pending proposal shown on the slices until accepted (``a``) or rejected (``x``)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from textual.worker import get_current_worker
+
+from ctui.engine.errors import CtuiError
+
+from .session import engine
+
+
+class PropagationRun:
+    def __init__(self, ws, direction: str) -> None:
+        self.ws = ws
+        self.direction = direction
+        self.event = threading.Event()
+        self.proposal = None
+        self.started = time.perf_counter()
+
+    def cancel(self) -> None:
+        self.event.set()
+
+
+def settings_for(session, direction: str):
+    """PropagationSettings from the current object's fill range (or the session's)."""
+    prop = engine("propagate")
+    s = session
+    info = s.seg.objects.get(s.current) if s.seg is not None else None
+    st = dict(info.settings) if info is not None else {}
+    if "low" in st and "high" in st:
+        lo, hi = float(st["low"]), float(st["high"])
+    elif s.range_ is not None:
+        lo, hi = s.range_
+    else:
+        raise CtuiError(f"object {s.current} has no fill yet: press Enter on it first")
+    return prop.PropagationSettings(low=lo, high=hi, direction=direction, connectivity=int(st.get("connectivity", s.connectivity)))
+
+
+def start_propagation(ws, direction: str) -> None:
+    app = ws.app
+    s = ws.s
+    if ws._prop is not None:
+        app.notify("A propagation is already running (Escape cancels it)", severity="warning")
+        return
+    if getattr(ws, "proposal", None) is not None:
+        app.notify("Accept (a) or reject (x) the pending propagation first", severity="warning")
+        return
+    try:
+        settings = settings_for(s, direction)
+        if not (s.seg.labels[s.z] == s.current).any():
+            raise CtuiError(f"object {s.current} has no pixels on slice {s.z + 1}: fill it here first (Enter)")
+    except (CtuiError, ValueError) as exc:
+        app.notify(str(exc), severity="error")
+        return
+    run = PropagationRun(ws, direction)
+    ws._prop = run
+    nz = s.shape[0]
+    ws.show_progress(f"Propagating object {s.current} {direction}", 0, nz)
+    app.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
+
+
+def _work(run: PropagationRun, settings) -> None:
+    ws = run.ws
+    app = ws.app
+    s = ws.s
+    worker = get_current_worker()
+    prop = engine("propagate")
+    last = [0.0]
+
+    def progress(ev) -> bool:
+        if worker.is_cancelled or run.event.is_set():
+            return False
+        now = time.perf_counter()
+        if now - last[0] > 0.05:
+            last[0] = now
+            try:
+                app.call_from_thread(ws.show_progress, f"Propagating {ev.direction}: slice {ev.z + 1}", ev.done, max(ev.total, 1))
+            except Exception:
+                return False  # app gone
+        return True
+
+    try:
+        with s._lock:
+            proposal = prop.propagate_object(s.seg, s.volume, s.pipeline, s.current, s.z, settings,
+                                             progress=progress, cancel=run.event)
+    except Exception as exc:
+        try:
+            app.call_from_thread(_failed, ws, str(exc))
+        except Exception:
+            pass
+        return
+    run.proposal = proposal
+    try:
+        app.call_from_thread(_finished, ws, run)
+    except Exception:
+        pass
+
+
+def _failed(ws, msg: str) -> None:
+    ws._prop = None
+    ws.show_progress(None)
+    ws.app.notify(f"Propagation failed: {msg}", severity="error")
+
+
+def _finished(ws, run: PropagationRun) -> None:
+    ws._prop = None
+    ws.show_progress(None)
+    p = run.proposal
+    ws.proposal = p
+    rng = p.slices
+    secs = time.perf_counter() - run.started
+    extra = "; ".join(p.warnings())
+    where = f"slices {rng[0] + 1}..{rng[1] + 1}" if rng else "no slices"
+    ws.set_status(f"Proposal: {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
+    if p.warnings():
+        ws.app.notify(extra, severity="warning", timeout=8)
+    ws.refresh_view()
+
+
+def accept(ws) -> None:
+    p = getattr(ws, "proposal", None)
+    if p is None:
+        ws.app.notify("No pending propagation", timeout=2)
+        return
+    n = p.accept(ws.s.seg)
+    ws.proposal = None
+    ws.labels_changed()
+    ws.set_status(f"Accepted: {n} voxels added to object {p.object_id} (u undoes)")
+    ws.refresh_view()
+
+
+def reject(ws) -> None:
+    if getattr(ws, "proposal", None) is None:
+        ws.app.notify("No pending propagation", timeout=2)
+        return
+    ws.proposal = None
+    ws.set_status("Propagation rejected")
+    ws.refresh_view()

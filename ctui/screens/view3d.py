@@ -1,0 +1,308 @@
+"""The 3D screen (``r``): object surfaces (marching cubes / smoothed mask surfaces, or
+contour connecting) rendered offscreen by ``ctui.engine.render`` on the renderer's
+own thread, shown at the panel's pixel size. The keyboard never blocks: each request
+is a Future; a newer request supersedes older ones (their images are dropped)."""
+
+from __future__ import annotations
+
+import copy
+import time
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal
+from textual.screen import Screen
+from textual.widgets import Footer, Static
+
+from ctui.engine.errors import CtuiError
+
+from .imageview import ImageView
+from .session import engine
+
+MODES = ("surface", "wire", "transparent", "mip", "dvr")
+METHODS = ("marching-cubes", "contours")
+
+
+def build_meshes(session, method: str) -> dict:
+    """{object_id: Mesh} of the session's objects with the chosen surface method."""
+    vol = session.volume
+    labels = session.labels()
+    if labels is None or not labels.any():
+        return {}
+    if method == "contours":
+        borders = engine("borders")
+        cc = engine("contour_connect")
+        out = {}
+        for oid in sorted(int(i) for i in set(labels.ravel().tolist()) - {0}) if labels.size < 4_000_000 else range(1, 11):
+            per_slice = borders.object_borders(labels, oid)
+            if not any(per_slice):
+                continue
+            out[oid] = cc.connect_contours(per_slice, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
+            out[oid].object_id = oid
+        return out
+    surface = engine("surface")
+    meshes = surface.label_surfaces(labels, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
+    for oid, m in meshes.items():
+        m.object_id = int(oid)
+    return dict(meshes)
+
+
+class View3DScreen(Screen):
+    DEFAULT_CSS = """
+    View3DScreen #v3-body { height: 1fr; }
+    View3DScreen #v3-info { width: 30; padding: 0 1; background: $panel; }
+    View3DScreen #v3-status { height: 1; background: $boost; padding: 0 1; }
+    """
+    BINDINGS = [
+        Binding("left", "orbit(-15,0)", "Orbit", show=False),
+        Binding("right", "orbit(15,0)", "Orbit", show=False),
+        Binding("up", "orbit(0,15)", "Orbit", show=False),
+        Binding("down", "orbit(0,-15)", "Orbit", show=False),
+        Binding("shift+left", "light(-15,0)", "Light", show=False),
+        Binding("shift+right", "light(15,0)", "Light", show=False),
+        Binding("shift+up", "light(0,15)", "Light", show=False),
+        Binding("shift+down", "light(0,-15)", "Light", show=False),
+        Binding("plus,equals_sign", "zoom(1.25)", "Zoom in", show=False),
+        Binding("minus", "zoom(0.8)", "Zoom out", show=False),
+        Binding("m", "mode", "Mode"),
+        Binding("c", "method", "Contours/MC"),
+        Binding("S", "shadows", "Shadows", show=False),
+        Binding("s", "save", "Save PNG"),
+        Binding("t", "turntable", "Turntable"),
+        Binding("escape,r", "close", "Back"),
+    ]
+
+    def __init__(self, session, *, image=None) -> None:
+        """image: a fixed RGB image to show instead of rendering (snapshot tests)."""
+        super().__init__()
+        self.s = session
+        self.mode = "surface"
+        self.method = METHODS[0]
+        self.meshes: dict | None = None
+        self.scene = None
+        self.fixed_image = image
+        self._req = 0
+        self.last_image = None
+        self.render_times: list[float] = []
+        self.shown_requests: list[int] = []
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="v3-body"):
+            yield ImageView(id="v3-view")
+            yield Static(id="v3-info")
+        yield Static("", id="v3-status")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        if self.fixed_image is not None:
+            self.query_one(ImageView).set_image(self.fixed_image, token="fixed")
+            self._info()
+            return
+        self._info()
+        self.prepare_meshes()
+
+    def on_resize(self) -> None:
+        if self.scene is not None:
+            self.request_render()
+
+    # ------------------------------------------------------------------ info
+    def _status(self, text: str) -> None:
+        self.query_one("#v3-status", Static).update(text)
+
+    def _info(self) -> None:
+        lines = ["[b]3D view[/b]", f"mode    {self.mode}", f"surface {self.method}"]
+        if self.scene is not None:
+            c, lt = self.scene.camera, self.scene.light
+            lines += [f"azimuth {c.azimuth:g}°", f"elev.   {c.elevation:g}°", f"zoom    {c.zoom:.2f}",
+                      f"light   {lt.azimuth:g}°, {lt.elevation:g}°",
+                      f"shadows {'on' if self.scene.options.shadows else 'off'}"]
+        if self.meshes:
+            lines.append("")
+            lines.append("[b]Objects[/b]")
+            for oid, m in sorted(self.meshes.items()):
+                try:
+                    vol = m.volume_mm3() / 1000.0
+                except Exception:
+                    vol = float("nan")
+                lines.append(f" {oid}: {len(m.faces)} tris, {vol:.1f} ml")
+        lines += ["", "[dim]arrows orbit 15°", "+/- zoom, shift+arrows light", "m mode, c method, S shadows",
+                  "s PNG, t turntable, Esc back[/dim]"]
+        self.query_one("#v3-info", Static).update("\n".join(lines))
+
+    # ------------------------------------------------------------------ meshes
+    @work(thread=True, exclusive=True, group="meshes")
+    def prepare_meshes(self) -> None:
+        self.app.call_from_thread(self._status, f"Building surfaces ({self.method}) ...")
+        t0 = time.perf_counter()
+        try:
+            meshes = build_meshes(self.s, self.method)
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"Surfaces failed: {exc}", severity="error")
+            meshes = {}
+        dt = time.perf_counter() - t0
+        self.app.call_from_thread(self._meshes_ready, meshes, dt)
+
+    def _meshes_ready(self, meshes: dict, dt: float) -> None:
+        self.meshes = meshes
+        try:
+            render = engine("render")
+            scene = render.Scene.from_meshes(list(meshes.values()))
+            scene.set_volume(self.s.volume)
+            scene.options.show_surfaces = True
+        except CtuiError as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        if self.scene is not None:  # keep the camera and light when switching methods
+            scene.camera, scene.light, scene.options = self.scene.camera, self.scene.light, self.scene.options
+        self.scene = scene
+        if not meshes and self.mode in ("surface", "wire", "transparent"):
+            self.mode = "mip"
+            self.app.notify("No objects yet: showing the volume (MIP); segment objects in the workspace", timeout=5)
+        self._status(f"{len(meshes)} surface(s) in {dt:.2f} s")
+        self._info()
+        self.request_render()
+
+    # ------------------------------------------------------------------ rendering
+    def request_render(self) -> None:
+        if self.scene is None:
+            return
+        self._req += 1
+        self.scene.mode = self.mode
+        self.scene.options.window = tuple(self.s.window)
+        scene = self.scene.snapshot() if hasattr(self.scene, "snapshot") else copy.deepcopy(self.scene)
+        size = self.query_one(ImageView).target_pixels()
+        self._render_worker(scene, size, self._req)
+
+    @work(thread=True, exclusive=True, group="render")
+    def _render_worker(self, scene, size, req: int) -> None:
+        t0 = time.perf_counter()
+        try:
+            render = engine("render")
+            fut = render.get_renderer().submit(scene, size)
+            while True:
+                try:
+                    img = fut.result(timeout=0.1)
+                    break
+                except TimeoutError:
+                    if req != self._req:  # superseded: drop it (the renderer finishes on its thread)
+                        return
+        except Exception as exc:
+            msg = str(exc)
+            self.app.call_from_thread(self._render_failed, msg)
+            return
+        dt = time.perf_counter() - t0
+        self.app.call_from_thread(self._show, img, req, dt)
+
+    def _render_failed(self, msg: str) -> None:
+        self._status(f"Render failed: {msg}")
+        self.app.notify(f"3D render failed: {msg}", severity="error", timeout=10)
+
+    def _show(self, img, req: int, dt: float) -> None:
+        if req != self._req:
+            return  # a newer request is on its way
+        self.last_image = img
+        self.render_times.append(dt)
+        self.shown_requests.append(req)
+        self.query_one(ImageView).set_image(img, token=("3d", req))
+        self._status(f"{self.mode}: {img.shape[1]}x{img.shape[0]} px in {dt * 1000:.0f} ms")
+
+    # ------------------------------------------------------------------ keys
+    def action_orbit(self, da: float, de: float) -> None:
+        if self.scene is None:
+            return
+        c = self.scene.camera
+        c.azimuth = (c.azimuth + da) % 360
+        c.elevation = max(-90.0, min(90.0, c.elevation + de))
+        self._info()
+        self.request_render()
+
+    def action_light(self, da: float, de: float) -> None:
+        if self.scene is None:
+            return
+        lt = self.scene.light
+        lt.azimuth = (lt.azimuth + da + 180) % 360 - 180
+        lt.elevation = max(-90.0, min(90.0, lt.elevation + de))
+        self._info()
+        self.request_render()
+
+    def action_zoom(self, f: float) -> None:
+        if self.scene is None:
+            return
+        self.scene.camera.zoom = max(0.1, min(50.0, self.scene.camera.zoom * f))
+        self._info()
+        self.request_render()
+
+    def action_mode(self) -> None:
+        i = MODES.index(self.mode) if self.mode in MODES else -1
+        self.mode = MODES[(i + 1) % len(MODES)]
+        self._info()
+        self.request_render()
+
+    def action_method(self) -> None:
+        self.method = METHODS[(METHODS.index(self.method) + 1) % len(METHODS)]
+        self._info()
+        self.prepare_meshes()
+
+    def action_shadows(self) -> None:
+        if self.scene is None:
+            return
+        self.scene.options.shadows = not self.scene.options.shadows
+        self._info()
+        self.request_render()
+
+    def action_save(self) -> None:
+        from .dialogs import PromptScreen
+
+        if self.scene is None:
+            return
+
+        def done(path: str | None) -> None:
+            if path:
+                self._save_png(path.strip())
+
+        self.app.push_screen(PromptScreen("Save the 3D view as PNG", "ctui-3d.png"), done)
+
+    @work(thread=True, group="save")
+    def _save_png(self, path: str) -> None:
+        render = engine("render")
+        scene = self.scene.snapshot()
+        scene.mode = self.mode
+        try:
+            w, h = 1024, 1024
+            img = render.get_renderer().submit(scene, (w, h)).result()
+            render.save_png(path, img)
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"PNG not saved: {exc}", severity="error")
+            return
+        self.app.call_from_thread(self.app.notify, f"Saved {path}")
+
+    def action_turntable(self) -> None:
+        from .dialogs import PromptScreen
+
+        if self.scene is None:
+            return
+
+        def done(path: str | None) -> None:
+            if path:
+                self._turntable(path.strip())
+
+        self.app.push_screen(PromptScreen("Turntable animation (36 frames, GIF)", "ctui-turntable.gif"), done)
+
+    @work(thread=True, group="save")
+    def _turntable(self, path: str) -> None:
+        render = engine("render")
+        scene = self.scene.snapshot()
+        scene.mode = self.mode
+        self.app.call_from_thread(self._status, f"Writing turntable {path} ...")
+        try:
+            render.save_turntable(path, scene, 36, (384, 384))
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"Turntable not saved: {exc}", severity="error")
+            return
+        self.app.call_from_thread(self.app.notify, f"Saved {path}")
+        self.app.call_from_thread(self._status, f"Saved {path}")
+
+    def action_close(self) -> None:
+        self._req += 1  # drop anything in flight
+        self.app.pop_screen()
