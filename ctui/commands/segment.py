@@ -1,0 +1,259 @@
+"""``ctui segment PATH --seed X,Y,Z (--range LO:HI | --tolerance T) ...``: threshold fill + propagation."""
+
+from __future__ import annotations
+
+import argparse
+
+FILTER_HELP = (
+    "filter step NAME[:key=value,...], repeatable, run in order (stage 1 steps, then stage 2). "
+    "Names: opening closing erode dilate median gaussian sharpen conservative invert equalize clahe. "
+    "Keys: stage=1|2, shape=rect|ellipse|cross|custom, size=N, iterations=N, kernel=010/111/010 "
+    "(custom 0/1 rows), sigma=S, amount=A (sharpen), clip_limit=C, tiles=N (clahe). "
+    "Example: --filter opening:size=3,shape=ellipse --filter median:size=5,stage=2"
+)
+
+
+class _ThresholdAction(argparse.Action):
+    """Keeps --range and --tolerance in one ordered list so the n-th pairs with the n-th --seed."""
+
+    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[override]
+        items = list(getattr(namespace, self.dest, None) or [])
+        items.append((self.const, values))
+        setattr(namespace, self.dest, items)
+
+
+def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) -> None:
+    """Options shared by ``segment`` and ``drift``."""
+    p.add_argument("--seed", action="append", default=[], metavar="X,Y,Z",
+                   help="seed voxel: column, row, slice (slice 0 lowest along the slice normal); "
+                        "repeat for several objects" + ("" if required else " (instead of --mask)"))
+    p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI",
+                   help="in-range values LO..HI inclusive (HU for CT in the default hu domain); "
+                        "one per --seed, or one for all")
+    p.add_argument("--tolerance", dest="thresholds", action=_ThresholdAction, const="tolerance", metavar="T",
+                   help="in-range values: seed value +- T (in the seed slice's final view)")
+    p.add_argument("--filter", action="append", default=[], metavar="SPEC", help=FILTER_HELP)
+    p.add_argument("--domain", choices=("hu", "window8"), default="hu",
+                   help="filters and thresholds work on HU values (hu, default) or on windowed 0..255 values (window8)")
+    p.add_argument("--window", metavar="C,W", default=None, help="window centre,width for window8/equalize/invert (default: the series')")
+    p.add_argument("--connectivity", type=int, choices=(4, 8), default=8, help="in-slice connectivity (default 8)")
+    p.add_argument("--direction", choices=("both", "forward", "backward"), default="both",
+                   help="propagate from the seed slice towards higher slices, lower, or both (default)")
+    p.add_argument("--mode", choices=("slice", "3d"), default="slice",
+                   help="slice-by-slice propagation with leak guard (default) or one 3D flood fill")
+    p.add_argument("--leak-factor", type=float, default=2.5,
+                   help="leak guard: stop when the area grows more than this factor from one slice to the next (default 2.5)")
+    p.add_argument("--neighbourhood", type=int, default=2,
+                   help="pixels the previous slice's object is grown by to seed the next slice (default 2)")
+    p.add_argument("--min-area", type=int, default=5, help="smallest accepted fill / object slice in pixels (default 5)")
+    p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "segment",
+        help="threshold flood fill from seeds, propagated through the slices",
+        description="Fill each object from its seed on the seed slice (after the filter pipeline), "
+        "propagate it slice by slice with a leak guard, and report voxels and volume. "
+        "--seed/--range/--tolerance may repeat: one object per --seed (ids 1, 2, ...).",
+        epilog="Example: ctui segment scan/ --seed 94,81,40 --range 115:445 --filter opening:size=3 --json",
+    )
+    p.add_argument("path", help="series folder/file (anything `ctui open` loads)")
+    add_segmentation_args(p)
+    p.add_argument("--project", metavar="OUT.ctui", help="write a project (source, pipeline, labels, objects)")
+    p.add_argument("--mask", metavar="OUT", help="write the label volume (.nii, .nii.gz, .nrrd, .seg.nrrd)")
+    p.add_argument("--mric", metavar="OUT.mric", help="write the borders as an MRIC contour file")
+    p.add_argument("--json", action="store_true", help="print a JSON report")
+    p.set_defaults(func=run)
+
+
+# ----------------------------------------------------------------------------- helpers
+def _err(msg: str):
+    from ctui.engine.errors import CtuiError
+
+    return CtuiError(msg)
+
+
+def parse_seed(text: str) -> tuple[int, int, int]:
+    parts = text.replace(" ", "").split(",")
+    if len(parts) != 3:
+        raise _err(f"--seed {text!r}: expected X,Y,Z (column,row,slice)")
+    try:
+        x, y, z = (int(v) for v in parts)
+    except ValueError:
+        raise _err(f"--seed {text!r}: X,Y,Z must be integers") from None
+    return x, y, z
+
+
+def parse_range(text: str) -> tuple[float, float]:
+    lo_s, sep, hi_s = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        lo, hi = float(lo_s), float(hi_s)
+    except ValueError:
+        raise _err(f"--range {text!r}: expected LO:HI (numbers), e.g. 115:445") from None
+    if lo > hi:
+        raise _err(f"--range {text!r}: LO is above HI")
+    return lo, hi
+
+
+def build_pipeline(args: argparse.Namespace):
+    from ctui.engine.pipeline import Pipeline, parse_filter_spec
+
+    window = None
+    if args.window:
+        try:
+            c, w = (float(v) for v in args.window.split(","))
+        except ValueError:
+            raise _err(f"--window {args.window!r}: expected CENTRE,WIDTH") from None
+        if w <= 0:
+            raise _err(f"--window {args.window!r}: width must be > 0")
+        window = (c, w)
+    try:
+        steps = [parse_filter_spec(s) for s in args.filter]
+    except ValueError as exc:
+        raise _err(f"--filter: {exc}") from None
+    return Pipeline(steps, domain=args.domain, window=window)
+
+
+def load_volume(path: str, *, series: str | None = None):
+    import os
+
+    if not os.path.exists(path):
+        raise _err(f"{path}: no such file or folder")
+    from ctui.engine.loaders import load
+
+    opts = {"series": series} if series else {}
+    return load(path, **opts)
+
+
+def segment_volume(volume, args: argparse.Namespace, *, pipeline=None):
+    """Fill and propagate every --seed; returns (Segmentation, pipeline, settings list, results list)."""
+    from ctui.engine.propagate import PropagationSettings, propagate_object
+    from ctui.engine.selection import Segmentation
+
+    seeds = [parse_seed(s) for s in args.seed]
+    if not seeds:
+        raise _err("give at least one --seed X,Y,Z")
+    thresholds = list(args.thresholds or [])
+    if not thresholds:
+        raise _err("give --range LO:HI or --tolerance T")
+    if len(thresholds) == 1:
+        thresholds = thresholds * len(seeds)
+    if len(thresholds) != len(seeds):
+        raise _err(f"{len(seeds)} --seed but {len(thresholds)} --range/--tolerance: give one for all or one per seed")
+    if len(seeds) > 10:
+        raise _err("at most 10 objects (--seed given more than 10 times)")
+    if args.leak_factor <= 1:
+        raise _err("--leak-factor must be > 1")
+    if args.neighbourhood < 0 or args.min_area < 1:
+        raise _err("--neighbourhood must be >= 0 and --min-area >= 1")
+    pipeline = pipeline or build_pipeline(args)
+    nz, ny, nx = volume.data.shape
+    for x, y, z in seeds:
+        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+            raise _err(f"--seed {x},{y},{z} is outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
+    seg = Segmentation(volume.data.shape)
+    results = []
+    all_settings = []
+    for i, ((x, y, z), (kind, value)) in enumerate(zip(seeds, thresholds), start=1):
+        final = pipeline.final_slice(volume, z)
+        if kind == "range":
+            lo, hi = parse_range(value)
+            fill_kw = {"low": lo, "high": hi}
+        else:
+            try:
+                tol = float(value)
+            except ValueError:
+                raise _err(f"--tolerance {value!r}: expected a number") from None
+            fill_kw = {"tolerance": tol}
+        oid = seg.add_object(f"object {i}", object_id=i)
+        res = seg.fill(final, x, y, z, object_id=oid, connectivity=args.connectivity, min_area=args.min_area, **fill_kw)
+        warnings: list[str] = []
+        if not res.accepted:
+            if res.area == 0 and seg.labels[z, y, x] not in (0, oid):
+                raise _err(f"--seed {x},{y},{z}: the voxel already belongs to object {int(seg.labels[z, y, x])}")
+            raise _err(f"--seed {x},{y},{z}: {res.reason}")
+        lo, hi = res.range
+        settings = PropagationSettings(low=lo, high=hi, direction=args.direction, connectivity=args.connectivity,
+                                       neighbourhood=args.neighbourhood, min_area=args.min_area,
+                                       leak_factor=args.leak_factor, mode=args.mode)
+        prop = propagate_object(seg, volume, pipeline, oid, z, settings)
+        prop.accept(seg)
+        warnings.extend(prop.warnings())
+        seg.objects[oid].settings["propagation"] = prop.summary()["stops"]
+        all_settings.append(settings.to_dict())
+        results.append({"id": oid, "seed": [x, y, z], "range": [lo, hi], "stops": prop.stops, "warnings": warnings})
+    return seg, pipeline, all_settings, results
+
+
+def objects_report(seg, volume, results) -> list[dict]:
+    vox_ml = volume.voxel_volume_mm3() / 1000.0
+    counts = {int(i): int(c) for i, c in enumerate(__import__("numpy").bincount(seg.labels.ravel(), minlength=256))}
+    out = []
+    for r in results:
+        oid = r["id"]
+        rng = seg.slice_range(oid)
+        out.append({"id": oid, "voxels": counts.get(oid, 0), "volume_ml": round(counts.get(oid, 0) * vox_ml, 4),
+                    "slices": None if rng is None else [int(rng[0]), int(rng[1])], "warnings": r["warnings"],
+                    "seed": r["seed"], "range": r["range"]})
+    return out
+
+
+def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, series: str | None = None, drift: dict | None = None):
+    import os
+
+    from ctui.engine.project import Project
+
+    prop = dict(settings[0]) if settings else {}
+    if len(settings) > 1:
+        prop["per_object"] = settings
+    return Project(source_path=os.path.abspath(path), source_options={"series": series} if series else {},
+                   pipeline=pipeline.to_dict(), labels=seg.labels, objects=seg.object_list(), propagation=prop,
+                   drift=drift or {}, window=tuple(volume.window) if volume.window else None, meta={})
+
+
+def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: list[dict]) -> list[str]:
+    written = []
+    if getattr(args, "project", None):
+        from ctui.engine.project import save_project
+
+        save_project(args.project, make_project(args.path, volume, seg, pipeline, settings, series=args.series))
+        written.append(args.project)
+    if getattr(args, "mask", None):
+        from ctui.engine.labelio import save_labels
+
+        save_labels(args.mask, seg.labels, volume, names={o["id"]: o["name"] for o in seg.object_list()})
+        written.append(args.mask)
+    if getattr(args, "mric", None):
+        from ctui.engine.borders import borders_for_mric
+        from ctui.engine.mric import write_mric
+
+        nz, ny, nx = seg.labels.shape
+        mid = nz // 2
+        image = pipeline.run_slice(volume, mid).display("original")
+        write_mric(args.mric, borders_for_mric(seg.labels), width=nx, height=ny, image=image)
+        written.append(args.mric)
+    return written
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    volume = load_volume(args.path, series=args.series)
+    seg, pipeline, settings, results = segment_volume(volume, args)
+    written = write_outputs(args, volume, seg, pipeline, settings)
+    objs = objects_report(seg, volume, results)
+    if args.json:
+        print(json.dumps({"path": args.path, "shape_zyx": list(volume.shape), "spacing_zyx_mm": list(volume.spacing),
+                          "pipeline": pipeline.to_dict(), "objects": objs, "written": written}, indent=1))
+    else:
+        for o in objs:
+            sl = "-" if o["slices"] is None else f"{o['slices'][0]}..{o['slices'][1]}"
+            print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl}")
+            for w in o["warnings"]:
+                print(f"  warning: {w}")
+        for w in written:
+            print(f"wrote {w}")
+    return 0
