@@ -346,7 +346,7 @@ def _uid(*parts: object) -> str:
     return generate_uid(prefix=PYDICOM_ROOT_UID, entropy_srcs=["ctui-phantom", *map(str, parts)])
 
 
-def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, description: str = "ctui synthetic phantom") -> list[Path]:
+def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, description: str = "ctui demo CT") -> list[Path]:
     """Write ``volume`` (CT, HU) as a DICOM CT Image Storage series with shuffled file names.
 
     Stored as uint16 with RescaleIntercept -1024; positions from the volume's geometry.
