@@ -1,0 +1,92 @@
+"""Slice drift: the phantom's drifted slices are flagged and corrected; plot written."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine.drift import (analyze_drift, apply_corrections, corrections_from_report, invert_corrections,
+                               plot_drift, slice_centroids, smooth_fit)
+from ctui.engine.pipeline import Pipeline
+from ctui.engine.propagate import PropagationSettings, propagate_object
+from ctui.engine.selection import Segmentation
+
+
+@pytest.fixture(scope="module")
+def phantom_seg():
+    from ctui.engine.phantom import make_phantom
+
+    vol, truth = make_phantom()
+    seg = Segmentation(vol.shape)
+    p = Pipeline()
+    for o in truth["objects"]:
+        if o["name"] not in ("kidney_left", "kidney_right", "spine"):
+            continue
+        z, y, x = o["seed_zyx"]
+        lo, hi = o["hu_range"]
+        oid = seg.add_object(o["name"])
+        assert seg.fill(p.final_slice(vol, z), x, y, z, object_id=oid, low=lo, high=hi).accepted
+        propagate_object(seg, vol, p, oid, z, PropagationSettings(low=lo, high=hi)).accept(seg)
+    return vol, truth, seg
+
+
+def test_phantom_drifted_slices_flagged(phantom_seg):
+    vol, truth, seg = phantom_seg
+    rep = analyze_drift(seg.labels, vol)
+    assert rep.flagged == truth["drift"]["slices"]
+    for o in rep.objects:  # every object sees the same drift
+        assert o.flagged == truth["drift"]["slices"]
+        # deviation in mm matches the known shift (within a fraction of a pixel)
+        for z, (sy, sx) in zip(truth["drift"]["slices"], truth["drift"]["shifts_mm_yx"]):
+            k = int(np.flatnonzero(o.slices == z)[0])
+            np.testing.assert_allclose(o.deviation_mm[k], [sx, sy], atol=0.6)
+    data = rep.plot_data()
+    assert data["flagged"] == truth["drift"]["slices"] and len(data["objects"]) == 3
+
+
+@pytest.mark.parametrize("estimate", ["centroid", "phase"])
+def test_corrections_realign_and_undo(phantom_seg, estimate):
+    vol, truth, seg = phantom_seg
+    rep = analyze_drift(seg.labels, vol)
+    corr = corrections_from_report(rep, estimate=estimate, volume=vol)
+    assert [c["slice"] for c in corr] == truth["drift"]["slices"]
+    for c, (sy, sx) in zip(corr, truth["drift"]["shifts_px_yx"]):
+        assert c["dx"] == pytest.approx(-sx, abs=0.25) and c["dy"] == pytest.approx(-sy, abs=0.25)
+    rounded = [{"slice": c["slice"], "dx": round(c["dx"]), "dy": round(c["dy"])} for c in corr]
+    fixed = apply_corrections(seg.labels, rounded, interpolation="nearest")
+    assert analyze_drift(fixed, vol).flagged == []
+    assert fixed is not seg.labels and (seg.labels != fixed).any()  # original untouched
+    # undo: integer shifts away from the edges invert exactly
+    back = apply_corrections(fixed, invert_corrections(rounded), interpolation="nearest")
+    np.testing.assert_array_equal(back, seg.labels)
+    img = apply_corrections(vol.data, corr)  # sub-pixel, linear
+    assert img.dtype == vol.data.dtype and img.shape == vol.data.shape
+
+
+def test_no_flags_without_drift_and_robust_fit():
+    labels = np.zeros((30, 40, 40), np.uint8)
+    for z in range(30):
+        x = 10 + z * 0.5  # slow, smooth drift: not flagged
+        labels[z, 15:25, int(x):int(x) + 8] = 1
+    rep = analyze_drift(labels, spacing=(1.0, 1.0, 1.0))
+    assert rep.flagged == []
+    labels[12] = np.roll(labels[12], 5, axis=1)  # a jolt
+    rep = analyze_drift(labels, spacing=(1.0, 1.0, 1.0), threshold_mm=2.0)
+    assert rep.flagged == [12]
+    rep = analyze_drift(labels, spacing=(1.0, 1.0, 1.0), threshold_mm=2.0, method="poly")
+    assert rep.flagged == [12]
+    zs, c, area = slice_centroids(labels, 1)
+    assert len(zs) == 30 and (area == 80).all()
+    t = np.arange(20.0)
+    np.testing.assert_allclose(smooth_fit(t, method="poly", degree=1), t, atol=1e-6)
+
+
+def test_plot_png(tmp_path, phantom_seg):
+    vol, truth, seg = phantom_seg
+    out = tmp_path / "drift.png"
+    plot_drift(analyze_drift(seg.labels, vol), out)
+    from PIL import Image
+
+    im = Image.open(out)
+    assert im.size == (800, 700)
+    assert not list(tmp_path.glob(".*tmp*"))  # atomic: no temp file left
