@@ -160,6 +160,34 @@ class ImageView(Widget):
             return strips[y]
         return Strip.blank(self.size.width)
 
+    def render_lines(self, crop):
+        """Strips straight from the half-block/ascii renderer.
+
+        Bypasses Textual's per-line style cache and line filters: this widget has no
+        border, padding or text styles, its cells are already truecolor, and the
+        filter pass (ANSIToTruecolor, lru-cached on 1024 styles) thrashes on the
+        thousands of distinct fg/bg pairs of a grey image, costing more than the
+        whole render.
+        """
+        if self.mode in ("sixel", "kitty"):
+            return super().render_lines(crop)
+        strips = self._ensure_strips()
+        W = self.size.width
+        out = []
+        x0, x1 = crop.x, crop.x + crop.width
+        full = x0 == 0 and x1 >= W
+        blank = None
+        for y in range(crop.y, crop.y + crop.height):
+            if 0 <= y < len(strips):
+                st = strips[y]
+                out.append(st if full else st.crop(x0, x1))
+            else:
+                blank = blank or Strip.blank(crop.width)
+                out.append(blank)
+        if crop.y + crop.height >= len(strips):
+            self.painted = (self.token, time.perf_counter())
+        return out
+
     def get_content_height(self, container: Size, viewport: Size, width: int) -> int:
         return container.height
 
