@@ -1,13 +1,20 @@
 """Display windows (centre, width) and conversion of slices to 8-bit for display.
 
-Placeholder core; the loader helper extends presets. Kept free of heavy imports.
+* CT presets (Hounsfield units) with the usual centre/width: brain, subdural, stroke,
+  bone, lung, abdomen / soft tissue, liver, mediastinum;
+* the DICOM header's window (WindowCenter/WindowWidth, first of several values);
+* an automatic percentile window for MR and plain images (0.5 - 99.5 percentiles).
+
+Kept free of heavy imports (numpy only).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-# (centre, width) in HU
+# (centre, width) in HU. Sources: common radiology practice (e.g. Radiopaedia "CT windows").
 CT_PRESETS: dict[str, tuple[float, float]] = {
     "brain": (40.0, 80.0),
     "subdural": (75.0, 215.0),
@@ -19,32 +26,110 @@ CT_PRESETS: dict[str, tuple[float, float]] = {
     "liver": (60.0, 150.0),
     "mediastinum": (50.0, 350.0),
 }
+# order for cycling through presets in the TUI
+PRESET_ORDER: tuple[str, ...] = tuple(CT_PRESETS)
+_ALIASES = {"soft tissue": "soft_tissue", "soft-tissue": "soft_tissue", "softtissue": "soft_tissue", "abdominal": "abdomen",
+            "abd": "abdomen", "mediastinal": "mediastinum", "mediastinum": "mediastinum", "bones": "bone"}
 
 
-def auto_window(data: np.ndarray, *, modality: str = "OT", percentiles: tuple[float, float] = (0.5, 99.5)) -> tuple[float, float]:
-    """Default window: abdomen for CT, a percentile window otherwise.
+def preset(name: str) -> tuple[float, float]:
+    """CT preset (centre, width) in HU by name (case-insensitive; 'soft tissue' etc. accepted).
+
+    Raises KeyError naming the known presets.
+    """
+    key = str(name).strip().lower()
+    key = _ALIASES.get(key, key.replace(" ", "_").replace("-", "_"))
+    if key not in CT_PRESETS:
+        raise KeyError(f"unknown window preset {name!r}; known: {', '.join(CT_PRESETS)}")
+    return CT_PRESETS[key]
+
+
+def header_window(centre: Any, width: Any) -> tuple[float, float] | None:
+    """The DICOM header window: WindowCenter/WindowWidth values (numbers, strings or
+    multi-valued lists, of which the first is used) -> (centre, width), or None when
+    absent or invalid (width <= 0)."""
+
+    def first(v: Any) -> float | None:
+        if v is None:
+            return None
+        if isinstance(v, str):
+            v = v.split("\\")[0]
+        elif not isinstance(v, (int, float, np.number)):
+            try:
+                v = list(v)[0]
+            except (TypeError, IndexError):
+                return None
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            return None
+        return f if np.isfinite(f) else None
+
+    c, w = first(centre), first(width)
+    if c is None or w is None or w <= 0:
+        return None
+    return (c, w)
+
+
+def percentile_window(data: np.ndarray, percentiles: tuple[float, float] = (0.5, 99.5), *, max_samples: int = 2_000_000) -> tuple[float, float]:
+    """Window spanning the given percentiles of ``data`` (any shape); a strided sample
+    of at most ``max_samples`` values is used for big volumes."""
+    if data.size == 0:
+        return (0.0, 1.0)
+    sample = data
+    if data.size > max_samples:
+        if data.ndim == 3:
+            step = int(np.ceil((data.size / max_samples) ** (1 / 3)))
+            sample = data[::step, ::step, ::step]
+        else:
+            sample = data.ravel()[:: int(np.ceil(data.size / max_samples))]
+    sample = np.asarray(sample)
+    if sample.dtype.kind == "f":
+        sample = sample[np.isfinite(sample)]
+        if sample.size == 0:
+            return (0.0, 1.0)
+    lo, hi = np.percentile(sample, percentiles)
+    width = float(max(hi - lo, 1e-6))
+    return (float(lo + hi) / 2.0, width)
+
+
+def auto_window(
+    data: np.ndarray,
+    *,
+    modality: str = "OT",
+    percentiles: tuple[float, float] = (0.5, 99.5),
+    header: tuple[float, float] | None = None,
+) -> tuple[float, float]:
+    """Default window: the header's window when given, else abdomen / soft tissue
+    (40, 400) for CT, else a percentile window (MR, plain images).
 
     Parameters
     ----------
     data : ndarray, any shape
     modality : str
     percentiles : (low, high) percentiles used for non-CT data.
+    header : (centre, width) from the DICOM header, optional.
 
     Returns
     -------
     (centre, width) in the data's units.
     """
+    if header is not None and header[1] > 0:
+        return (float(header[0]), float(header[1]))
     if modality == "CT":
         return CT_PRESETS["abdomen"]
-    if data.size == 0:
-        return (0.0, 1.0)
-    sample = data
-    if data.size > 2_000_000:  # a strided sample is plenty for percentiles
-        step = int(np.ceil((data.size / 2_000_000) ** (1 / 3)))
-        sample = data[::step, ::step, ::step] if data.ndim == 3 else data.ravel()[:: step**3]
-    lo, hi = np.percentile(sample, percentiles)
-    width = float(max(hi - lo, 1e-6))
-    return (float(lo + hi) / 2.0, width)
+    return percentile_window(data, percentiles)
+
+
+def window_range(window: tuple[float, float]) -> tuple[float, float]:
+    """(centre, width) -> (low, high) values."""
+    c, w = window
+    return (c - w / 2.0, c + w / 2.0)
+
+
+def window_from_range(lo: float, hi: float) -> tuple[float, float]:
+    """(low, high) -> (centre, width)."""
+    return ((lo + hi) / 2.0, max(hi - lo, 1e-6))
 
 
 def apply_window(image: np.ndarray, window: tuple[float, float]) -> np.ndarray:
