@@ -568,6 +568,7 @@ class GLEngine:
         has_surf = any(m.visible and m.mesh.n_faces for m in scene.meshes) and opts.show_surfaces
         _set(p, "u_use_depth", 1 if has_surf else 0)
         _set(p, "u_jitter", 1 if mode == 2 else 0)
+        _set(p, "u_skip", 1 if opts.empty_space_skipping else 0)
         _set(p, "u_tf_scale", ((TF_SIZE - 1) / TF_SIZE, 0.5 / TF_SIZE))
         g.tex.use(0)
         g.brick_tex.use(1)

@@ -136,6 +136,8 @@ class RenderOptions:
     show_surfaces : in volume modes, draw the scene's meshes inside the volume (the
         rays stop at them).
     shadow_map_size : shadow map resolution in texels.
+    empty_space_skipping : skip volume bricks that cannot contribute (on; off only
+        for measuring its effect).
     """
 
     shadows: bool = False
@@ -154,6 +156,7 @@ class RenderOptions:
     shading: bool = True
     show_surfaces: bool = True
     shadow_map_size: int = 2048
+    empty_space_skipping: bool = True
 
 
 @dataclass

@@ -213,6 +213,7 @@ uniform float u_headlight;
 uniform vec4 u_material;
 uniform int u_use_depth;
 uniform int u_jitter;
+uniform int u_skip;
 in vec2 v_uv;
 out vec4 f_color;
 
@@ -257,7 +258,7 @@ void main() {
         vec3 blo = bc * u_brick - 0.5, bhi = blo + u_brick;
         vec3 te = ((mix(blo, bhi, step(0.0, d))) - o) * invd;
         float texit = min(min(te.x, te.y), min(te.z, t1));
-        bool skip = (u_mode == 0 && b.g <= best) || (u_mode == 1 && b.r >= best) || (u_mode == 2 && b.b < 0.5);
+        bool skip = u_skip == 1 && ((u_mode == 0 && b.g <= best) || (u_mode == 1 && b.r >= best) || (u_mode == 2 && b.b < 0.5));
         if (skip) {
             // keep samples on the ray's regular lattice
             t += max(ceil((texit - t) / u_step), 1.0) * u_step;
