@@ -422,10 +422,9 @@ def _read_compressed(p: Path, fh, header, sizes, dtype: np.dtype, encoding: str,
         raise FormatError(f"{p}: compressed data holds more than the {need} bytes the header declares")
     if not dec.eof:
         raise FormatError(f"{p}: truncated or corrupted compressed data (stream ends early)")
-    raw = bytes(out[skip : skip + need])
-    if len(raw) != need:
+    if len(out) - skip != need:
         raise FormatError(f"{p}: truncated: compressed data holds {max(len(out) - skip, 0)} of the {need} bytes the header declares")
-    arr = np.frombuffer(raw, dtype)
+    arr = np.frombuffer(out, dtype, count=need // dtype.itemsize, offset=skip)  # no copy
     return arr.reshape(tuple(sizes[::-1])).T
 
 
