@@ -347,46 +347,46 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
         per = None
     per = list(per) if per else []
     out = []
+
+    def lookup(own: Any, seq: str) -> Any:
+        """Item of functional group ``seq``: the frame's own group first, then the shared one."""
+        for g in (own, shared):
+            if g is not None:
+                it = _seq_item(g, seq)
+                if it is not None:
+                    return it
+        return None
+
     for i in range(nframes):
         f = Frame(**{k: getattr(base, k) for k in base.__dataclass_fields__})
         f.frame = i
         f.instance = i + 1
-        groups = [g for g in (per[i] if i < len(per) else None, shared) if g is not None]
-        for g in groups:  # per-frame first, shared second: first found wins
-            if f.ipp is None or g is groups[0]:
-                p = _vec(getattr(_seq_item(g, "PlanePositionSequence"), "ImagePositionPatient", None), 3)
-                if p is not None and (f.ipp is None or g is groups[0]):
-                    f.ipp = p
-            o = _vec(getattr(_seq_item(g, "PlaneOrientationSequence"), "ImageOrientationPatient", None), 6)
-            if o is not None and (f.iop is None or f.iop is base.iop):
-                f.iop = o
-            pm = _seq_item(g, "PixelMeasuresSequence")
-            if pm is not None:
-                ps = _vec(pm.get("PixelSpacing"), 2)
-                if ps is not None and np.all(ps > 0) and (f.pixel_spacing is None or f.pixel_spacing == base.pixel_spacing):
-                    f.pixel_spacing = (float(ps[0]), float(ps[1]))
-                st = _num(pm.get("SliceThickness"))
-                if st is not None:
-                    f.thickness = st
-                sb = _num(pm.get("SpacingBetweenSlices"))
-                if sb is not None:
-                    f.spacing_between = sb
-            pv = _seq_item(g, "PixelValueTransformationSequence")
-            if pv is not None and g is groups[0]:
-                f.slope = _num(pv.get("RescaleSlope"), f.slope) or 1.0
-                f.intercept = _num(pv.get("RescaleIntercept"), f.intercept) or 0.0
-            voi = _seq_item(g, "FrameVOILUTSequence")
-            if voi is not None and f.window is None:
-                wc, ww = _num(voi.get("WindowCenter")), _num(voi.get("WindowWidth"))
-                if wc is not None and ww is not None and ww > 0:
-                    f.window = (wc, ww)
-        if per and i < len(per):
-            # each frame's own position comes only from its own group (not the base)
-            p = _vec(getattr(_seq_item(per[i], "PlanePositionSequence"), "ImagePositionPatient", None), 3)
-            if p is not None:
-                f.ipp = p
-        if f.ipp is base.ipp:
-            f.ipp = None  # a top-level position cannot be every frame's position
+        own = per[i] if i < len(per) else None
+        # a top-level position cannot be every frame's: only per-frame (or shared) positions count
+        f.ipp = _vec(getattr(lookup(own, "PlanePositionSequence"), "ImagePositionPatient", None), 3)
+        o = _vec(getattr(lookup(own, "PlaneOrientationSequence"), "ImageOrientationPatient", None), 6)
+        if o is not None:
+            f.iop = o
+        pm = lookup(own, "PixelMeasuresSequence")
+        if pm is not None:
+            ps = _vec(pm.get("PixelSpacing"), 2)
+            if ps is not None and np.all(ps > 0):
+                f.pixel_spacing = (float(ps[0]), float(ps[1]))
+            st = _num(pm.get("SliceThickness"))
+            if st is not None:
+                f.thickness = st
+            sb = _num(pm.get("SpacingBetweenSlices"))
+            if sb is not None:
+                f.spacing_between = sb
+        pv = lookup(own, "PixelValueTransformationSequence")
+        if pv is not None:
+            f.slope = _num(pv.get("RescaleSlope"), f.slope) or 1.0
+            f.intercept = _num(pv.get("RescaleIntercept"), f.intercept) or 0.0
+        voi = lookup(own, "FrameVOILUTSequence")
+        if voi is not None:
+            wc, ww = _num(voi.get("WindowCenter")), _num(voi.get("WindowWidth"))
+            if wc is not None and ww is not None and ww > 0:
+                f.window = (wc, ww)
         out.append(f)
     return out
 
@@ -640,6 +640,54 @@ def _decode_native(f: Frame) -> np.ndarray:
     return arr
 
 
+def _fast_ok(f: Frame, out_dtype: np.dtype) -> bool:
+    """Whether a frame can be read straight into the output slice (no temporary)."""
+    return (
+        not f.compressed
+        and f.samples == 1
+        and not f.float_kind
+        and f.bits_stored == f.bits
+        and f.photometric == "MONOCHROME2"
+        and out_dtype.kind in "iu"
+        and out_dtype.itemsize == f.bits // 8
+        and f.slope == 1.0
+        and f.intercept == int(f.intercept)
+    )
+
+
+def _decode_native_into(f: Frame, dst: np.ndarray, optimistic: bool, overflow: list, k: int) -> str | None:
+    """Read a frame's stored values into ``dst`` (the output slice) and rescale in place.
+
+    Peak memory: nothing beyond ``dst`` (the intercept is added in place through a
+    same-size view, in numpy's small buffered chunks).
+    """
+    raw_dt = f.raw_dtype
+    view = dst.view(raw_dt.newbyteorder("="))
+    n = f.rows * f.cols * raw_dt.itemsize
+    with open(f.file, "rb") as fh:
+        fh.seek(int(f.offset) + f.frame * n)
+        got = fh.readinto(memoryview(view.reshape(-1)).cast("B"))
+    if got != n:
+        return f"truncated: {got} of {n} pixel bytes"
+    if raw_dt.byteorder == ">" or (raw_dt.byteorder == "=" and f.big_endian):
+        view.byteswap(inplace=True)
+    icpt = int(f.intercept)
+    if view.dtype == dst.dtype and icpt == 0:
+        return None
+    if optimistic or icpt:
+        lo, hi = int(view.min()) + icpt, int(view.max()) + icpt
+        info = np.iinfo(dst.dtype)
+        if lo < info.min or hi > info.max:
+            overflow.append(k)
+            return None
+    # modular arithmetic in the stored type: once the bounds check above has passed,
+    # (stored + intercept) mod 2^bits read through ``dst``'s type is the exact value,
+    # and the in-place add needs no temporary (a mixed-dtype ufunc would copy the
+    # overlapping input)
+    view += np.array(icpt).astype(view.dtype)
+    return None
+
+
 def _mask_bits(arr: np.ndarray, f: Frame) -> np.ndarray:
     """Drop bits above BitsStored (overlays in old files); sign-extend when signed."""
     bs, nb = f.bits_stored, f.bits
@@ -753,8 +801,12 @@ def load_series(
     ysl, xsl = plan.y, plan.x
     overflow = []
 
+    full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
+
     def work(k: int, zi: int) -> str | None:
         f = sorted_frames[zi]
+        if full_plane and _fast_ok(f, out.dtype):
+            return _decode_native_into(f, out[k], optimistic, overflow, k)
         try:
             raw = _decode_native(f) if not f.compressed else _decode_pydicom(f)
         except _Skip as sk:
