@@ -204,3 +204,23 @@ def test_head_phantom_round_insert_one_object_per_slice():
     # a cylinder-like insert: same cross-section on the slices it fully crosses
     core = np.array(areas[1:-1]) if len(areas) > 2 else np.array(areas)
     assert core.std() / core.mean() < 0.05
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_fill3d_matches_scipy_label(connectivity):
+    from scipy import ndimage
+
+    from ctui.engine.propagate import fill3d
+
+    rng = np.random.default_rng(7)
+    inr = rng.random((12, 40, 40)) < 0.55
+    start = np.zeros((40, 40), bool)
+    start[18:22, 18:22] = True
+    got = fill3d(inr, 6, start, connectivity=connectivity)
+    st = ndimage.generate_binary_structure(3, 1)  # 6-connected
+    if connectivity == 8:
+        st[1] = True  # plus the in-plane diagonals
+    lab, _ = ndimage.label(inr, structure=st)
+    ids = np.unique(lab[6][start & inr[6]])
+    ref = np.isin(lab, ids[ids > 0])
+    np.testing.assert_array_equal(got, ref)

@@ -19,9 +19,9 @@ touches the crop's edge), so one object through 300 slices of 512x512 takes well
 under a second.
 
 3D mode (``mode="3d"``): the in-range mask of every slice in the chosen direction(s)
-is labelled at once with ``scipy.ndimage.label`` (6-connected for connectivity 4,
-in-plane 8 plus the slice above/below for connectivity 8) and the component(s)
-touching the seed slice's object are kept; the leak guard is then applied to the
+is labelled at once in 3D (:func:`fill3d`: ``scipy.ndimage.label`` with a 6-connected
+structure for connectivity 4, in-plane 8 plus the slice above/below for connectivity
+8), keeping what is connected to the seed slice's object; the leak guard is then applied to the
 per-slice areas of that component.
 
 The result is a :class:`Proposal` (pending: the label volume is untouched) the TUI can
@@ -359,6 +359,28 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
     return prop
 
 
+def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
+    """Voxels of ``inrange`` (bool (nz, ny, nx)) connected to ``start_mask`` (bool (ny, nx)) on slice ``z``.
+
+    Connectivity in 3D: 6 for ``connectivity=4``; in-plane 8 plus the voxel above and
+    below for ``connectivity=8``. Uses ``scipy.ndimage.label`` on the whole mask (about
+    5-10 ns per voxel here); a numba depth-first flood fill that visits only the
+    component was measured slower on 300x512x512 (about 370 ns per visited voxel: its
+    slice-to-slice steps miss the cache), so it was dropped.
+    """
+    from scipy import ndimage
+
+    inr = np.asarray(inrange, dtype=bool)
+    lab, n = ndimage.label(inr, structure=_structure(connectivity))
+    ids = np.unique(lab[z][start_mask.astype(bool) & inr[z]])
+    ids = ids[ids > 0]
+    if len(ids) == 1:
+        return lab == ids[0]
+    keep = np.zeros(n + 1, bool)  # lookup table: much faster than np.isin on a large volume
+    keep[ids] = True
+    return keep[lab]
+
+
 def _structure(connectivity: int) -> np.ndarray:
     st = np.zeros((3, 3, 3), bool)
     st[1] = True if connectivity == 8 else np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
@@ -369,8 +391,6 @@ def _structure(connectivity: int) -> np.ndarray:
 def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: PropagationSettings, prop: Proposal,
              dirs: list[str], labels: np.ndarray | None, object_id: int, cancel: threading.Event | None,
              total: int) -> Generator[Progress, None, Proposal]:
-    from scipy import ndimage
-
     nz = volume.data.shape[0]
     z0 = 0 if "backward" in dirs else z
     z1 = nz if "forward" in dirs else z + 1
@@ -395,14 +415,13 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
             done += 1
             yield Progress(z=zz, area=-1, direction="3d-threshold", done=done, total=total)
     if labels is not None and not s.overwrite:
-        lab = labels[z0:z1]
-        inr &= (lab == 0) | (lab == object_id)
+        for k in range(z1 - z0):  # per slice: no full-volume temporaries
+            lab = labels[z0 + k]
+            if lab.any():
+                inr[k] &= (lab == 0) | (lab == object_id)
     inr[z - z0] = start_mask.astype(bool)
     t1 = time.perf_counter()
-    lab3, n = ndimage.label(inr, structure=_structure(s.connectivity))
-    ids = np.unique(lab3[z - z0][start_mask.astype(bool)])
-    ids = ids[ids > 0]
-    comp = np.isin(lab3, ids)
+    comp = fill3d(inr, z - z0, start_mask.astype(bool), connectivity=s.connectivity)
     t2 = time.perf_counter()
     prop.timings["filter"] = t1 - t0
     prop.timings["fill"] = t2 - t1
