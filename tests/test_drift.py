@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.drift import (analyze_drift, apply_corrections, corrections_from_report, invert_corrections,
-                               plot_drift, slice_centroids, smooth_fit)
+from ctui.engine.drift import (analyze_drift, apply_corrections, correct_segmentation, corrected_volume,
+                               corrections_from_report, invert_corrections, plot_drift, slice_centroids, smooth_fit)
 from ctui.engine.pipeline import Pipeline
 from ctui.engine.propagate import PropagationSettings, propagate_object
 from ctui.engine.selection import Segmentation
@@ -90,3 +90,21 @@ def test_plot_png(tmp_path, phantom_seg):
     im = Image.open(out)
     assert im.size == (800, 700)
     assert not list(tmp_path.glob(".*tmp*"))  # atomic: no temp file left
+
+
+def test_correct_segmentation_is_one_slab_sized_undo_step(phantom_seg):
+    vol, truth, seg = phantom_seg
+    labels = seg.labels.copy()
+    from ctui.engine.selection import Segmentation
+
+    work = Segmentation(labels.shape, labels=labels)
+    corr = corrections_from_report(analyze_drift(labels, vol))
+    assert correct_segmentation(work, corr) > 0
+    assert analyze_drift(work.labels, vol).flagged == []
+    nslab = len(truth["drift"]["slices"])
+    assert work.undo_bytes() == 2 * nslab * labels.shape[1] * labels.shape[2]  # the slab, not the volume
+    work.undo()
+    np.testing.assert_array_equal(work.labels, seg.labels)
+    fixed = corrected_volume(vol, corr)
+    assert fixed.data is not vol.data and fixed.spacing == vol.spacing
+    assert fixed.meta["drift_corrections"] == corr

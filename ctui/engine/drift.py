@@ -319,3 +319,36 @@ def plot_drift(report: DriftReport, path: Any, *, title: str | None = None) -> N
     fig.tight_layout()
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png")
+
+
+def correct_segmentation(segmentation: Any, corrections: list[dict[str, float]], *, label: str = "drift correction") -> int:
+    """Shift the corrected slices of ``segmentation.labels`` as ONE undo step.
+
+    Only the slab between the first and last corrected slice is stored for undo (not
+    the whole volume). Shifts are rounded to whole pixels (labels stay exact). Returns
+    the number of voxels that changed; ``segmentation.undo()`` reverts it.
+    """
+    todo = [c for c in corrections if 0 <= int(c["slice"]) < segmentation.labels.shape[0]]
+    if not todo:
+        return 0
+    z0 = min(int(c["slice"]) for c in todo)
+    z1 = max(int(c["slice"]) for c in todo) + 1
+    slab = segmentation.labels[z0:z1]
+    local = [{"slice": int(c["slice"]) - z0, "dx": round(float(c.get("dx", 0))), "dy": round(float(c.get("dy", 0)))} for c in todo]
+    new = apply_corrections(slab, local, interpolation="nearest", fill_value=0)
+    changed = int(np.count_nonzero(new != slab))
+    segmentation.apply_region((slice(z0, z1), slice(None), slice(None)), new, label=label)
+    return changed
+
+
+def corrected_volume(volume: Any, corrections: list[dict[str, float]], *, interpolation: str = "linear") -> Any:
+    """A copy of ``volume`` (same geometry) whose data has the corrections applied.
+
+    The original is untouched: undo is keeping/using the original volume (or applying
+    a shorter list of corrections to it).
+    """
+    import dataclasses
+
+    out = dataclasses.replace(volume, data=apply_corrections(volume.data, corrections, interpolation=interpolation))
+    out.meta = {**volume.meta, "drift_corrections": [dict(c) for c in corrections]}
+    return out
