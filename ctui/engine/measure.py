@@ -1,0 +1,284 @@
+"""Volumes, areas and shape figures of segmented objects and meshes.
+
+* :func:`object_stats` - one object of a label volume: voxel-count volume, mesh volume
+  by the Gauss theorem (surface from MESH's ``mask_surface``), their difference, surface
+  area, centroid, bounding box, principal axes;
+* :func:`label_stats` - the same for every object of a label volume;
+* :func:`mesh_stats` - volume and area of a mesh per connected component, with
+  warnings for components that are not closed;
+* :func:`principal_axes` - second-moment axes of a mask in mm.
+
+Principal axes (definition used here): the eigen-decomposition of the covariance of
+the object's points in mm, taking every voxel as a uniform box (covariance of the voxel
+centres plus ``s_i**2 / 12`` per index axis). The reported ``lengths_mm`` are the full
+axis lengths of the solid ellipsoid with the same second moments: a solid ellipsoid of
+semi-axes (a, b, c) has eigenvalues (a**2, b**2, c**2) / 5, so length = 2 sqrt(5 lambda).
+
+All positions are patient mm (x, y, z) (see :mod:`ctui.engine.volume`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .centreline import index_matrix, index_to_mm
+from .errors import CtuiError
+from .meshdata import Mesh, face_areas, signed_volume_mm3
+
+
+# ------------------------------------------------------------------ meshes
+def mesh_components(mesh: Mesh) -> tuple[int, np.ndarray]:
+    """Connected components of a mesh's faces (faces sharing a vertex are connected).
+
+    Returns (count, face_labels (m,) int).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    nv = len(mesh.vertices)
+    if len(f) == 0:
+        return 0, np.zeros(0, dtype=np.int64)
+    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    g = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(nv, nv))
+    n, vlab = connected_components(g, directed=False)
+    flab = vlab[f[:, 0]]
+    # renumber to the components that own faces
+    uniq, flab = np.unique(flab, return_inverse=True)
+    return int(len(uniq)), flab.astype(np.int64)
+
+
+def edge_counts(faces: np.ndarray) -> tuple[int, int]:
+    """(boundary edges, non-manifold edges) of a triangle list: edges used once / > twice."""
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0, 0
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e.sort(axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return int((counts == 1).sum()), int((counts > 2).sum())
+
+
+def mesh_stats(mesh: Mesh) -> dict[str, Any]:
+    """Volume (Gauss theorem) and area of a mesh, per connected component.
+
+    Returns
+    -------
+    dict with ``volume_mm3`` (sum over components of their signed volumes, made
+    positive when the whole mesh is oriented inwards), ``volume_ml``, ``area_mm2``,
+    ``closed`` (all components closed), ``components`` (list of ``{volume_mm3,
+    area_mm2, faces, closed, boundary_edges}``) and ``warnings`` (not closed,
+    inward-oriented components).
+    """
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    n, flab = mesh_components(mesh)
+    areas = face_areas(v, f)
+    comps = []
+    warnings = []
+    total = 0.0
+    for k in range(n):
+        fk = f[flab == k]
+        vol = signed_volume_mm3(v, fk)
+        b, nm = edge_counts(fk)
+        comps.append({
+            "volume_mm3": vol,
+            "area_mm2": float(areas[flab == k].sum()),
+            "faces": int(len(fk)),
+            "closed": b == 0,
+            "boundary_edges": b,
+            "nonmanifold_edges": nm,
+        })
+        total += vol
+    if total < 0:  # the mesh is oriented inwards as a whole
+        total = -total
+        for c in comps:
+            c["volume_mm3"] = -c["volume_mm3"]
+    open_ = [i for i, c in enumerate(comps) if not c["closed"]]
+    if open_:
+        nb = sum(comps[i]["boundary_edges"] for i in open_)
+        warnings.append(
+            f"mesh not closed: {len(open_)} of {n} component(s) have {nb} boundary edge(s); their Gauss volume is approximate"
+        )
+    neg = [i for i, c in enumerate(comps) if c["volume_mm3"] < 0]
+    if neg and n > 1:
+        warnings.append(f"{len(neg)} component(s) enclose negative volume (cavities or flipped faces)")
+    comps.sort(key=lambda c: -abs(c["volume_mm3"]))
+    return {
+        "volume_mm3": float(total),
+        "volume_ml": float(total) / 1000.0,
+        "area_mm2": float(areas.sum()),
+        "closed": not open_,
+        "n_components": n,
+        "components": comps,
+        "warnings": warnings,
+    }
+
+
+# ------------------------------------------------------------------ masks
+def principal_axes(mask: np.ndarray, *, spacing=(1.0, 1.0, 1.0), direction=None) -> dict[str, Any]:
+    """Second-moment axes of a mask, in mm.
+
+    Returns ``{"lengths_mm": (3,) descending, "axes": (3, 3) rows = unit vectors
+    (x, y, z), "eigenvalues_mm2": (3,)}``; lengths are the full axes of the solid
+    ellipsoid with the same second moments (2 sqrt(5 lambda)).
+    """
+    idx = np.argwhere(np.asarray(mask).astype(bool, copy=False))
+    if len(idx) == 0:
+        raise CtuiError("the object is empty")
+    m = index_matrix(spacing, direction)  # (z, y, x) index -> mm offset
+    x = idx.astype(np.float64) @ m.T
+    x -= x.mean(axis=0)
+    cov = (x.T @ x) / len(x)
+    # each voxel is a uniform box: add its own second moment s^2/12 along each index axis
+    cov += (m @ m.T) / 12.0
+    w, vec = np.linalg.eigh(cov)
+    order = np.argsort(w)[::-1]
+    w = np.clip(w[order], 0.0, None)
+    vec = vec[:, order].T
+    return {"lengths_mm": 2.0 * np.sqrt(5.0 * w), "axes": vec, "eigenvalues_mm2": w}
+
+
+def _surface(mask: np.ndarray, *, spacing, origin, direction, smooth: bool) -> Mesh:
+    """The mask's surface by MESH's mask_surface (imported lazily)."""
+    from .surface import mask_surface
+
+    return mask_surface(mask, spacing=tuple(spacing), origin=tuple(origin), direction=direction, smooth=smooth)
+
+
+def object_stats(
+    labels: np.ndarray,
+    object_id: int = 1,
+    *,
+    spacing=(1.0, 1.0, 1.0),
+    origin=(0.0, 0.0, 0.0),
+    direction=None,
+    mesh: bool | Mesh = True,
+    smooth: bool = True,
+) -> dict[str, Any]:
+    """Volumes, area and shape figures of one object of a label volume.
+
+    Parameters
+    ----------
+    labels : ndarray (z, y, x)
+        Label volume (0 background, 1..10 objects) or a boolean mask (then
+        ``object_id`` is ignored).
+    object_id : int
+        The object to measure.
+    spacing, origin, direction
+        Geometry (see :class:`~ctui.engine.volume.Volume`).
+    mesh : bool or Mesh
+        True: mesh the object with MESH's ``mask_surface`` (on its bounding box) and
+        report the Gauss volume and area; a Mesh: use that surface; False: voxels only.
+    smooth : bool
+        Passed to ``mask_surface``.
+
+    Returns
+    -------
+    dict with ``object``, ``voxels``, ``volume_voxels_mm3``, ``volume_voxels_ml``,
+    ``volume_mesh_mm3``, ``volume_mesh_ml``, ``volume_difference_percent`` (mesh vs
+    voxels), ``area_mm2``, ``mesh_closed``, ``mesh_components``, ``centroid_mm`` (3,),
+    ``bbox_mm`` ((3,), (3,)) min/max x, y, z of the voxels' extent,
+    ``principal_axes_mm`` (3,), ``principal_directions`` (3, 3), ``warnings``, and
+    ``mesh`` (the surface, when one was made).
+    """
+    lab = np.asarray(labels)
+    if lab.ndim != 3:
+        raise CtuiError(f"expected a 3D label volume, got shape {lab.shape}")
+    mask = lab.astype(bool) if lab.dtype == bool else lab == object_id
+    n = int(np.count_nonzero(mask))
+    if n == 0:
+        raise CtuiError(f"object {object_id} is empty")
+    sp = np.asarray(spacing, dtype=np.float64)
+    vox_mm3 = float(np.prod(sp))
+    nz = np.nonzero(mask)
+    lo = np.array([int(i.min()) for i in nz])
+    hi = np.array([int(i.max()) for i in nz])
+    centroid = index_to_mm(np.array([i.mean() for i in nz]), spacing=sp, origin=origin, direction=direction)
+    corners = np.array([[a, b, c] for a in (lo[0] - 0.5, hi[0] + 0.5) for b in (lo[1] - 0.5, hi[1] + 0.5)
+                        for c in (lo[2] - 0.5, hi[2] + 0.5)])
+    cxyz = index_to_mm(corners, spacing=sp, origin=origin, direction=direction)
+    pa = principal_axes(mask[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1], spacing=sp, direction=direction)
+    out: dict[str, Any] = {
+        "object": int(object_id),
+        "voxels": n,
+        "volume_voxels_mm3": n * vox_mm3,
+        "volume_voxels_ml": n * vox_mm3 / 1000.0,
+        "volume_mesh_mm3": None,
+        "volume_mesh_ml": None,
+        "volume_difference_percent": None,
+        "area_mm2": None,
+        "mesh_closed": None,
+        "mesh_components": None,
+        "centroid_mm": centroid,
+        "bbox_mm": (cxyz.min(axis=0), cxyz.max(axis=0)),
+        "principal_axes_mm": pa["lengths_mm"],
+        "principal_directions": pa["axes"],
+        "warnings": [],
+    }
+    surf = None
+    if isinstance(mesh, Mesh):
+        surf = mesh
+    elif mesh:
+        m = 3  # margin so the surface closes inside the crop
+        sl = tuple(slice(max(a - m, 0), b + m + 1) for a, b in zip(lo, hi))
+        sub = mask[sl]
+        start = np.array([s.start for s in sl])
+        pad = [(m - (a - s), m - (min(b + m + 1, N) - b - 1)) for a, b, s, N in zip(lo, hi, start, mask.shape)]
+        pad = [(max(p0, 0), max(p1, 0)) for p0, p1 in pad]
+        if any(p for pp in pad for p in pp):
+            sub = np.pad(sub, pad)
+            start = start - np.array([p[0] for p in pad])
+        sub_origin = index_to_mm(start.astype(np.float64), spacing=sp, origin=origin, direction=direction)
+        try:
+            surf = _surface(sub, spacing=sp, origin=sub_origin, direction=direction, smooth=smooth)
+        except ImportError:
+            out["warnings"].append("mesh volume unavailable: ctui.engine.surface.mask_surface is missing")
+            surf = None
+        else:
+            surf.object_id = int(object_id)
+    if surf is not None:
+        st = mesh_stats(surf)
+        out.update(
+            volume_mesh_mm3=st["volume_mm3"],
+            volume_mesh_ml=st["volume_ml"],
+            volume_difference_percent=100.0 * (st["volume_mm3"] - n * vox_mm3) / (n * vox_mm3),
+            area_mm2=st["area_mm2"],
+            mesh_closed=st["closed"],
+            mesh_components=st["n_components"],
+        )
+        out["warnings"] += st["warnings"]
+        out["mesh"] = surf
+    return out
+
+
+def label_stats(labels: np.ndarray, *, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), direction=None,
+                mesh: bool = True, smooth: bool = True) -> dict[int, dict[str, Any]]:
+    """:func:`object_stats` of every object (1..255) present in ``labels``."""
+    ids = [int(i) for i in np.unique(np.asarray(labels)) if i != 0]
+    return {i: object_stats(labels, i, spacing=spacing, origin=origin, direction=direction, mesh=mesh, smooth=smooth)
+            for i in ids}
+
+
+def stats_json(stats: dict[str, Any]) -> dict[str, Any]:
+    """A JSON-ready copy of :func:`object_stats`'s result (arrays to lists, no mesh)."""
+    def clean(v):
+        if isinstance(v, Mesh):
+            return None
+        if isinstance(v, np.ndarray):
+            return clean(v.tolist())
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        if isinstance(v, (float, np.floating)):
+            return None if not math.isfinite(float(v)) else round(float(v), 6)
+        if isinstance(v, np.integer):
+            return int(v)
+        if isinstance(v, (bool, np.bool_)):
+            return bool(v)
+        return v
+
+    return {k: clean(v) for k, v in stats.items() if k != "mesh"}

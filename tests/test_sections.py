@@ -1,0 +1,287 @@
+"""Cross-sections along a path and volume between planes, against analytic phantoms.
+
+Phantoms are built from analytic shapes at 0.5 mm voxels, either as partial-volume
+free binary masks (centre of the voxel inside) or as partial-volume fractions (each
+voxel's covered fraction, supersampled 4x4x4). A binary mask of a 2-3 voxel radius
+tube carries its own discretisation error (its voxel count differs from the analytic
+volume by a few %, see `_mask_bias`); per-section accuracy on binary masks is bounded
+by that, so binary tests check the mean along the path against the analytic area
+corrected by at most the mask's own bias, and the partial-volume tests check every
+section.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ctui.engine.centreline import centreline
+from ctui.engine.sections import (
+    feret_diameters,
+    find_steps,
+    object_field,
+    path_points,
+    plot_sections,
+    rotation_minimising_frames,
+    sections_along_path,
+    shoelace_area,
+    volume_between,
+    write_sections_csv,
+    write_sections_json,
+)
+
+SP = (0.5, 0.5, 0.5)
+
+
+def _grid(shape, sp=SP, sub=None):
+    """Voxel-centre coordinates (x, y, z) mm, optionally offset by sub-voxel ``sub`` (z,y,x) fractions."""
+    o = np.zeros(3) if sub is None else np.asarray(sub)
+    zz, yy, xx = np.meshgrid(*[(np.arange(n) + o[i]) * sp[i] for i, n in enumerate(shape)], indexing="ij")
+    return xx, yy, zz
+
+
+def _soft(inside, shape, sp=SP, ss=4):
+    """Partial-volume fraction of each voxel: mean of ss**3 sub-samples of inside(x, y, z)."""
+    acc = np.zeros(shape, np.float32)
+    for dz in range(ss):
+        for dy in range(ss):
+            for dx in range(ss):
+                o = (np.array([dz, dy, dx]) + 0.5) / ss - 0.5
+                acc += inside(*_grid(shape, sp, o))
+    return acc / ss**3
+
+
+def _cylinder(c, a, r, half_len):
+    c = np.asarray(c, float)
+    a = np.asarray(a, float) / np.linalg.norm(a)
+
+    def inside(x, y, z):
+        p = np.stack([x, y, z], -1) - c
+        t = p @ a
+        d = np.linalg.norm(p - t[..., None] * a, axis=-1)
+        return (d <= r) & (np.abs(t) <= half_len)
+
+    return inside, c, a
+
+
+def _axis_path(c, a, half):
+    return np.stack([c + a * t for t in np.arange(-half, half + 1e-9, 0.25)])
+
+
+def _areas(rows):
+    s = np.array([r["s_mm"] for r in rows])
+    a = np.array([r["area_mm2"] for r in rows])
+    return s, a
+
+
+# ------------------------------------------------------------------ 2D geometry
+def test_shoelace_and_feret_on_known_shapes():
+    sq = np.array([[0, 0], [4, 0], [4, 2], [0, 2]], float)
+    assert shoelace_area(sq) == pytest.approx(8.0)
+    assert shoelace_area(sq[::-1]) == pytest.approx(-8.0)
+    dmin, dmax = feret_diameters(sq)
+    assert dmin == pytest.approx(2.0) and dmax == pytest.approx(math.hypot(4, 2))
+    t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    ell = np.stack([5 * np.cos(t + 0.3), 2 * np.sin(t + 0.3)], 1) @ np.array([[0.8, 0.6], [-0.6, 0.8]])
+    dmin, dmax = feret_diameters(ell)
+    assert dmin == pytest.approx(4.0, rel=1e-3) and dmax == pytest.approx(10.0, rel=1e-3)
+
+
+def test_rotation_minimising_frames_do_not_flip_on_a_helix():
+    t = np.linspace(0, 6 * np.pi, 600)
+    pts = np.stack([10 * np.cos(t), 10 * np.sin(t), 3 * t], 1)
+    p, tan = path_points(pts, np.linspace(0, 150, 400))
+    u, v = rotation_minimising_frames(p, tan)
+    for a, b in ((u, v), (u, tan), (v, tan)):
+        assert np.abs((a * b).sum(1)).max() < 1e-9
+    assert np.allclose(np.linalg.norm(u, axis=1), 1) and np.allclose(np.linalg.norm(v, axis=1), 1)
+    # consecutive frames turn little (no flip): u changes by less than the tangent does + a bit
+    du = np.linalg.norm(np.diff(u, axis=0), axis=1)
+    assert du.max() < 0.1
+
+
+# ------------------------------------------------------------------ section accuracy
+@pytest.mark.parametrize("radius,tol", [(1.0, 0.02), (1.5, 0.01), (2.5, 0.01)])
+@pytest.mark.parametrize("axis", [(0.0, 0.0, 1.0), (0.6, 1.0, 2.0)], ids=["straight", "oblique"])
+def test_partial_volume_cylinder_every_section(axis, radius, tol):
+    """Partial-volume cylinders: every section away from the ends within 2% (r = 1 mm)
+    or 1% (r >= 1.5 mm) of pi r^2 along the analytic axis."""
+    shape = (56, 28, 28) if axis[0] == 0 else (48, 40, 32)
+    ext = np.array(shape[::-1]) * 0.5
+    inside, c, a = _cylinder(ext / 2 + np.array([0.13, 0.21, 0.07]), axis, radius, 10.0)
+    m = _soft(inside, shape)
+    rows = sections_along_path(m, _axis_path(c, a, 7.0), spacing=SP, step_mm=0.5)
+    s, area = _areas(rows)
+    err = area / (math.pi * radius**2) - 1
+    assert np.all(np.isfinite(err))
+    assert np.abs(err).max() < tol, (np.abs(err).max(), err.mean())
+    d = np.array([[r["min_diameter_mm"], r["max_diameter_mm"], r["eq_diameter_mm"]] for r in rows])
+    assert np.allclose(d, 2 * radius, rtol=max(2 * tol, 0.03))
+
+
+def _mask_bias(mask, analytic_volume_mm3):
+    return mask.sum() * np.prod(SP) / analytic_volume_mm3 - 1
+
+
+@pytest.mark.parametrize("radius,tol", [(1.0, 0.02), (1.5, 0.01), (2.5, 0.01)])
+@pytest.mark.parametrize("axis", [(0.17, 0.1, 1.0), (0.6, 1.0, 2.0)], ids=["straight-tilted", "oblique"])
+def test_binary_cylinder_centreline_sections(axis, radius, tol):
+    """Binary cylinders, automatic centreline: mean section within 2% / 1% of pi r^2
+    (allowing the mask's own voxel-count bias); each section's scatter is reported."""
+    shape = (60, 32, 32) if axis[0] < 0.5 else (48, 40, 32)
+    ext = np.array(shape[::-1]) * 0.5
+    inside, c, a = _cylinder(ext / 2 + np.array([0.13, 0.21, 0.07]), axis, radius, 11.0)
+    mask = inside(*_grid(shape))
+    bias = _mask_bias(mask, math.pi * radius**2 * 22.0)
+    path = centreline(mask, spacing=SP)
+    # the centreline runs on the axis
+    q = path - c
+    off = np.linalg.norm(q - (q @ a)[:, None] * a, axis=1)
+    inner = np.abs(q @ a) < 8
+    assert off[inner].max() < 0.25
+    rows = sections_along_path(mask, path, spacing=SP, step_mm=0.5)
+    s, area = _areas(rows)
+    keep = (s > 3) & (s < s[-1] - 3)
+    err = area[keep] / (math.pi * radius**2) - 1
+    assert np.all(np.isfinite(err))
+    assert abs(err.mean() - bias) < tol, (err.mean(), bias)
+    assert abs(err.mean()) < tol + abs(bias)
+    assert np.percentile(np.abs(err), 95) < 0.15 / radius  # binary masks: scatter ~ voxel aliasing
+
+
+def _torus(rt, r0, c):
+    def inside(x, y, z):
+        rho = np.hypot(x - c[0], y - c[1])
+        ang = np.arctan2(y - c[1], x - c[0])
+        return ((rho - rt) ** 2 + (z - c[2]) ** 2 <= r0 * r0) & (ang > 0.2) & (ang < 2.8)
+
+    return inside
+
+
+@pytest.mark.parametrize("r0,tol", [(1.0, 0.02), (1.5, 0.015)])
+def test_torus_segment_partial_volume(r0, tol):
+    c = (20.1, 20.2, 6.05)
+    m = _soft(_torus(15.0, r0, c), (24, 80, 80))
+    path = centreline(m > 0.5, spacing=SP)
+    rows = sections_along_path(m, path, spacing=SP, step_mm=0.5)
+    s, area = _areas(rows)
+    keep = (s > 4) & (s < s[-1] - 4)
+    err = area[keep] / (math.pi * r0**2) - 1
+    assert np.abs(err).max() < tol, np.abs(err).max()
+    assert abs(err.mean()) < 0.01
+    # path length of the arc (the centreline also runs into the end caps)
+    assert s[-1] == pytest.approx(15.0 * 2.6 + 2 * r0, abs=2.5)
+
+
+def test_stepped_tube_steps_found_at_the_right_places():
+    """A rod whose radius steps 3 -> 2 -> 1.5 mm at t = 20 and 40 mm along a tilted axis."""
+    shape = (124, 40, 40)
+    c = np.array([10.1, 10.2, 0.0])
+    a = np.array([0.15, 0.1, 1.0])
+    a /= np.linalg.norm(a)
+    x, y, z = _grid(shape)
+    p = np.stack([x, y, z], -1) - c
+    t = p @ a
+    d = np.linalg.norm(p - t[..., None] * a, axis=-1)
+    rad = np.where(t < 20, 3.0, np.where(t < 40, 2.0, 1.5))
+    mask = (d <= rad) & (t > 2) & (t < 58)
+    path = centreline(mask, spacing=SP)
+    rows = sections_along_path(mask, path, spacing=SP, step_mm=0.5)
+    s, area = _areas(rows)
+    steps = find_steps(s, area)
+    t_path = (path_points(path, [r["s_mm"] for r in steps])[0] - c) @ a if steps else []
+    assert len(steps) == 2, steps
+    assert sorted(t_path) == pytest.approx([20.0, 40.0], abs=1.0)
+    before_after = sorted((st["before"], st["after"]) for st in steps)
+    expect = sorted([(math.pi * 4, math.pi * 9), (math.pi * 2.25, math.pi * 4)])
+    for got, want in zip(before_after, expect):
+        assert got == pytest.approx(want, rel=0.08)
+
+
+# ------------------------------------------------------------------ volume between
+def test_volume_between_excludes_parallel_neighbour():
+    shape = (44, 56, 120)
+    x, y, z = _grid(shape)
+    r = 3.0
+    a = np.array([1.0, 0.25, 0.15])
+    a /= np.linalg.norm(a)
+    c = np.array([30.0, 12.3, 10.2])
+    ins1, _, _ = _cylinder(c, a, r, 24.0)
+    ins2, _, _ = _cylinder(c + np.array([0.0, 8.0, 0.0]), a, 2.5, 24.0)  # 2.5 mm gap, crosses both planes
+    m1 = ins1(x, y, z)
+    mask = m1 | ins2(x, y, z)
+    path = _axis_path(c, a, 20.0)
+    res = volume_between(mask, path, 10.0, 30.0, spacing=SP, return_mesh=True)
+    want = math.pi * r * r * 20.0
+    assert res["volume_mm3"] == pytest.approx(want, rel=0.02)
+    assert res["closed"]
+    assert res["area1_mm2"] == pytest.approx(math.pi * r * r, rel=0.03)
+    assert res["area2_mm2"] == pytest.approx(math.pi * r * r, rel=0.03)
+    # the region's surface stays within the first cylinder (the neighbour is excluded)
+    v = res["mesh"].vertices - c
+    dist = np.linalg.norm(v - (v @ a)[:, None] * a, axis=1)
+    assert dist.max() < r + 0.5
+    assert (v @ a).min() > -10.3 and (v @ a).max() < 10.3
+    # and without the neighbour the volume is the same
+    alone = volume_between(m1, path, 10.0, 30.0, spacing=SP)
+    assert alone["volume_mm3"] == pytest.approx(res["volume_mm3"], rel=1e-3)
+
+
+def test_volume_between_bad_positions():
+    from ctui.engine.errors import CtuiError
+
+    mask = np.zeros((20, 20, 40), bool)
+    mask[5:15, 5:15, 5:35] = True
+    path = np.array([[x, 5.0, 5.0] for x in np.arange(3.0, 17.0, 0.5)])
+    with pytest.raises(CtuiError):
+        volume_between(mask, path, 2.0, 200.0, spacing=SP)
+    with pytest.raises(CtuiError):
+        volume_between(mask, path, 3.0, 3.0, spacing=SP)
+
+
+# ------------------------------------------------------------------ outputs
+def test_outputs_csv_json_plot(tmp_path):
+    inside, c, a = _cylinder((8.1, 8.2, 10.0), (0, 0, 1), 2.0, 8.0)
+    mask = inside(*_grid((40, 32, 32)))
+    path = _axis_path(c, a, 6.0)
+    rows = sections_along_path(mask, path, spacing=SP, step_mm=1.0)
+    write_sections_csv(tmp_path / "s.csv", rows)
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    assert lines[0] == "s_mm,area_mm2,eq_diameter_mm,min_diameter_mm,max_diameter_mm"
+    assert len(lines) == len(rows) + 1
+    write_sections_json(tmp_path / "s.json", rows, path_length_mm=12.0)
+    import json
+
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert doc["sections"][3]["area_mm2"] == pytest.approx(rows[3]["area_mm2"], abs=1e-3)
+    plot_sections(tmp_path / "s.png", rows, references=[math.pi * 4])
+    from PIL import Image
+
+    im = np.asarray(Image.open(tmp_path / "s.png").convert("RGB")).astype(int)
+    assert im.shape[0] > 100 and im.shape[1] > 200
+    # the reference line (red) and the curve (blue) are drawn
+    red = (im[..., 0] > 180) & (im[..., 1] < 90) & (im[..., 2] < 90)
+    blue = (im[..., 2] > 150) & (im[..., 0] < 80)
+    assert red.sum() > 50 and blue.sum() > 50
+
+
+def test_points_outside_object_give_nan():
+    mask = np.zeros((30, 30, 30), bool)
+    mask[10:20, 10:20, 5:25] = True
+    path = np.array([[x, 7.25, 7.25] for x in np.arange(0.0, 14.0, 0.5)])  # x from outside into the box
+    rows = sections_along_path(mask, path, spacing=SP, step_mm=1.0)
+    area = np.array([r["area_mm2"] for r in rows])
+    assert np.isnan(area[0]) and np.isfinite(area[-3])
+    assert area[-3] == pytest.approx(25.0, rel=0.02)  # 5 x 5 mm box
+
+
+def test_field_reused_gives_same_result():
+    inside, c, a = _cylinder((8.1, 8.2, 10.0), (0.2, 0, 1), 2.0, 8.0)
+    mask = inside(*_grid((40, 32, 32)))
+    f = object_field(mask, spacing=SP)
+    path = _axis_path(c, a, 5.0)
+    r1 = sections_along_path(mask, path, spacing=SP, step_mm=1.0)
+    r2 = sections_along_path(None, path, field=f, step_mm=1.0)
+    assert [r["area_mm2"] for r in r1] == pytest.approx([r["area_mm2"] for r in r2])
