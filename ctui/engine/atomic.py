@@ -42,7 +42,7 @@ def _lock(fd: int) -> bool:
         return False
 
 
-def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 1.0) -> int:
+def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 0.2) -> int:
     """Remove temporary files left beside ``path`` by writers that died mid-save.
 
     A temp file ``.NAME.*.tmp*`` is stale when no process holds its lock (the lock
