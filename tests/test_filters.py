@@ -90,6 +90,15 @@ def test_median_matches_scipy(size):
                                ndimage.median_filter(img, size=size)[r:-r, r:-r])
 
 
+@pytest.mark.parametrize("size", [7, 11])
+def test_large_median_on_whole_hu_values_matches_scipy(size):
+    """Whole HU values take the sliding-histogram path; exact, edges included."""
+    rng = np.random.default_rng(8)
+    img = rng.integers(-1024, 2000, (50, 61)).astype(np.float32)
+    img[10:30, 10:40] = 40.0
+    np.testing.assert_array_equal(F.median(img, size=size), ndimage.median_filter(img, size=size, mode="nearest"))
+
+
 def test_gaussian_matches_scipy_and_preserves_mean():
     rng = np.random.default_rng(5)
     img = rng.normal(0, 50, (64, 64)).astype(np.float32)

@@ -111,9 +111,72 @@ def median(image: np.ndarray, *, size: int = 3) -> np.ndarray:
     img = _f32(image)
     if img.dtype == np.uint8 or size <= 5:
         return cv2.medianBlur(img, size)
-    from scipy import ndimage  # OpenCV's float median stops at 5x5
+    # OpenCV's float median stops at 5x5 and scipy's takes ~0.6 s on 512x512 at 7x7.
+    # CT slices hold whole HU values: a sliding-histogram (Huang) median in numba gives
+    # the exact result in a few ms (tests compare it with scipy).
+    lo, hi = float(img.min()), float(img.max())
+    if hi - lo < 65536 and np.array_equal(img, np.floor(img)):
+        kernel = _huang_kernel()
+        if kernel is not None:
+            r = size // 2
+            padded = np.pad((img - np.float32(lo)).astype(np.int32), r, mode="edge")
+            out = np.empty(img.shape, np.int32)
+            kernel(padded, size, int(hi - lo) + 1, out)
+            return out.astype(np.float32) + np.float32(lo)
+    from scipy import ndimage
 
     return ndimage.median_filter(img, size=size, mode="nearest")
+
+
+def _huang_median_py(padded, k, nbins, out):  # pragma: no cover - compiled by numba
+    ny, nx = out.shape
+    rank = (k * k) // 2
+    hist = np.zeros(nbins, np.int32)
+    for y in range(ny):
+        hist[:] = 0
+        for yy in range(y, y + k):
+            for xx in range(k):
+                hist[padded[yy, xx]] += 1
+        med = 0
+        lt = 0
+        while lt + hist[med] <= rank:
+            lt += hist[med]
+            med += 1
+        out[y, 0] = med
+        for x in range(1, nx):
+            xo = x - 1
+            xn = x + k - 1
+            for yy in range(y, y + k):
+                v = padded[yy, xo]
+                hist[v] -= 1
+                if v < med:
+                    lt -= 1
+                v = padded[yy, xn]
+                hist[v] += 1
+                if v < med:
+                    lt += 1
+            while lt > rank:
+                med -= 1
+                lt -= hist[med]
+            while lt + hist[med] <= rank:
+                lt += hist[med]
+                med += 1
+            out[y, x] = med
+
+
+_HUANG = []
+
+
+def _huang_kernel():
+    """The numba-compiled median kernel (compiled once, cached on disk), or None."""
+    if not _HUANG:
+        try:
+            from numba import njit
+
+            _HUANG.append(njit(cache=True, nogil=True)(_huang_median_py))
+        except ImportError:  # pragma: no cover - numba is a declared dependency
+            _HUANG.append(None)
+    return _HUANG[0]
 
 
 def gaussian(image: np.ndarray, *, sigma: float = 1.0, size: int = 0) -> np.ndarray:
