@@ -25,7 +25,8 @@ Domain (recorded in the pipeline dict as ``"domain"``):
 
 Results are cached per slice, keyed by (volume data identity, pipeline key, slice
 index), so changing any step or parameter invalidates them; the cache is bounded in
-bytes. Propagation does not fill the cache: it filters only a crop around the object
+bytes (call :meth:`Pipeline.clear_cache` after changing ``volume.data`` in place;
+a new data array is a new key). Propagation does not fill the cache: it filters only a crop around the object
 (:meth:`Pipeline.final_region`), which gives the same values as the full slice as long
 as every step is local (:meth:`Pipeline.reach`).
 """
