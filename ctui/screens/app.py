@@ -76,6 +76,11 @@ class CtuiApp(App):
         self.path = path
         self.project_file = project
         self.graphics = graphics
+        if graphics:
+            from . import graphics as _g
+
+            if graphics in ("halfblock", "ascii") or _g._chosen is None:
+                _g._chosen = graphics if graphics in ("halfblock", "ascii") else "halfblock"
         self.load_options = load_options
         self.session: Session | None = session
         self.workspace = None

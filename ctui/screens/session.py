@@ -43,14 +43,7 @@ def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
     """Load a series with ``ctui.engine.loaders.load`` (the bundled sample when None)."""
     if path is None:
         path = sample_source()
-    try:
-        loaders = engine("loaders")
-    except CtuiError:
-        # TEMPORARY until ctui.engine.loaders lands: the phantom's own Volume
-        if path == sample_source():
-            return engine("phantom").make_phantom()[0]
-        raise
-    return loaders.load(path, progress=progress, **options)
+    return engine("loaders").load(path, progress=progress, **options)
 
 
 @dataclass

@@ -161,6 +161,10 @@ class WorkspaceScreen(Screen):
     def refresh_view(self) -> None:
         """Repaint the visible view(s) for the current slice/cursor; filtered views
         come from a worker (newest request wins)."""
+        if not self.query("#main"):  # not composed yet (or being torn down): try after the next refresh
+            if self.is_attached:
+                self.call_after_refresh(self.refresh_view)
+            return
         s = self.s
         s.clamp()
         token = (s.z, s.view, self._views_token)

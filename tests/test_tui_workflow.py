@@ -1,0 +1,168 @@
+"""The whole TUI workflow on the bundled phantom, driven by keys with Textual's Pilot:
+open, add an opening filter, select a kidney from its truth seed, propagate, render 3D,
+export STL and a project, resume the project."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ctui.engine.phantom import load_truth
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.testing import answer_prompt, choose, goto_voxel, wait_for, wait_workspace
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(autouse=True)
+def _halfblock(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+
+
+def _kidney():
+    t = load_truth()
+    return next(o for o in t["objects"] if o["name"] == "kidney_left")
+
+
+def _has(module: str, attr: str) -> bool:
+    try:
+        return hasattr(importlib.import_module(f"ctui.engine.{module}"), attr)
+    except ImportError:
+        return False
+
+
+async def test_open_filter_select_propagate_export_project(tmp_path):
+    kid = _kidney()
+    app = CtuiApp()
+    async with app.run_test(size=(160, 50)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        assert s.volume.shape == tuple(load_truth()["shape_zyx"])
+        assert s.volume.modality == "CT"
+
+        # f: pipeline editor, a: add, choose "opening", accept default parameters
+        await pilot.press("f")
+        await pilot.press("a")
+        await choose(pilot, "opening")
+        await answer_prompt(pilot, "stage=1 shape=ellipse size=3 iterations=1")
+        assert [st.name for st in s.pipeline.steps] == ["opening"]
+        assert s.pipeline.steps[0].params["shape"] == "ellipse"
+        await pilot.press("escape")
+        await pilot.pause()
+        assert app.screen is app.workspace
+
+        # move to the kidney's seed voxel with the keys, fill with a range
+        z, y, x = kid["seed_zyx"]
+        await goto_voxel(pilot, app, z, y, x)
+        assert (s.z, s.y, s.x) == (z, y, x)
+        lo, hi = kid["hu_range"] if "hu_range" in kid else (kid["hu"] - 60, kid["hu"] + 60)
+        await pilot.press("T")
+        await answer_prompt(pilot, f"{(kid['hu'] + 40) / 2:g}:{kid['hu'] + 200:g}")
+        assert s.range_ is not None
+        await pilot.press("enter")
+        await pilot.pause()
+        assert (s.seg.labels[z] == s.current).sum() > 100
+
+        # p: propagate both ways, then accept
+        await pilot.press("p")
+        await wait_for(pilot, lambda: app.workspace.proposal is not None, what="the propagation proposal")
+        await pilot.press("a")
+        await pilot.pause()
+        vox = int((s.seg.labels == s.current).sum())
+        vol_ml = vox * s.volume.voxel_volume_mm3() / 1000.0
+        assert abs(vol_ml - kid["volume_ml"]) / kid["volume_ml"] < 0.03, (vol_ml, kid["volume_ml"])
+        assert s.dirty
+
+        # undo / redo of the propagation
+        await pilot.press("u")
+        await pilot.pause()
+        assert int((s.seg.labels == s.current).sum()) < vox
+        await pilot.press("U")
+        await pilot.pause()
+        assert int((s.seg.labels == s.current).sum()) == vox
+
+        # e: export the mesh as STL
+        if _has("meshio", "save_mesh") and _has("surface", "mask_surface"):
+            stl = tmp_path / "kidney.stl"
+            await pilot.press("e")
+            await choose(pilot, "mesh-stl")
+            await answer_prompt(pilot, str(stl))
+            await wait_for(pilot, lambda: stl.exists(), what="the STL file")
+            from ctui.engine.meshio import load_mesh
+
+            mesh = load_mesh(stl)
+            assert abs(mesh.volume_mm3() / 1000.0 - kid["volume_ml"]) / kid["volume_ml"] < 0.03
+        # e: label map as NIfTI
+        nii = tmp_path / "labels.nii.gz"
+        await pilot.press("e")
+        await choose(pilot, "labels-nii")
+        await answer_prompt(pilot, str(nii))
+        await wait_for(pilot, lambda: nii.exists(), what="the NIfTI file")
+        from ctui.engine.labelio import load_labels
+
+        lab, _ = load_labels(nii)
+        assert np.array_equal(lab, s.seg.labels)
+
+        # Ctrl+S: save the project
+        proj = tmp_path / "work.ctui"
+        await pilot.press("ctrl+s")
+        await answer_prompt(pilot, str(proj))
+        await wait_for(pilot, lambda: proj.exists() and not s.dirty, what="the project")
+        assert not app.errors, app.errors
+        labels = s.seg.labels.copy()
+        steps = s.pipeline.to_dict()
+
+    # resume: `ctui open work.ctui`
+    app2 = CtuiApp(project=str(proj))
+    async with app2.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app2)
+        s2 = app2.session
+        assert np.array_equal(s2.seg.labels, labels)
+        assert s2.pipeline.to_dict() == steps
+        assert s2.project_path == str(proj)
+        assert not s2.dirty
+
+
+async def test_render_3d_shows_rendered_pixels():
+    render = pytest.importorskip("ctui.engine.render")
+    if not render.egl_available():
+        pytest.skip("no EGL context on this machine (install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri)")
+    kid = _kidney()
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        z, y, x = kid["seed_zyx"]
+        await goto_voxel(pilot, app, z, y, x)
+        s.range_ = ((kid["hu"] + 40) / 2, kid["hu"] + 200)
+        await pilot.press("enter", "p")
+        await wait_for(pilot, lambda: app.workspace.proposal is not None, what="proposal")
+        await pilot.press("a", "r")
+        v3 = app.screen
+        await wait_for(pilot, lambda: v3.last_image is not None, timeout=60, what="the first 3D image")
+        img = v3.last_image
+        tw, th = v3.query_one("#v3-view").target_pixels()
+        assert img.shape[:2] == (th, tw)
+        # the kidney (object colour, red) is in the picture and the background is not
+        assert img.std() > 5
+        first = len(v3.shown_requests)
+        # a burst of orbit keys: only the newest request is shown
+        await pilot.press("right", "right", "right")
+        await wait_for(pilot, lambda: len(v3.shown_requests) > first and v3.shown_requests[-1] == v3._req, timeout=60,
+                       what="the newest render")
+        assert v3.scene.camera.azimuth == 45
+        from ctui.screens.view3d import MODES
+
+        if _has("surface", "label_surfaces"):
+            assert v3.meshes and v3.mode == "surface"
+        before = v3.mode
+        await pilot.press("m")
+        await wait_for(pilot, lambda: v3.shown_requests[-1] == v3._req, timeout=60, what="the next mode")
+        assert v3.mode == MODES[(MODES.index(before) + 1) % len(MODES)]
+        assert not app.errors, app.errors
