@@ -224,3 +224,21 @@ def test_fill3d_matches_scipy_label(connectivity):
     ids = np.unique(lab[6][start & inr[6]])
     ref = np.isin(lab, ids[ids > 0])
     np.testing.assert_array_equal(got, ref)
+
+
+def test_window8_domain_kidney(phantom):
+    """The prototype's way: filters and thresholds on windowed 0..255 values."""
+    vol, truth = phantom
+    k = [o for o in truth["objects"] if o["name"] == "kidney_left"][0]
+    centre, width = 40.0, 400.0
+    p = Pipeline(domain="window8", window=(centre, width))
+    to8 = lambda hu: (hu - (centre - width / 2)) * 255.0 / width  # noqa: E731
+    lo8 = to8(k["hu_range"][0])
+    seg = Segmentation(vol.shape)
+    z, y, x = k["seed_zyx"]
+    final = p.final_slice(vol, z)
+    assert final.dtype == np.uint8
+    assert seg.fill(final, x, y, z, low=lo8, high=255).accepted
+    propagate_object(seg, vol, p, 1, z, PropagationSettings(low=lo8, high=255)).accept(seg)
+    ml = seg.voxels(1) * vol.voxel_volume_mm3() / 1000.0
+    assert ml == pytest.approx(k["volume_ml"], rel=0.02)

@@ -101,3 +101,34 @@ def test_clear_object_is_undoable():
     assert seg.voxels(1) == 0
     seg.undo()
     assert seg.voxels(1) == 18 and seg.slice_range(1) == (1, 2)
+
+
+def test_random_edits_undo_all_and_redo_all():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    box = st.tuples(st.integers(0, 5), st.integers(0, 19), st.integers(0, 19), st.integers(1, 3), st.integers(1, 8),
+                    st.integers(1, 8), st.integers(1, 4), st.booleans())
+
+    @settings(max_examples=40, deadline=None)
+    @given(st.lists(box, min_size=1, max_size=8))
+    def check(ops):
+        seg = Segmentation((8, 28, 28))
+        states = [seg.labels.copy()]
+        for z, y, x, dz, dy, dx, oid, erase in ops:
+            m = np.ones((dz, dy, dx), bool)
+            if erase:
+                seg.erase(m, offset=(z, y, x))
+            else:
+                seg.paint(m, oid, offset=(z, y, x))
+            if not np.array_equal(seg.labels, states[-1]):
+                states.append(seg.labels.copy())
+        assert len(seg.undo_labels()) == len(states) - 1
+        for expected in reversed(states[:-1]):
+            seg.undo()
+            np.testing.assert_array_equal(seg.labels, expected)
+        for expected in states[1:]:
+            seg.redo()
+            np.testing.assert_array_equal(seg.labels, expected)
+
+    check()
