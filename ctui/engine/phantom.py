@@ -346,12 +346,20 @@ def _uid(*parts: object) -> str:
     return generate_uid(prefix=PYDICOM_ROOT_UID, entropy_srcs=["ctui-phantom", *map(str, parts)])
 
 
-def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, description: str = "ctui demo CT") -> list[Path]:
+def write_series(
+    outdir: str | os.PathLike,
+    volume: Volume,
+    *,
+    seed: int = 0,
+    description: str = "ctui demo CT",
+    bits_stored: int = 16,
+) -> list[Path]:
     """Write ``volume`` (CT, HU) as a DICOM CT Image Storage series with shuffled file names.
 
     Stored as uint16 with RescaleIntercept -1024; positions from the volume's geometry.
-    Deterministic: the same volume and seed give byte-identical files. Returns the
-    written paths (in slice order).
+    Deterministic: the same volume and seed give byte-identical files. ``bits_stored``
+    12 gives the common CT layout (values must then fit 0..4095 stored). Returns the written paths
+    (in slice order).
     """
     import pydicom
     from pydicom.dataset import FileMetaDataset
@@ -362,7 +370,7 @@ def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, de
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     nz, ny, nx = volume.shape
-    stored = np.clip(volume.data.astype(np.int32) + 1024, 0, 65535).astype(np.uint16)
+    stored = np.clip(volume.data.astype(np.int32) + 1024, 0, 2**bits_stored - 1).astype(np.uint16)
     rng = np.random.default_rng(seed + 1)
     names = [f"IM{n:04d}.dcm" for n in rng.permutation(nz) + 1]
     study, series, frame = _uid("study", seed), _uid("series", seed, description), _uid("frame", seed)
@@ -406,8 +414,8 @@ def write_series(outdir: str | os.PathLike, volume: Volume, *, seed: int = 0, de
         ds.PhotometricInterpretation = "MONOCHROME2"
         ds.Rows, ds.Columns = ny, nx
         ds.BitsAllocated = 16
-        ds.BitsStored = 16
-        ds.HighBit = 15
+        ds.BitsStored = bits_stored
+        ds.HighBit = bits_stored - 1
         ds.PixelRepresentation = 0
         ds.RescaleIntercept = -1024
         ds.RescaleSlope = 1

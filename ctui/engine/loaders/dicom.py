@@ -142,6 +142,11 @@ def _num(v: Any, default: float | None = None) -> float | None:
         return default
 
 
+def _int_or_none(v: Any) -> int | None:
+    f = _num(v)
+    return int(f) if f is not None and np.isfinite(f) and abs(f) < 2**31 else None
+
+
 def _vec(v: Any, n: int) -> np.ndarray | None:
     try:
         if v is None:
@@ -152,6 +157,63 @@ def _vec(v: Any, n: int) -> np.ndarray | None:
     if a.shape != (n,) or not np.all(np.isfinite(a)):
         return None
     return a
+
+
+_BIN = {"US": "H", "SS": "h", "UL": "I", "SL": "i", "FL": "f", "FD": "d"}
+
+
+class _Fast:
+    """Read-only ``get(keyword)`` over a dataset that decodes simple elements from their
+    raw bytes (pydicom's general value conversion costs ~30 us an element, which made
+    header reading 2.5x slower). Sequences, person names and text that needs the
+    character set go through pydicom."""
+
+    _PYDICOM = {"SQ", "PN", "LO", "SH", "ST", "LT", "UT", "UC"}
+
+    def __init__(self, ds: Any) -> None:
+        self.ds = ds
+
+    def get(self, keyword: str, default: Any = None) -> Any:
+        from pydicom.datadict import dictionary_VR, tag_for_keyword
+        from pydicom.dataelem import RawDataElement
+
+        tag = tag_for_keyword(keyword)
+        if tag is None:
+            return default
+        try:
+            elem = self.ds.get_item(tag)
+        except Exception:
+            return default
+        if elem is None:
+            return default
+        if not isinstance(elem, RawDataElement):
+            return elem.value
+        try:
+            vr = str(elem.VR) if elem.VR else dictionary_VR(tag)
+        except KeyError:
+            return default
+        if vr in self._PYDICOM or elem.value is None:
+            try:
+                return self.ds[tag].value
+            except Exception:
+                return default
+        raw = bytes(elem.value)
+        if vr in _BIN:
+            code = _BIN[vr]
+            size = struct.calcsize(code)
+            n = len(raw) // size
+            if n == 0:
+                return default
+            vals = struct.unpack(("<" if elem.is_little_endian else ">") + code * n, raw[: n * size])
+            return vals[0] if n == 1 else list(vals)
+        text = raw.decode("latin-1").strip("\x00 ")
+        if not text:
+            return default
+        parts = [t.strip() for t in text.split("\\")]
+        return parts[0] if len(parts) == 1 else parts
+
+    def __contains__(self, keyword: str) -> bool:
+        return self.get(keyword) is not None
 
 
 def _first(ds: Any, keyword: str) -> Any:
@@ -245,10 +307,10 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
             syntax = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
             if not syntax:
                 syntax = "1.2.840.10008.1.2" if implicit else ("1.2.840.10008.1.2.1" if little else "1.2.840.10008.1.2.2")
-            frames = _frames_from_dataset(ds, path, syntax)
+            frames = _frames_from_dataset(_Fast(ds), path, syntax, full=ds)
             ids = []
             for kw in _ID_KEYWORDS:
-                v = _first(ds, kw)
+                v = _Fast(ds).get(kw)
                 if v:
                     ids.append(str(v))
             compressed = syntax not in _NATIVE_SYNTAXES
@@ -285,7 +347,7 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
             raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
 
-def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
+def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -> list[Frame]:
     rows, cols = int(ds.get("Rows") or 0), int(ds.get("Columns") or 0)
     if rows <= 0 or cols <= 0:
         raise _Skip("no image (Rows/Columns missing)")
@@ -324,7 +386,7 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
         pixel_spacing=None,
         thickness=_num(ds.get("SliceThickness")),
         spacing_between=_num(ds.get("SpacingBetweenSlices")),
-        instance=int(_num(ds.get("InstanceNumber"))) if _num(ds.get("InstanceNumber")) is not None else None,
+        instance=_int_or_none(ds.get("InstanceNumber")),
         series_uid=str(ds.get("SeriesInstanceUID") or ""),
         series_number=int(sn) if sn is not None else None,
         description=str(ds.get("SeriesDescription") or ""),

@@ -1,0 +1,170 @@
+"""Benchmark: load a 300-slice 512x512 CT DICOM series with ctui and with SimpleITK.
+
+    python3 benchmarks/load.py [--slices 300] [--repeat 5] [--large]
+
+Generates the series once under benchmarks/_cache/ (gitignored; uint16 storage, 12
+bits stored, intercept -1024, shuffled file names), then in ONE run times
+
+* ctui: ``ctui.engine.loaders.load(folder)`` (header scan, grouping, sorting along the
+  normal, parallel decode, rescale to int16 HU);
+* SimpleITK: ``ImageSeriesReader.GetGDCMSeriesFileNames(folder)`` (GDCM's header scan
+  and sort) + ``Execute()`` + ``GetArrayViewFromImage``;
+
+alternating runs, printing medians, the ratio and peak memory. Peak memory of each
+loader is measured in a fresh subprocess as the growth of the process's maximum
+resident set size (VmHWM) during the load, compared with the final array size;
+for ctui also tracemalloc's peak of Python/numpy allocations. ``--large`` also loads a
+1000-slice 512x512 series (issue 8: it must load within the memory bound).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+CACHE = ROOT / "benchmarks" / "_cache"
+
+
+def make_series(nz: int) -> Path:
+    """A CT-like 512x512 series of nz slices (body ellipse, bone ring, noise)."""
+    import numpy as np
+
+    from ctui.engine.phantom import write_series
+    from ctui.engine.volume import Volume
+
+    out = CACHE / f"ct_{nz}x512x512"
+    if out.is_dir() and len(list(out.glob("*.dcm"))) == nz:
+        return out
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:512, :512]
+    body = ((xx - 256) / 200.0) ** 2 + ((yy - 256) / 150.0) ** 2 <= 1
+    ring = (((xx - 256) / 60.0) ** 2 + ((yy - 300) / 45.0) ** 2 <= 1) & (((xx - 256) / 45.0) ** 2 + ((yy - 300) / 32.0) ** 2 > 1)
+    base = np.where(body, 40, -1000).astype(np.int16)
+    base[ring] = 900
+    data = np.empty((nz, 512, 512), np.int16)
+    for k in range(nz):
+        data[k] = base + rng.normal(0, 12, size=(512, 512)).astype(np.int16)
+    vol = Volume(data=data, spacing=(1.0, 0.7, 0.7), modality="CT", window=(40, 400))
+    print(f"writing {nz} slices to {out} (once) ...", flush=True)
+    write_series(out, vol, bits_stored=12, description=f"benchmark {nz}")
+    return out
+
+
+def load_ctui(path: Path):
+    from ctui.engine.loaders import load
+
+    return load(path).data
+
+
+def load_sitk(path: Path):
+    import SimpleITK as sitk
+
+    reader = sitk.ImageSeriesReader()
+    names = reader.GetGDCMSeriesFileNames(str(path))
+    reader.SetFileNames(names)
+    img = reader.Execute()
+    arr = sitk.GetArrayViewFromImage(img)
+    return img, arr
+
+
+def _hwm() -> int:
+    """This process's peak resident set size (VmHWM) in bytes. (ru_maxrss is not used:
+    on Linux it keeps the parent's high-water mark across fork+exec.)"""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def child(which: str, path: Path) -> None:
+    """Fresh process: peak RSS growth during one load (after imports and a warm-up of the imports)."""
+    import tracemalloc
+
+    import numpy as np  # noqa: F401
+
+    if which == "ctui":
+        import pydicom  # noqa: F401
+
+        from ctui.engine.loaders import load  # noqa: F401
+    else:
+        import SimpleITK  # noqa: F401
+    base = _hwm()
+    t0 = time.perf_counter()
+    if which == "ctui":
+        tracemalloc.start()
+        arr = load_ctui(path)
+        _, tpeak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+    else:
+        img, arr = load_sitk(path)
+        tpeak = None
+    dt = time.perf_counter() - t0
+    peak = _hwm()
+    print(json.dumps({"rss_growth": peak - base, "tracemalloc_peak": tpeak, "nbytes": int(arr.nbytes),
+                      "dtype": str(arr.dtype), "seconds": dt}))
+
+
+def measure_child(which: str, path: Path) -> dict:
+    r = subprocess.run([sys.executable, __file__, "--child", which, str(path)], capture_output=True, text=True, check=True)
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--slices", type=int, default=300)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--large", action="store_true", help="also load a 1000-slice series (memory bound)")
+    ap.add_argument("--child", nargs=2, metavar=("WHICH", "PATH"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        child(args.child[0], Path(args.child[1]))
+        return
+    import numpy as np
+
+    path = make_series(args.slices)
+    # warm-up (imports, page cache) and a correctness check: same voxels, same order
+    a = load_ctui(path)
+    img, b = load_sitk(path)
+    same = a.shape == b.shape and np.array_equal(a, b)
+    print(f"series: {args.slices} x 512 x 512, ctui {a.dtype} / SimpleITK {b.dtype}, identical voxels: {same}")
+    del a, b, img
+    t_ctui, t_sitk = [], []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        a = load_ctui(path)
+        t_ctui.append(time.perf_counter() - t0)
+        del a
+        t0 = time.perf_counter()
+        img, b = load_sitk(path)
+        t_sitk.append(time.perf_counter() - t0)
+        del img, b
+    mc, ms = statistics.median(t_ctui), statistics.median(t_sitk)
+    print(f"ctui      median {mc:.3f} s  (runs: {', '.join(f'{t:.3f}' for t in t_ctui)})")
+    print(f"SimpleITK median {ms:.3f} s  (runs: {', '.join(f'{t:.3f}' for t in t_sitk)})")
+    print(f"ratio ctui/SimpleITK = {mc / ms:.2f}  ({'ctui faster' if mc < ms else 'SimpleITK faster'})")
+    pc, ps = measure_child("ctui", path), measure_child("sitk", path)
+    mb = 1 / (1 << 20)
+    print(f"peak memory ctui:      RSS growth {pc['rss_growth'] * mb:.1f} MB for a {pc['nbytes'] * mb:.1f} MB array "
+          f"({pc['rss_growth'] / pc['nbytes']:.3f}x); tracemalloc peak {pc['tracemalloc_peak'] * mb:.1f} MB "
+          f"({pc['tracemalloc_peak'] / pc['nbytes']:.3f}x)")
+    print(f"peak memory SimpleITK: RSS growth {ps['rss_growth'] * mb:.1f} MB for a {ps['nbytes'] * mb:.1f} MB array "
+          f"({ps['rss_growth'] / ps['nbytes']:.3f}x)")
+    if args.large:
+        big = make_series(1000)
+        pl = measure_child("ctui", big)
+        print(f"1000 x 512 x 512: ctui {pl['seconds']:.2f} s, RSS growth {pl['rss_growth'] * mb:.0f} MB for a "
+              f"{pl['nbytes'] * mb:.0f} MB array ({pl['rss_growth'] / pl['nbytes']:.3f}x), tracemalloc peak "
+              f"{pl['tracemalloc_peak'] / pl['nbytes']:.3f}x")
+
+
+if __name__ == "__main__":
+    main()
