@@ -19,7 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "or a mesh (.stl, .ply, .obj: volume and area only). Path points and positions are patient "
         "mm (x, y, z).",
         epilog='Examples: ctui measure seg.nii.gz --object 2 --path auto --step 0.5 --plot sec.png --json\n'
-        '          ctui measure vessel.ctui --path "10,20,5;12,25,40" --between 10,30 --csv sec.csv',
+        '          ctui measure vessel.ctui --path "10,20,5;12,25,40" --between 10,30 --csv sec.csv\n'
+        '          ctui measure seg.nrrd --path="-12,20,5;-14,25,40"   (use = when the path starts with -)',
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="a .ctui project, a label volume (.nii/.nii.gz/.nrrd) or a mesh (.stl/.ply/.obj)")

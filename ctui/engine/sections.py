@@ -524,12 +524,20 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = 0
 
     p = np.asarray(path_mm, dtype=np.float64)
     if smooth_mm is None:
-        smooth_mm = 0.25 * float(min(field.spacing))
+        smooth_mm = 0.5 * float(max(field.spacing))
     for _ in range(iterations):
         rows = sections_along_path(None, p, field=field, step_mm=step_mm)
-        cen = np.array([r["centroid_mm"] if r.get("centroid_mm") is not None else r["point_mm"] for r in rows])
+        pts = np.array([r["point_mm"] for r in rows])
+        cen = pts.copy()
+        for i, r in enumerate(rows):
+            if r.get("centroid_mm") is None:
+                continue
+            move = r["centroid_mm"] - r["point_mm"]
+            lim = 0.25 * r["eq_diameter_mm"]  # half the equivalent radius per iteration
+            n = float(np.linalg.norm(move))
+            cen[i] = r["point_mm"] + (move if n <= lim else move * (lim / n))
         # keep the two ends where they were (their sections are caps)
-        cen[0], cen[-1] = p[0], p[-1]
+        cen[0], cen[-1] = pts[0], pts[-1]
         p = _spline_resample(cen, step_mm, smooth_mm=smooth_mm)
     return p
 
