@@ -184,16 +184,16 @@ def load(
             if suf in _MHD and shape is None:
                 from .stacks import load_mhd
 
-                return _privacy(load_mhd(p, skipped=skipped, spacing=spacing, **common))
+                return _with_series(load_mhd(p, skipped=skipped, spacing=spacing, **common))
             if shape is not None:
                 from .stacks import load_raw
 
-                return _privacy(load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset,
+                return _with_series(load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset,
                                          base=base, skipped=skipped, **common))
             if suf in IMAGE_SUFFIXES:
                 from .stacks import load_images
 
-                return _privacy(load_images([p], path=p, base=base, skipped=skipped, spacing=spacing, **common))
+                return _with_series(load_images([p], path=p, base=base, skipped=skipped, spacing=spacing, **common))
             files = [p]
         path_label = p
     else:
@@ -204,7 +204,7 @@ def load(
         from .stacks import load_raw
 
         one = len(files) == 1 and not (single and single.is_dir())
-        return _privacy(load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape,
+        return _with_series(load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape,
                                  dtype=dtype, spacing=spacing, offset=offset, base=base, skipped=skipped, **common))
     if kind == "images":
         from .stacks import load_images
@@ -213,12 +213,12 @@ def load(
         for f in files:
             if f.suffix.lower() not in IMAGE_SUFFIXES:
                 skipped.append({"file": _rel(f, base), "reason": "not an image file (by extension)"})
-        return _privacy(load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common))
+        return _with_series(load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common))
     if kind == "mhd":
         from .stacks import load_mhd
 
         mhd = next(f for f in files if f.suffix.lower() in _MHD)
-        return _privacy(load_mhd(mhd, skipped=skipped, spacing=spacing, **common))
+        return _with_series(load_mhd(mhd, skipped=skipped, spacing=spacing, **common))
     from . import dicom
 
     found, skip2, ids = dicom.read_headers(files, base=base)
@@ -248,8 +248,8 @@ def _rel(p: Path, base: Path | None) -> str:
     return rel(p, base)
 
 
-def _privacy(vol: Volume) -> Volume:
-    """Non-DICOM inputs: give ``series`` its one entry."""
+def _with_series(vol: Volume) -> Volume:
+    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it)."""
     if not vol.series:
         vol.series = [{"uid": "", "description": vol.meta.get("format", ""), "modality": vol.modality,
                        "files": int(vol.meta.get("files", 1)), "shape_zyx": list(vol.shape),

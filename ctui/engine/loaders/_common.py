@@ -15,7 +15,6 @@ import numpy as np
 from ..errors import CtuiError, LoadError
 
 IMAGE_SUFFIXES = {".png", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
-# files that are documentation next to data: listed as skipped like any non-image
 _NATURAL = re.compile(r"(\d+)")
 MAX_FILES = 200_000  # bound on a folder walk (symlink loops, huge trees)
 
@@ -82,10 +81,6 @@ class Plan:
     y: slice
     x: slice
 
-    @property
-    def shape_in(self) -> tuple[int, int, int]:  # pragma: no cover - informative
-        return (0, 0, 0)
-
     def out_len(self, axis: int, n: int) -> int:
         return len(range(*(self.z, self.y, self.x)[axis].indices(n)))
 
@@ -98,9 +93,9 @@ class Plan:
     def steps(self) -> tuple[int, int, int]:
         return tuple(s.step or 1 for s in (self.z, self.y, self.x))  # type: ignore[return-value]
 
-    @property
-    def is_full(self) -> bool:
-        return all(s == slice(None, None, 1) or s == slice(None) for s in (self.z, self.y, self.x))
+    def is_full(self, shape: Sequence[int]) -> bool:
+        """True when the plan loads the whole (nz, ny, nx) grid."""
+        return self.steps() == (1, 1, 1) and self.out_shape(shape) == tuple(int(n) for n in shape)
 
 
 def make_plan(shape: Sequence[int], *, crop: Any = None, downsample: Any = None, path: Any = None) -> Plan:

@@ -66,6 +66,9 @@ _ID_KEYWORDS = (
     "OtherPatientIDs",
     "ReferringPhysicianName",
 )
+# header values bigger than this are not read (pydicom seeks past them): a corrupt
+# length field cannot make us allocate gigabytes for a small file
+_DEFER = 1 << 20
 MAX_COMPRESSION = 1000  # decoded bytes per stored byte we accept before decoding
 
 
@@ -286,12 +289,12 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     with fh:
         forced = False
         try:
-            ds = pydicom.dcmread(fh, stop_before_pixels=True)
+            ds = pydicom.dcmread(fh, stop_before_pixels=True, defer_size=_DEFER)
         except InvalidDicomError:
             fh.seek(0)
             forced = True
             try:
-                ds = pydicom.dcmread(fh, stop_before_pixels=True, force=True)
+                ds = pydicom.dcmread(fh, stop_before_pixels=True, force=True, defer_size=_DEFER)
             except Exception:
                 raise _Skip("not a DICOM file or image") from None
         except Exception as exc:
@@ -980,7 +983,7 @@ def load_series(
         window = auto_window(out, modality=modality)
     if f0.photometric == "MONOCHROME1":
         warnings.append("MONOCHROME1 (inverted grey) image: values inverted so that higher is brighter")
-    if not plan.is_full:
+    if not plan.is_full(full_shape):
         meta["crop_downsample"] = {"start_zyx": list(plan.starts(full_shape)), "step_zyx": list(plan.steps()),
                                    "full_shape_zyx": list(full_shape)}
     desc = scrub_obj(f0.description, ids)  # header text: scrubbed of patient identifiers
