@@ -19,9 +19,9 @@ touches the crop's edge), so one object through 300 slices of 512x512 takes well
 under a second.
 
 3D mode (``mode="3d"``): the in-range mask of every slice in the chosen direction(s)
-is labelled at once in 3D (:func:`fill3d`: ``scipy.ndimage.label`` with a 6-connected
-structure for connectivity 4, in-plane 8 plus the slice above/below for connectivity
-8), keeping what is connected to the seed slice's object; the leak guard is then applied to the
+is flood-filled at once in 3D (:func:`fill3d`, a numba scanline fill; 6-connected for
+connectivity 4, in-plane 8 plus the slice above/below for connectivity 8), keeping
+what is connected to the seed slice's object; the leak guard is then applied to the
 per-slice areas of that component.
 
 The result is a :class:`Proposal` (pending: the label volume is untouched) the TUI can
@@ -363,22 +363,114 @@ def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity:
     """Voxels of ``inrange`` (bool (nz, ny, nx)) connected to ``start_mask`` (bool (ny, nx)) on slice ``z``.
 
     Connectivity in 3D: 6 for ``connectivity=4``; in-plane 8 plus the voxel above and
-    below for ``connectivity=8``. Uses ``scipy.ndimage.label`` on the whole mask (about
-    5-10 ns per voxel here); a numba depth-first flood fill that visits only the
-    component was measured slower on 300x512x512 (about 370 ns per visited voxel: its
-    slice-to-slice steps miss the cache), so it was dropped.
+    below for ``connectivity=8``. A numba scanline flood fill (runs along x, so memory
+    is read in order) visits only the component: on 300x512x512 it took 0.15 s on a
+    70%-noisy block and a few ms on solid objects, against about 0.4 s for
+    ``scipy.ndimage.label`` of the whole mask (equal results: tests/test_propagate.py).
+    A plain voxel-by-voxel depth-first numba fill was slower than scipy (cache misses)
+    and was dropped. scipy is the fallback when numba is missing.
     """
-    from scipy import ndimage
+    inr = np.ascontiguousarray(inrange, dtype=bool)
+    start = start_mask.astype(bool) & inr[z]
+    kernel = _scanline_kernel()
+    if kernel is None:  # pragma: no cover - numba is a declared dependency
+        from scipy import ndimage
 
-    inr = np.asarray(inrange, dtype=bool)
-    lab, n = ndimage.label(inr, structure=_structure(connectivity))
-    ids = np.unique(lab[z][start_mask.astype(bool) & inr[z]])
-    ids = ids[ids > 0]
-    if len(ids) == 1:
-        return lab == ids[0]
-    keep = np.zeros(n + 1, bool)  # lookup table: much faster than np.isin on a large volume
-    keep[ids] = True
-    return keep[lab]
+        lab, n = ndimage.label(inr, structure=_structure(connectivity))
+        keep = np.zeros(n + 1, bool)
+        keep[np.unique(lab[z][start])] = True
+        keep[0] = False
+        return keep[lab]
+    yx = np.argwhere(start)
+    seeds = np.column_stack([np.full(len(yx), z), yx]).astype(np.int32)
+    out = np.zeros(inr.shape, np.uint8)
+    kernel(inr.view(np.uint8), seeds, out, connectivity == 8)
+    return out.view(bool)
+
+
+def _scanline_fill_py(inr, seeds, out, eight):  # pragma: no cover - compiled by numba
+    nz, ny, nx = inr.shape
+    cap = max(seeds.shape[0] * 2, 4096)
+    stack = np.empty((cap, 3), np.int32)
+    top = 0
+    for i in range(seeds.shape[0]):
+        stack[top, 0] = seeds[i, 0]
+        stack[top, 1] = seeds[i, 1]
+        stack[top, 2] = seeds[i, 2]
+        top += 1
+    e = 1 if eight else 0
+    while top > 0:
+        top -= 1
+        z = stack[top, 0]
+        y = stack[top, 1]
+        x = stack[top, 2]
+        if inr[z, y, x] == 0 or out[z, y, x] != 0:
+            continue
+        xl = x
+        while xl > 0 and inr[z, y, xl - 1] != 0 and out[z, y, xl - 1] == 0:
+            xl -= 1
+        xr = x
+        while xr < nx - 1 and inr[z, y, xr + 1] != 0 and out[z, y, xr + 1] == 0:
+            xr += 1
+        for xx in range(xl, xr + 1):
+            out[z, y, xx] = 1
+        for k in range(4):
+            if k == 0:
+                zz = z
+                yy = y - 1
+                a = xl - e
+                b = xr + e
+            elif k == 1:
+                zz = z
+                yy = y + 1
+                a = xl - e
+                b = xr + e
+            elif k == 2:
+                zz = z - 1
+                yy = y
+                a = xl
+                b = xr
+            else:
+                zz = z + 1
+                yy = y
+                a = xl
+                b = xr
+            if zz < 0 or zz >= nz or yy < 0 or yy >= ny:
+                continue
+            if a < 0:
+                a = 0
+            if b > nx - 1:
+                b = nx - 1
+            inseg = False
+            for xx in range(a, b + 1):
+                if inr[zz, yy, xx] != 0 and out[zz, yy, xx] == 0:
+                    if not inseg:
+                        if top >= stack.shape[0]:
+                            bigger = np.empty((stack.shape[0] * 2, 3), np.int32)
+                            bigger[:top] = stack[:top]
+                            stack = bigger
+                        stack[top, 0] = zz
+                        stack[top, 1] = yy
+                        stack[top, 2] = xx
+                        top += 1
+                        inseg = True
+                else:
+                    inseg = False
+
+
+_SCAN: list = []
+
+
+def _scanline_kernel():
+    """The numba-compiled scanline fill (compiled once, cached on disk), or None."""
+    if not _SCAN:
+        try:
+            from numba import njit
+
+            _SCAN.append(njit(cache=True, nogil=True)(_scanline_fill_py))
+        except ImportError:  # pragma: no cover
+            _SCAN.append(None)
+    return _SCAN[0]
 
 
 def _structure(connectivity: int) -> np.ndarray:
