@@ -423,3 +423,36 @@ def test_no_patient_identifiers_in_volume(tmp_path):
     for ident in ("ROSSINI", "GIOACHINO", "PID-7788991", "17920229", "ACC-55443322", "Pesaro"):
         assert ident.lower() not in text.lower(), ident
     assert "Head" in vol.series[0]["description"]
+
+
+# ----------------------------------------------------------------- hostile structure
+def test_huge_element_length_does_not_allocate(tmp_path):
+    import struct
+
+    raw = (SAMPLE_DIR / "IM0001.dcm").read_bytes()
+    i = raw.index(b"\x08\x00\x08\x00")  # before ImageType: a private OB claiming 4 GB
+    bad = raw[:i] + struct.pack("<HH", 0x0008, 0x0001) + b"OB\x00\x00" + struct.pack("<I", 0xFFFFFFF0) + raw[i:]
+    p = tmp_path / "huge_len.dcm"
+    p.write_bytes(bad)
+    tracemalloc.start()
+    with pytest.raises(LoadError):
+        load(p)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert peak < 64 * 1024 * 1024
+
+
+def test_symlink_loop_and_fifo_in_folder(tmp_path, ref):
+    d = tmp_path / "s"
+    shutil.copytree(SAMPLE_DIR, d)
+    (d / "loop").symlink_to(d, target_is_directory=True)
+    os.mkfifo(d / "pipe")
+    vol = load(d)
+    np.testing.assert_array_equal(vol.data, ref.data)
+
+
+def test_scan_matches_load():
+    s = scan(SAMPLE_DIR)
+    assert len(s) == 1 and s[0]["shape_zyx"] == [80, 128, 128] and s[0]["files"] == 80
+    assert s[0]["spacing_zyx_mm"] == [2.5, 2.0, 2.0] and s[0]["modality"] == "CT"
+    assert s[0]["description"] == "ctui demo CT"
