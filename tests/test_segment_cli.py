@@ -124,3 +124,22 @@ def test_help_documents_filter_syntax(capsys):
         main(["segment", "--help"])
     out = capsys.readouterr().out
     assert "opening:size=3" in out and "stage=1|2" in out
+
+
+@pytest.mark.parametrize("extra, part", [(["--mode", "3d"], "all"), (["--direction", "forward"], "upper"),
+                                         (["--direction", "backward", "--connectivity", "4"], "lower")])
+def test_segment_modes_and_directions(capsys, truth, sample, extra, part):
+    k = _kidneys(truth)[0]
+    z, y, x = k["seed_zyx"]
+    rc, out, err = _run(capsys, "segment", sample, "--seed", f"{x},{y},{z}", "--range", "{}:{}".format(*k["hu_range"]),
+                        "--json", *extra)
+    assert rc == 0, err
+    (o,) = json.loads(out)["objects"]
+    if part == "all":
+        assert o["volume_ml"] == pytest.approx(k["volume_ml"], rel=0.02)
+    elif part == "upper":
+        assert o["slices"][0] == z and o["slices"][1] > z + 10
+        assert 0.3 < o["volume_ml"] / k["volume_ml"] < 0.7
+    else:
+        assert o["slices"][1] == z and o["slices"][0] < z - 10
+        assert 0.3 < o["volume_ml"] / k["volume_ml"] < 0.7
