@@ -189,8 +189,10 @@ def segment_volume(volume, args: argparse.Namespace, *, pipeline=None):
 
 
 def objects_report(seg, volume, results) -> list[dict]:
+    import numpy as np
+
     vox_ml = volume.voxel_volume_mm3() / 1000.0
-    counts = {int(i): int(c) for i, c in enumerate(__import__("numpy").bincount(seg.labels.ravel(), minlength=256))}
+    counts = {int(i): int(c) for i, c in enumerate(np.bincount(seg.labels.ravel(), minlength=256))}
     out = []
     for r in results:
         oid = r["id"]
