@@ -17,6 +17,7 @@ import sys
 
 from . import __version__
 
+OPEN_OPTIONS = ("--graphics", "--series")  # options of `open` accepted without the command name
 COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure")
 
 
@@ -47,8 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv:
         argv = ["open"]
-    elif argv[0] not in COMMANDS and not argv[0].startswith("-"):
-        argv = ["open", *argv]
+    elif argv[0] not in COMMANDS and (not argv[0].startswith("-") or argv[0].split("=")[0] in OPEN_OPTIONS):
+        argv = ["open", *argv]  # `ctui PATH`, `ctui --graphics ascii [PATH]`
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
