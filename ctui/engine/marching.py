@@ -493,6 +493,9 @@ def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, 
                 _put(verts, bz00, r00[b + 1], r01[b + 1], level, b + 1, y, z, 2)
 
 
+_KERNEL_DTYPES = (np.dtype(np.uint8), np.dtype(np.int16), np.dtype(np.float32))
+
+
 def _threshold(data: np.ndarray, level: float):
     """Comparison threshold in the data's own dtype: inside <=> value > thr."""
     if np.issubdtype(data.dtype, np.integer):
@@ -541,6 +544,11 @@ def marching_cubes(
         raise ValueError(f"marching_cubes needs a 3D array, got shape {data.shape}")
     if data.dtype == np.bool_:
         data = data.view(np.uint8)
+    if data.dtype not in _KERNEL_DTYPES:
+        # each dtype is a separate numba compilation (tens of seconds cold): the kernel
+        # is compiled for uint8 (masks, label maps), int16 (CT) and float32 (fields);
+        # other types are converted (int8 -> int16 exactly, the rest -> float32).
+        data = data.astype(np.int16 if data.dtype == np.int8 else np.float32)
     if not data.flags.c_contiguous:
         data = np.ascontiguousarray(data)
     nz, ny, nx = data.shape
