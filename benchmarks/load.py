@@ -85,8 +85,9 @@ def _hwm() -> int:
     return 0
 
 
-def child(which: str, path: Path) -> None:
-    """Fresh process: peak RSS growth during one load (after imports and a warm-up of the imports)."""
+def child(which: str, path: Path, trace: bool) -> None:
+    """Fresh process: peak RSS growth during one load (imports done first); with
+    ``trace`` also tracemalloc's peak (which slows pydicom's parsing: no timing then)."""
     import tracemalloc
 
     import numpy as np  # noqa: F401
@@ -98,23 +99,23 @@ def child(which: str, path: Path) -> None:
     else:
         import SimpleITK  # noqa: F401
     base = _hwm()
+    if trace:
+        tracemalloc.start()
     t0 = time.perf_counter()
     if which == "ctui":
-        tracemalloc.start()
         arr = load_ctui(path)
-        _, tpeak = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
     else:
         img, arr = load_sitk(path)
-        tpeak = None
     dt = time.perf_counter() - t0
+    tpeak = tracemalloc.get_traced_memory()[1] if trace else None
     peak = _hwm()
     print(json.dumps({"rss_growth": peak - base, "tracemalloc_peak": tpeak, "nbytes": int(arr.nbytes),
-                      "dtype": str(arr.dtype), "seconds": dt}))
+                      "dtype": str(arr.dtype), "seconds": None if trace else dt}))
 
 
-def measure_child(which: str, path: Path) -> dict:
-    r = subprocess.run([sys.executable, __file__, "--child", which, str(path)], capture_output=True, text=True, check=True)
+def measure_child(which: str, path: Path, trace: bool = False) -> dict:
+    cmd = [sys.executable, __file__, "--child", which, str(path)] + (["--trace"] if trace else [])
+    r = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
@@ -124,9 +125,10 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--large", action="store_true", help="also load a 1000-slice series (memory bound)")
     ap.add_argument("--child", nargs=2, metavar=("WHICH", "PATH"), help=argparse.SUPPRESS)
+    ap.add_argument("--trace", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        child(args.child[0], Path(args.child[1]))
+        child(args.child[0], Path(args.child[1]), args.trace)
         return
     import numpy as np
 
@@ -152,6 +154,7 @@ def main() -> None:
     print(f"SimpleITK median {ms:.3f} s  (runs: {', '.join(f'{t:.3f}' for t in t_sitk)})")
     print(f"ratio ctui/SimpleITK = {mc / ms:.2f}  ({'ctui faster' if mc < ms else 'SimpleITK faster'})")
     pc, ps = measure_child("ctui", path), measure_child("sitk", path)
+    pc["tracemalloc_peak"] = measure_child("ctui", path, trace=True)["tracemalloc_peak"]
     mb = 1 / (1 << 20)
     print(f"peak memory ctui:      RSS growth {pc['rss_growth'] * mb:.1f} MB for a {pc['nbytes'] * mb:.1f} MB array "
           f"({pc['rss_growth'] / pc['nbytes']:.3f}x); tracemalloc peak {pc['tracemalloc_peak'] * mb:.1f} MB "
@@ -160,11 +163,14 @@ def main() -> None:
           f"({ps['rss_growth'] / ps['nbytes']:.3f}x)")
     if args.large:
         big = make_series(1000)
-        pl = measure_child("ctui", big)
-        print(f"1000 x 512 x 512: ctui {pl['seconds']:.2f} s, RSS growth {pl['rss_growth'] * mb:.0f} MB for a "
-              f"{pl['nbytes'] * mb:.0f} MB array ({pl['rss_growth'] / pl['nbytes']:.3f}x), tracemalloc peak "
-              f"{pl['tracemalloc_peak'] / pl['nbytes']:.3f}x")
-
+        pl, pt = measure_child("ctui", big), measure_child("ctui", big, trace=True)
+        t0 = time.perf_counter()
+        img, b = load_sitk(big)
+        tsitk = time.perf_counter() - t0
+        del img, b
+        print(f"1000 x 512 x 512: ctui {pl['seconds']:.2f} s (SimpleITK {tsitk:.2f} s), RSS growth "
+              f"{pl['rss_growth'] * mb:.0f} MB for a {pl['nbytes'] * mb:.0f} MB array "
+              f"({pl['rss_growth'] / pl['nbytes']:.3f}x), tracemalloc peak {pt['tracemalloc_peak'] / pl['nbytes']:.3f}x")
 
 if __name__ == "__main__":
     main()

@@ -221,8 +221,13 @@ def load(
         return _with_series(load_mhd(mhd, skipped=skipped, spacing=spacing, **common))
     from . import dicom
 
-    found, skip2, ids = dicom.read_headers(files, base=base)
+    n_files = len(files)
+    # progress: headers count as the first half of the work, decoding as the second
+    head_progress = (lambda done, total: progress(done, 2 * total)) if progress else None
+    found, skip2, ids = dicom.read_headers(files, base=base, progress=head_progress)
     skipped.extend(skip2)
+    if progress:
+        common["progress"] = lambda done, total: progress(n_files + done, n_files + total)
     if not found:
         reasons = {d["reason"] for d in skipped}
         why = next(iter(reasons)) if len(reasons) == 1 else "no DICOM image, image stack or MetaImage found"
