@@ -1,0 +1,84 @@
+"""The real ``ctui`` binary in tmux: start it, send keys, read the screen with
+capture-pane (as a person over SSH would see it). Skips when tmux is missing."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+TMUX = shutil.which("tmux")
+
+
+def _cap(session: str, *, escapes: bool = False) -> str:
+    args = ["tmux", "capture-pane", "-p", "-t", session] + (["-e"] if escapes else [])
+    return subprocess.run(args, capture_output=True, text=True, timeout=10).stdout
+
+
+def _wait(session: str, text: str, timeout: float = 60.0) -> str:
+    end = time.monotonic() + timeout
+    screen = ""
+    while time.monotonic() < end:
+        screen = _cap(session)
+        if text in screen:
+            return screen
+        time.sleep(0.2)
+    raise AssertionError(f"{text!r} never appeared on screen:\n{screen}")
+
+
+def _keys(session: str, *keys: str) -> None:
+    subprocess.run(["tmux", "send-keys", "-t", session, *keys], check=True, timeout=10)
+
+
+@pytest.fixture
+def tmux_session(tmp_path):
+    if TMUX is None:
+        pytest.skip("tmux is not installed")
+    name = f"ctui-test-{uuid.uuid4().hex[:8]}"
+    yield name
+    subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=10)
+
+
+@pytest.mark.parametrize("size", [(160, 50), (80, 24)], ids=["160x50", "80x24"])
+def test_real_binary_in_tmux(tmux_session, tmp_path, size):
+    w, h = size
+    env = {**os.environ, "CTUI_AUTOSAVE_DIR": str(tmp_path / "autosave"), "COLORTERM": "truecolor"}
+    env.pop("TEXTUAL_COLOR_SYSTEM", None)
+    cmd = f"cd {tmp_path} && {sys.executable} -m ctui --graphics halfblock; echo CTUI-EXIT=$?; sleep 30"
+    subprocess.run(["tmux", "new-session", "-d", "-s", tmux_session, "-x", str(w), "-y", str(h), cmd],
+                   check=True, env=env, timeout=10)
+    screen = _wait(tmux_session, "Slice")
+    assert "Traceback" not in screen
+    # the slice is drawn with half blocks in truecolor
+    esc = _cap(tmux_session, escapes=True)
+    assert "\u2580" in screen and "38;2;" in esc
+    start = int(screen.split("Slice ")[1].split("/")[0])
+    _keys(tmux_session, "PageUp")
+    _keys(tmux_session, "PageUp")
+    screen = _wait(tmux_session, f"Slice {start + 2}/")
+    # move the cursor and read the value under it in the side panel
+    _keys(tmux_session, "l")
+    screen = _wait(tmux_session, "Cursor x 65")
+    assert "HU" in screen
+    # help lists the bindings
+    _keys(tmux_session, "?")
+    screen = _wait(tmux_session, "ctui help")
+    assert "Keys on this screen" in screen and "Cursor left" in screen
+    _keys(tmux_session, "Escape")
+    # resize the window: still alive and redrawn
+    subprocess.run(["tmux", "resize-window", "-t", tmux_session, "-x", "60", "-y", "20"], capture_output=True, timeout=10)
+    time.sleep(1.0)
+    subprocess.run(["tmux", "resize-window", "-t", tmux_session, "-x", str(w), "-y", str(h)], capture_output=True, timeout=10)
+    _wait(tmux_session, "Slice")
+    # quit (nothing unsaved: exits at once)
+    _keys(tmux_session, "q")
+    screen = _wait(tmux_session, "CTUI-EXIT=")
+    assert "CTUI-EXIT=0" in screen, screen
+    assert "Traceback" not in screen
