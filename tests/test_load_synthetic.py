@@ -456,3 +456,28 @@ def test_scan_matches_load():
     assert len(s) == 1 and s[0]["shape_zyx"] == [80, 128, 128] and s[0]["files"] == 80
     assert s[0]["spacing_zyx_mm"] == [2.5, 2.0, 2.0] and s[0]["modality"] == "CT"
     assert s[0]["description"] == "ctui demo CT"
+
+
+def test_uneven_gap_resampled_or_kept(series_dir, ref):
+    _file_for_slice(series_dir, 40).unlink()  # a missing slice: one 5 mm gap
+    vol = load(series_dir)
+    assert vol.shape == ref.shape and vol.spacing[0] == 2.5
+    w = next(w for w in vol.warnings if "uneven" in w)
+    assert "2.5 to 5" in w and "resampled" in w
+    assert len(vol.slice_positions) == 79  # the positions as found
+    kept = load(series_dir, resample=False)
+    assert kept.shape[0] == 79 and any("kept as is" in w for w in kept.warnings)
+    np.testing.assert_array_equal(kept.data[40], ref.data[41])
+
+
+def test_position_rounding_is_not_tilt_or_unevenness(tmp_path):
+    vol0 = _small_volume(nz=8)
+    write_series(tmp_path / "j", vol0)
+    rng = np.random.default_rng(5)
+    for p in (tmp_path / "j").glob("*.dcm"):
+        ds = pydicom.dcmread(p)
+        ds.ImagePositionPatient = [f"{float(v) + rng.uniform(-0.004, 0.004):.4f}" for v in ds.ImagePositionPatient]
+        ds.save_as(p)
+    vol = load(tmp_path / "j")
+    assert vol.warnings == []
+    np.testing.assert_array_equal(vol.data, vol0.data)

@@ -606,8 +606,7 @@ def _geometry(frames: list[Frame], *, quiet: bool = False) -> dict[str, Any]:
             dz = float(np.median(gaps))
             if dz <= 0:
                 dz = 1.0
-            spread = float(gaps.max() - gaps.min())
-            if spread > max(0.01 * dz, 1e-3):
+            if _uneven(gaps):
                 result["uneven"] = True
                 result["gaps"] = (float(gaps.min()), float(gaps.max()))
         else:
@@ -617,9 +616,11 @@ def _geometry(frames: list[Frame], *, quiet: bool = False) -> dict[str, Any]:
         offs = np.array([frames[i].ipp - p0 - (d[i] - d[order[0]]) * normal for i in order])
         inplane = np.linalg.norm(offs, axis=1)
         psz = min(f0.pixel_spacing or (1.0, 1.0))
-        if len(order) > 1 and inplane.max() > 0.05 * psz:
-            span = ds[-1] - ds[0]
-            tilt = float(np.degrees(np.arctan2(np.linalg.norm(offs[-1]), span))) if span > 0 else 0.0
+        span = ds[-1] - ds[0]
+        tilt = float(np.degrees(np.arctan2(np.linalg.norm(offs[-1]), span))) if span > 0 else 0.0
+        # rounding of positions in the header gives tiny offsets: only a stack whose
+        # positions move by more than a quarter pixel in-plane (and > 0.1 deg) is tilted
+        if len(order) > 1 and inplane.max() > max(0.25 * psz, 0.05) and tilt > 0.1:
             result["tilt_shifts"] = offs
             result["tilt_deg"] = tilt
         result.update(order=order, positions=ds, dz=dz, origin=p0)
@@ -653,6 +654,15 @@ def _geometry(frames: list[Frame], *, quiet: bool = False) -> dict[str, Any]:
     )
     result.update(order=order, positions=None, dz=float(dz), origin=f0.ipp if f0.ipp is not None else np.zeros(3))
     return result
+
+
+def _uneven(gaps: np.ndarray) -> bool:
+    """Gaps between slices differ by more than 5% of the median gap (and 0.01 mm):
+    header rounding of positions stays below that, a missing slice is far above."""
+    if len(gaps) == 0:
+        return False
+    dz = float(np.median(gaps))
+    return float(gaps.max() - gaps.min()) > max(0.05 * abs(dz), 0.01)
 
 
 # ===================================================================== pixels
@@ -960,7 +970,7 @@ def load_series(
     if positions is not None and len(positions) > 1:
         gaps = np.diff(positions)
         dz = float(np.median(gaps))
-        if float(gaps.max() - gaps.min()) > max(0.01 * dz, 1e-3):
+        if _uneven(gaps):
             msg = f"uneven slice spacing (gaps {gaps.min():.3g} to {gaps.max():.3g} mm)"
             if resample:
                 out = _resample_z(out, positions, dz)
