@@ -85,8 +85,15 @@ def test_shoelace_and_feret_on_known_shapes():
     assert dmin == pytest.approx(2.0) and dmax == pytest.approx(math.hypot(4, 2))
     t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
     ell = np.stack([5 * np.cos(t + 0.3), 2 * np.sin(t + 0.3)], 1) @ np.array([[0.8, 0.6], [-0.6, 0.8]])
-    dmin, dmax = feret_diameters(ell)
-    assert dmin == pytest.approx(4.0, rel=1e-3) and dmax == pytest.approx(10.0, rel=1e-3)
+    for exact in (False, True):
+        dmin, dmax = feret_diameters(ell, exact=exact)
+        assert dmin == pytest.approx(4.0, rel=1e-3) and dmax == pytest.approx(10.0, rel=1e-3)
+        dmin, dmax = feret_diameters(sq, exact=exact)
+        assert dmin == pytest.approx(2.0, rel=1e-4) and dmax == pytest.approx(math.hypot(4, 2), rel=1e-4)
+    tri = np.array([[0, 0], [6, 0], [1, 4]], float)  # min width = smallest height = 2 * area / longest side
+    dmin, dmax = feret_diameters(tri)
+    assert dmin == pytest.approx(24 / math.hypot(5, 4), rel=1e-4)
+    assert dmax == pytest.approx(math.hypot(5, 4), rel=1e-4)
 
 
 def test_rotation_minimising_frames_do_not_flip_on_a_helix():

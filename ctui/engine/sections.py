@@ -79,7 +79,6 @@ class ObjectField:
     """
 
     indicator: np.ndarray
-    sdf: np.ndarray
     offset: np.ndarray
     spacing: tuple[float, float, float]
     origin: tuple[float, float, float]
@@ -87,6 +86,15 @@ class ObjectField:
     sigma_vox: float
     mask: np.ndarray | None = None  # cropped binary mask
     meta: dict[str, Any] = dc_field(default_factory=dict)
+    source: np.ndarray | None = None  # cropped (padded) float mask the fields come from
+    _sdf: np.ndarray | None = None
+
+    @property
+    def sdf(self) -> np.ndarray:
+        """Approximate signed distance (mm, negative inside), computed on first use."""
+        if self._sdf is None:
+            self._sdf = _corrected_sdf(self.source, self.indicator, self.sigma_vox, self.spacing)
+        return self._sdf
 
     @property
     def matrix(self) -> np.ndarray:
@@ -101,6 +109,21 @@ class ObjectField:
     def to_index(self, xyz: np.ndarray) -> np.ndarray:
         """Patient mm (..., 3) -> fractional crop indices (..., 3) in (z, y, x)."""
         return (np.asarray(xyz, dtype=np.float64) - self.crop_origin) @ self.matrix.T
+
+
+def _bbox(occ: np.ndarray):
+    """(lo, hi) inclusive index bounds (z, y, x) of the non-zero voxels, or (None, None).
+
+    Projections with ``np.any`` on shrinking slabs: much cheaper than ``np.nonzero``
+    on a large mostly empty volume."""
+    z = np.flatnonzero(occ.any(axis=(1, 2)))
+    if len(z) == 0:
+        return None, None
+    slab = occ[z[0] : z[-1] + 1]
+    y = np.flatnonzero(slab.any(axis=(0, 2)))
+    slab = slab[:, y[0] : y[-1] + 1]
+    x = np.flatnonzero(slab.any(axis=(0, 1)))
+    return np.array([z[0], y[0], x[0]]), np.array([z[-1], y[-1], x[-1]])
 
 
 def object_field(
@@ -135,49 +158,54 @@ def object_field(
     if m.ndim != 3:
         raise CtuiError(f"expected a 3D mask, got shape {m.shape}")
     soft = m.dtype.kind == "f"
-    inside = m > 0.5 if soft else m.astype(bool, copy=False)
-    nz = np.nonzero(m > 0) if soft else np.nonzero(inside)
-    if len(nz[0]) == 0:
+    occ = m > 0 if (soft or m.dtype != bool) else m
+    bb_lo, bb_hi = _bbox(occ)
+    if bb_lo is None:
         raise CtuiError("the object is empty")
     if margin_vox is None:
         margin_vox = int(math.ceil(4 * sigma_vox)) + 3
-    lo = np.array([max(int(i.min()) - margin_vox, 0) for i in nz])
-    hi = np.array([min(int(i.max()) + margin_vox + 1, n) for i, n in zip(nz, m.shape)])
+    lo = np.maximum(bb_lo - margin_vox, 0)
+    hi = np.minimum(bb_hi + margin_vox + 1, m.shape)
     sl = tuple(slice(a, b) for a, b in zip(lo, hi))
-    sub = m[sl].astype(np.float32)
-    if not soft:
-        sub = (sub > 0).astype(np.float32)
-    pad = [
-        (max(margin_vox - int(i.min()), 0), max(int(i.max()) + margin_vox + 1 - n, 0)) for i, n in zip(nz, m.shape)
-    ]
+    sub = m[sl].astype(np.float32) if soft else occ[sl].astype(np.float32)
+    pad = [(max(margin_vox - int(a), 0), max(int(b) + margin_vox + 1 - n, 0)) for a, b, n in zip(bb_lo, bb_hi, m.shape)]
     if any(p for pp in pad for p in pp):  # the object touches the volume's edge
         sub = np.pad(sub, pad)
         lo = lo - np.array([p[0] for p in pad])
-    sig = [float(sigma_vox)] * 3
-    f = ndi.gaussian_filter(sub, sig, mode="constant", truncate=4.0)
-    # first-order correction of the curvature shift (backward heat step)
-    corr = np.zeros_like(f)
-    for ax in range(3):
-        order = [0, 0, 0]
-        order[ax] = 2
-        corr += (sig[ax] ** 2 / 2.0) * ndi.gaussian_filter(sub, sig, order=order, mode="constant", truncate=4.0)
-    fc = f - corr
-    # slope of a smoothed straight edge is 1 / (sqrt(2 pi) sigma_mm): scale to mm
+    f = ndi.gaussian_filter(sub, float(sigma_vox), mode="constant", truncate=4.0)
     sp = np.asarray(spacing, dtype=np.float64)
-    sigma_mm = float(sigma_vox * np.exp(np.mean(np.log(sp))))
-    sdf = ((0.5 - fc) * (math.sqrt(2 * math.pi) * sigma_mm)).astype(np.float32)
     d = np.eye(3) if direction is None else np.asarray(direction, dtype=np.float64).reshape(3, 3)
     return ObjectField(
         indicator=f.astype(np.float32, copy=False),
-        sdf=sdf,
         offset=lo.astype(np.int64),
         spacing=tuple(float(s) for s in sp),
         origin=tuple(float(o) for o in origin),
         direction=d,
         sigma_vox=float(sigma_vox),
         mask=(sub > 0.5),
-        meta={"sigma_mm": sigma_mm},
+        source=sub,
     )
+
+
+def _corrected_sdf(sub: np.ndarray, f: np.ndarray, sigma_vox: float, spacing) -> np.ndarray:
+    """Signed-distance-like field (mm, negative inside) from the smoothed indicator ``f``.
+
+    The 0.5 level of a Gaussian-smoothed shape moves inwards by about sigma**2 times the
+    mean curvature; one backward heat step ``f - sum_i sigma_i**2/2 d2f/dx_i2`` (exact
+    second derivatives of the Gaussian) undoes it to first order. Scaled by the slope of
+    a smoothed straight edge (1 / (sqrt(2 pi) sigma_mm)) to read in mm near the border.
+    """
+    from scipy import ndimage as ndi
+
+    sig = [float(sigma_vox)] * 3
+    corr = np.zeros_like(f)
+    for ax in range(3):
+        order = [0, 0, 0]
+        order[ax] = 2
+        corr += (sig[ax] ** 2 / 2.0) * ndi.gaussian_filter(sub, sig, order=order, mode="constant", truncate=4.0)
+    fc = f - corr
+    sigma_mm = float(sigma_vox * np.exp(np.mean(np.log(np.asarray(spacing, dtype=np.float64)))))
+    return ((0.5 - fc) * (math.sqrt(2 * math.pi) * sigma_mm)).astype(np.float32)
 
 
 # ------------------------------------------------------------------ path sampling
@@ -256,31 +284,60 @@ def shoelace_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
-def feret_diameters(poly: np.ndarray) -> tuple[float, float]:
-    """(min, max) Feret diameters of a 2D point set (n, 2): rotating calipers on its hull.
+_FERET_DIRS = None
 
-    The minimum width is attained with one caliper flush with a hull edge, so it is
-    the minimum over hull edges of the largest distance of the hull's points to that
-    edge's line; the maximum is the largest distance between two hull points.
+
+def feret_diameters(poly: np.ndarray, *, exact: bool = False) -> tuple[float, float]:
+    """(min, max) Feret (caliper) diameters of a 2D point set (n, 2).
+
+    Default (points in polygon order): caliper widths on 360 directions 0.5 degree
+    apart and on every polygon edge's normal. The maximum (a smooth maximum of the
+    width function) is then within 1e-5 relative; the minimum is exact when the
+    narrowest caliper rests on a polygon edge (always for convex contours), else
+    within the 0.5 degree sampling. About 5x faster than building the convex hull
+    with Qhull (0.3 ms vs 1.5 ms on a 200-point contour), which matters with hundreds
+    of sections. ``exact=True``: rotating calipers on the convex hull
+    (minimum width is attained with a caliper flush with a hull edge; maximum = the
+    largest distance between hull vertices).
     """
-    from scipy.spatial import ConvexHull, QhullError
-
-    p = np.unique(np.asarray(poly, dtype=np.float64), axis=0)
+    global _FERET_DIRS
+    p = np.asarray(poly, dtype=np.float64)
+    if len(p) > 1 and np.array_equal(p[0], p[-1]):
+        p = p[:-1]  # closed contour: drop the repeated point
     if len(p) < 3:
         d = float(np.linalg.norm(p[-1] - p[0])) if len(p) == 2 else 0.0
         return 0.0, d
+    if not exact:
+        if _FERET_DIRS is None:
+            t = np.arange(360) * (np.pi / 360.0)
+            _FERET_DIRS = np.stack([np.cos(t), np.sin(t)])  # (2, 360)
+        q = p - p.mean(axis=0)
+        proj = q @ _FERET_DIRS
+        w = proj.max(axis=0) - proj.min(axis=0)
+        # the minimum sits at a kink of the width function (a caliper flush with an
+        # edge): also try every polygon edge's normal exactly
+        e = np.roll(q, -1, axis=0) - q
+        el = np.hypot(e[:, 0], e[:, 1])
+        ok = el > 0
+        nrm = np.stack([-e[ok, 1], e[ok, 0]]) / el[ok]
+        pe = q @ nrm
+        we = pe.max(axis=0) - pe.min(axis=0)
+        return float(min(w.min(), we.min())), float(w.max())
+    from scipy.spatial import ConvexHull, QhullError
+    from scipy.spatial.distance import pdist
+
     try:
         h = p[ConvexHull(p).vertices]
-    except QhullError:
+    except QhullError:  # collinear points
         d = p - p.mean(axis=0)
         return 0.0, float(np.ptp(d @ np.linalg.svd(d, full_matrices=False)[2][0]))
     e = np.roll(h, -1, axis=0) - h
     el = np.linalg.norm(e, axis=1)
     ok = el > 0
     nrm = np.stack([-e[ok, 1], e[ok, 0]], axis=1) / el[ok, None]
-    widths = np.abs(np.einsum("eqk,ek->eq", h[None, :, :] - h[ok][:, None, :], nrm)).max(axis=1)
-    dmax = float(np.sqrt(((h[:, None, :] - h[None, :, :]) ** 2).sum(-1).max()))
-    return float(widths.min()), dmax
+    proj = h @ nrm.T  # (points, edges): extent of the hull across each edge
+    widths = proj.max(axis=0) - proj.min(axis=0)
+    return float(widths.min()), float(pdist(h).max())
 
 
 def _points_in_poly(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
