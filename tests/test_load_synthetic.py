@@ -481,3 +481,25 @@ def test_position_rounding_is_not_tilt_or_unevenness(tmp_path):
     vol = load(tmp_path / "j")
     assert vol.warnings == []
     np.testing.assert_array_equal(vol.data, vol0.data)
+
+
+def test_image_header_claiming_too_many_pixels_is_skipped(tmp_path):
+    import io
+    import struct
+    import zlib
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("L", (8, 8)).save(buf, "PNG")
+    raw = bytearray(buf.getvalue())
+    raw[16:24] = struct.pack(">II", 50000, 50000)  # IHDR width/height
+    raw[29:33] = struct.pack(">I", zlib.crc32(bytes(raw[12:29])) & 0xFFFFFFFF)
+    (tmp_path / "a.png").write_bytes(bytes(raw))
+    Image.new("L", (8, 8), 7).save(tmp_path / "b.png")
+    tracemalloc.start()
+    vol = load(tmp_path)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert vol.shape == (1, 8, 8) and peak < 32 * 1024 * 1024
+    assert "too many" in vol.skipped[0]["reason"]

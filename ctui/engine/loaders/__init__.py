@@ -41,6 +41,28 @@ from ._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_k
 __all__ = ["load", "scan", "estimate", "LoadError"]
 
 _MHD = {".mhd", ".mha"}
+_RESEARCH = (".nii", ".nii.gz", ".nrrd", ".nhdr")
+
+
+def _is_volume_file(p: Path) -> bool:
+    """A single-file volume format with its own geometry (MetaImage, NIfTI, NRRD)."""
+    name = p.name.lower()
+    return p.suffix.lower() in _MHD or name.endswith(_RESEARCH)
+
+
+def _load_volume_file(p: Path, **kw: Any) -> Volume:
+    name = p.name.lower()
+    if name.endswith((".nii", ".nii.gz")):
+        from .research import load_nifti
+
+        return load_nifti(p, **kw)
+    if name.endswith((".nrrd", ".nhdr")):
+        from .research import load_nrrd
+
+        return load_nrrd(p, **kw)
+    from .stacks import load_mhd
+
+    return load_mhd(p, **kw)
 
 
 def _as_paths(path: Any) -> tuple[Path | None, list[Path] | None]:
@@ -95,8 +117,8 @@ def _classify(files: Sequence[Path], *, shape: Any) -> str:
         return "dicom"
     if any(p.suffix.lower() in IMAGE_SUFFIXES for p in files):
         return "images"
-    mhd = [p for p in files if p.suffix.lower() in _MHD]
-    if len(mhd) == 1:
+    vols = [p for p in files if _is_volume_file(p)]
+    if len(vols) == 1:
         return "mhd"
     return "dicom"  # last resort: try every file as DICOM (force=True), skipping with reasons
 
@@ -181,10 +203,8 @@ def load(
             if p.stat().st_size == 0:
                 raise LoadError("empty file", path=p)
             suf = p.suffix.lower()
-            if suf in _MHD and shape is None:
-                from .stacks import load_mhd
-
-                return _with_series(load_mhd(p, skipped=skipped, spacing=spacing, **common))
+            if _is_volume_file(p) and shape is None:
+                return _with_series(_load_volume_file(p, skipped=skipped, spacing=spacing, **common))
             if shape is not None:
                 from .stacks import load_raw
 
@@ -215,10 +235,8 @@ def load(
                 skipped.append({"file": _rel(f, base), "reason": "not an image file (by extension)"})
         return _with_series(load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common))
     if kind == "mhd":
-        from .stacks import load_mhd
-
-        mhd = next(f for f in files if f.suffix.lower() in _MHD)
-        return _with_series(load_mhd(mhd, skipped=skipped, spacing=spacing, **common))
+        vf = next(f for f in files if _is_volume_file(f))
+        return _with_series(_load_volume_file(vf, skipped=skipped, spacing=spacing, **common))
     from . import dicom
 
     n_files = len(files)
@@ -284,7 +302,7 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if not files:
         return []
     kind = _classify(files, shape=shape)
-    if len(files) == 1 and files[0].suffix.lower() in _MHD and shape is None:
+    if len(files) == 1 and _is_volume_file(files[0]) and shape is None:
         kind = "mhd"
     if len(files) == 1 and files[0].suffix.lower() in IMAGE_SUFFIXES:
         kind = "images"
@@ -308,14 +326,20 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
                  "files": len({e[0] for e in entries}), "shape_zyx": [n, h, w], "spacing_zyx_mm": list(sp),
                  "kind": "tiff" if multipage else "image-stack"}]
     if kind == "mhd":
-        from .stacks import read_mhd_header
+        vf = next(f for f in files if _is_volume_file(f))
+        if vf.suffix.lower() in _MHD:
+            from .stacks import read_mhd_header
 
-        mhd = next(f for f in files if f.suffix.lower() in _MHD)
-        hdr, _ = read_mhd_header(mhd)
-        dims = [int(v) for v in hdr.get("DimSize", "0 0 0").split()] + [1]
-        sp = [float(v) for v in (hdr.get("ElementSpacing") or "1 1 1").split()] + [1.0]
-        return [{"uid": "", "description": "MetaImage", "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
-                 "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]], "kind": "mhd"}]
+            hdr, _ = read_mhd_header(vf)
+            dims = [int(v) for v in hdr.get("DimSize", "0 0 0").split()] + [1]
+            sp = [float(v) for v in (hdr.get("ElementSpacing") or "1 1 1").split()] + [1.0]
+            return [{"uid": "", "description": "MetaImage",
+                     "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
+                     "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],
+                     "kind": "mhd"}]
+        from .research import header_info
+
+        return [header_info(vf)]
     # raw: geometry from the options
     from .stacks import parse_dtype, parse_shape, parse_spacing
 

@@ -95,6 +95,7 @@ def _finish(data, *, spacing, given, warnings, source, path, meta, skipped, moda
 
 
 # --------------------------------------------------------------------- image stacks
+MAX_RATIO = 1100  # pixels per stored byte an image header may claim
 def _image_mode_dtype(mode: str) -> np.dtype:
     if mode in ("I;16", "I;16L", "I;16B", "I;16N"):
         return np.dtype(np.uint16)
@@ -116,7 +117,14 @@ def image_entries(files: Sequence[Path], base: Path | None) -> tuple[list[tuple[
     skipped: list[dict[str, str]] = []
     for p in files:
         try:
+            fsize = p.stat().st_size
             with Image.open(p) as im:
+                # never trust the header's size beyond what the file can hold: the best
+                # lossless image codecs (PNG's deflate) stay below ~1032:1
+                if im.width * im.height > MAX_RATIO * fsize + (1 << 22):
+                    skipped.append({"file": rel(p, base), "reason": f"header claims {im.width}x{im.height} pixels, "
+                                    f"too many for a {fsize}-byte file"})
+                    continue
                 n = int(getattr(im, "n_frames", 1) or 1)
                 if n == 1:
                     entries.append((p, 0, im.height, im.width, im.mode))
