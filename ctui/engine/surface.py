@@ -48,9 +48,19 @@ def _fix_handedness(faces: np.ndarray, affine: np.ndarray) -> np.ndarray:
     return faces
 
 
+def _touches_border(data: np.ndarray, level: float) -> bool:
+    """Whether any voxel on the volume's six faces is inside (value > level)."""
+    for ax in range(3):
+        for idx in (0, -1):
+            face = np.take(data, idx, axis=ax)
+            if (face > level).any():
+                return True
+    return False
+
+
 def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.0, 1.0, 1.0),
                origin: Sequence[float] = (0.0, 0.0, 0.0), direction: np.ndarray | None = None,
-               normals: bool = True) -> Mesh:
+               normals: bool = True, close: bool = False) -> Mesh:
     """Isosurface of a volume at ``level``.
 
     Parameters
@@ -60,6 +70,10 @@ def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.
     level : float
         Iso value in the data's units (HU for CT).
     spacing : (dz, dy, dx) mm; origin : (x, y, z) mm; direction : (3, 3), columns x, y, z axes.
+    close : bool
+        Close the surface where the object touches the volume's border (the volume is
+        padded by one voxel below the level, a copy made only when some border voxel
+        is inside). Off by default (like VTK and scikit-image).
 
     Returns
     -------
@@ -71,6 +85,17 @@ def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.
     from .marching import marching_cubes
 
     aff = affine_from(spacing, origin, direction)
+    data = np.asarray(data)
+    if close and _touches_border(data, level):
+        lo = data.min()
+        fill = lo if lo <= level else level
+        if np.issubdtype(data.dtype, np.integer) and fill > level - 1:
+            fill = np.floor(level) if np.floor(level) >= np.iinfo(data.dtype).min else fill
+        padded = np.pad(data, 1, mode="constant", constant_values=fill)
+        shift = np.eye(4)
+        shift[:3, 3] = -1.0
+        aff = aff @ shift
+        data = padded
     v, f, n = marching_cubes(data, level, affine=aff, normals=normals)
     f = _fix_handedness(f, aff)
     return Mesh(vertices=v, faces=f, normals=n, meta={"method": "marching-cubes", "level": float(level)})
