@@ -212,3 +212,25 @@ async def test_quit_during_propagation():
             break
         time.sleep(0.1)
     assert not extra, extra
+
+
+async def test_internal_error_is_a_notification_not_a_traceback(monkeypatch):
+    """A bug in a handler, an action or a worker callback must not end the app."""
+    from ctui.screens.workspace import WorkspaceScreen
+
+    def broken(self):
+        raise RuntimeError("simulated bug")
+
+    monkeypatch.setattr(WorkspaceScreen, "action_connectivity", broken)
+    app = CtuiApp()
+    async with app.run_test(size=(100, 30)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.press("c")
+        await pilot.pause()
+        assert any("simulated bug" in e for e in app.errors)
+        assert "RuntimeError" in app.internal_errors[-1]
+        # still usable
+        z = app.session.z
+        await pilot.press("pageup")
+        assert app.session.z == z + 1
+        assert app.screen is app.workspace

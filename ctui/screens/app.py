@@ -18,12 +18,13 @@ from textual.widgets import Footer, Label, ProgressBar, Static
 from ctui.engine.errors import CtuiError
 
 from .graphics import colour_advice
+from .guard import GuardMixin
 from .session import Session, engine, load_volume
 
 AUTOSAVE_SECONDS = 180.0
 
 
-class LoadingScreen(Screen):
+class LoadingScreen(GuardMixin, Screen):
     """Shown while a series loads (progress bar), or the reasons it could not load."""
 
     DEFAULT_CSS = """
@@ -88,6 +89,7 @@ class CtuiApp(App):
         self._last_autosave = time.monotonic()
         self._colour_warned = False
         self.errors: list[str] = []  # every error notified (tests read it)
+        self.internal_errors: list[str] = []  # tracebacks of internal errors (reported, not fatal)
 
     # ------------------------------------------------------------------ start
     def on_mount(self) -> None:
@@ -301,6 +303,45 @@ class CtuiApp(App):
             return
         self.exit()
 
+    # ------------------------------------------------------------------ errors
+    def _handle_exception(self, error: Exception) -> None:
+        """Workers and handlers: report and keep running once the app is up."""
+        from .guard import report_internal_error
+
+        if self.is_running and self.screen_stack and not isinstance(error, (KeyboardInterrupt, SystemExit)):
+            report_internal_error(self, error)
+            return
+        super()._handle_exception(error)
+
+    async def _dispatch_action(self, namespace, action_name, params):  # type: ignore[override]
+        try:
+            return await super()._dispatch_action(namespace, action_name, params)
+        except Exception as exc:  # noqa: BLE001
+            from .guard import report_internal_error
+
+            report_internal_error(self, exc)
+            return True
+
+    def push_screen(self, screen, callback=None, wait_for_dismiss: bool = False):  # type: ignore[override]
+        if callback is not None:
+            inner = callback
+
+            def callback(result, _inner=inner):  # noqa: F811 - guarded wrapper
+                try:
+                    return _inner(result)
+                except Exception as exc:  # noqa: BLE001
+                    from .guard import report_internal_error
+
+                    report_internal_error(self, exc)
+
+        return super().push_screen(screen, callback, wait_for_dismiss=wait_for_dismiss)
+
+    def action_last_error(self) -> None:
+        from .dialogs import TextScreen
+
+        body = self.internal_errors[-1] if self.internal_errors else "No internal error so far."
+        self.push_screen(TextScreen("Last internal error", body, markup=False))
+
     # ------------------------------------------------------------------ command palette
     def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
         yield from super().get_system_commands(screen)
@@ -317,6 +358,7 @@ class CtuiApp(App):
         yield SystemCommand("Save project", "Ctrl+S", self.action_save)
         yield SystemCommand("Help: all keys", "?", self.action_help)
         yield SystemCommand("Open series or project", "o", self.action_open)
+        yield SystemCommand("Show last internal error", "traceback of the last reported internal error", self.action_last_error)
 
     def _palette_callback(self, node, action: str):
         async def run() -> None:

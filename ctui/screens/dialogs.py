@@ -10,7 +10,10 @@ from textual.widgets import Button, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
 
-class PromptScreen(ModalScreen[str | None]):
+from .guard import GuardMixin
+
+
+class PromptScreen(GuardMixin, ModalScreen[str | None]):
     """Ask for one line of text; dismiss with the text (Enter) or None (Escape)."""
 
     DEFAULT_CSS = """
@@ -41,7 +44,7 @@ class PromptScreen(ModalScreen[str | None]):
         self.dismiss(None)
 
 
-class ConfirmScreen(ModalScreen[bool]):
+class ConfirmScreen(GuardMixin, ModalScreen[bool]):
     """Yes/no question; y/n keys, Escape = no."""
 
     DEFAULT_CSS = """
@@ -74,7 +77,7 @@ class ConfirmScreen(ModalScreen[bool]):
         self.dismiss(value)
 
 
-class ChoiceScreen(ModalScreen[str | None]):
+class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
     """Pick one of several options (arrow keys + Enter, or the option's hot key)."""
 
     DEFAULT_CSS = """
@@ -105,7 +108,7 @@ class ChoiceScreen(ModalScreen[str | None]):
         self.dismiss(None)
 
 
-class TextScreen(ModalScreen[None]):
+class TextScreen(GuardMixin, ModalScreen[None]):
     """Scrollable text (help, error reasons, reports); Escape/q closes."""
 
     DEFAULT_CSS = """

@@ -10,14 +10,16 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, Static
 
+
 from ctui.engine.colors import object_color
 
+from .guard import GuardMixin
 from .imageview import ImageView
 from .plot import line_plot
 from .session import engine
 
 
-class DriftScreen(Screen):
+class DriftScreen(GuardMixin, Screen):
     DEFAULT_CSS = """
     DriftScreen #dr-body { height: 1fr; }
     DriftScreen #dr-plots { width: 1fr; }

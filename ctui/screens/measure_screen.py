@@ -14,8 +14,10 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Label, Static
 
+
 from ctui.engine.colors import object_color
 
+from .guard import GuardMixin
 from .imageview import ImageView
 from .plot import line_plot
 from .session import engine
@@ -23,11 +25,12 @@ from .session import engine
 
 def is_tubular(stats: dict) -> bool:
     """Elongated objects (longest principal axis >= 3x the second) get a section plot."""
-    ax = sorted((float(v) for v in (stats.get("principal_axes_mm") or [])), reverse=True)
+    axes = stats.get("principal_axes_mm")
+    ax = sorted((float(v) for v in ([] if axes is None else list(axes))), reverse=True)
     return len(ax) >= 2 and ax[1] > 0 and ax[0] / ax[1] >= 3.0
 
 
-class MeasureScreen(Screen):
+class MeasureScreen(GuardMixin, Screen):
     DEFAULT_CSS = """
     MeasureScreen #ms-table { height: auto; max-height: 14; }
     MeasureScreen #ms-body { height: 1fr; }
@@ -95,7 +98,8 @@ class MeasureScreen(Screen):
         self.stats[oid] = st
         name = self.s.seg.objects[oid].name if self.s.seg and oid in self.s.seg.objects else f"object {oid}"
         rng = self.s.seg.slice_range(oid) if self.s.seg else None
-        axes = "/".join(f"{a:.0f}" for a in (st.get("principal_axes_mm") or []))
+        pa = st.get("principal_axes_mm")
+        axes = "/".join(f"{float(a):.0f}" for a in ([] if pa is None else list(pa)))
 
         def f(key, fmt="{:.2f}"):
             val = st.get(key)
@@ -106,7 +110,7 @@ class MeasureScreen(Screen):
             f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"),
             f("volume_difference_percent", "{:+.2f}"), f("area_mm2", "{:.0f}"), str(st.get("mesh_closed", "-")), axes,
             f"{rng[0] + 1}..{rng[1] + 1}" if rng else "-", key=str(oid))
-        warn = st.get("warnings") or []
+        warn = list(st.get("warnings") or [])
         if warn:
             self.app.notify(f"Object {oid}: {'; '.join(warn)}", severity="warning", timeout=6)
 
@@ -143,7 +147,7 @@ class MeasureScreen(Screen):
         iv = self.query_one("#ms-plot", ImageView)
         sm = [r["s_mm"] for r in rows]
         area = [r["area_mm2"] for r in rows]
-        img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": True}])
+        img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": len(sm) <= 60}])
         iv.set_image(img, token=("sections", oid, len(rows)))
         a = np.array(area, float)
         ok = a[np.isfinite(a)]

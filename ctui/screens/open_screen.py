@@ -15,6 +15,8 @@ from textual.screen import ModalScreen
 from textual.widgets import DirectoryTree, Footer, Input, Label, OptionList
 from textual.widgets.option_list import Option
 
+
+from .guard import GuardMixin
 from .session import engine
 
 
@@ -27,7 +29,7 @@ def describe_series(s: dict) -> str:
     return f"{s.get('modality') or '?':<3} {shape_t:>13}  {sp_t} mm  {s.get('files', '?')} files  {s.get('kind', '')}  {desc[:40]}"
 
 
-class OpenScreen(ModalScreen[tuple | None]):
+class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
     """Dismisses with (path, series uid or None), or None."""
 
     DEFAULT_CSS = """

@@ -14,6 +14,8 @@ from textual.screen import ModalScreen
 from textual.widgets import Footer, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
+
+from .guard import GuardMixin
 from .imageview import ImageView
 
 MORPHOLOGY = ("closing", "opening", "erode", "dilate", "conservative")
@@ -39,7 +41,7 @@ def parse_params(text: str) -> dict:
     return out
 
 
-class KernelEditor(ModalScreen[list | None]):
+class KernelEditor(GuardMixin, ModalScreen[list | None]):
     """An n x n grid of 0/1 cells: arrows move, space toggles, +/- resize, Enter accepts."""
 
     DEFAULT_CSS = """
@@ -129,7 +131,7 @@ class KernelEditor(ModalScreen[list | None]):
         self.dismiss(None)
 
 
-class PipelineEditor(ModalScreen[None]):
+class PipelineEditor(GuardMixin, ModalScreen[None]):
     """Edit the session's Pipeline; preview on the current slice."""
 
     DEFAULT_CSS = """

@@ -15,8 +15,10 @@ from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import Footer, Static
 
+
 from ctui.engine.errors import CtuiError
 
+from .guard import GuardMixin
 from .imageview import ImageView
 from .session import engine
 
@@ -48,7 +50,7 @@ def build_meshes(session, method: str) -> dict:
     return dict(meshes)
 
 
-class View3DScreen(Screen):
+class View3DScreen(GuardMixin, Screen):
     DEFAULT_CSS = """
     View3DScreen #v3-body { height: 1fr; }
     View3DScreen #v3-info { width: 30; padding: 0 1; background: $panel; }
@@ -148,7 +150,6 @@ class View3DScreen(Screen):
         try:
             render = engine("render")
             scene = render.Scene.from_meshes(list(meshes.values()))
-            scene.set_volume(self.s.volume)
             scene.options.show_surfaces = True
         except CtuiError as exc:
             self.app.notify(str(exc), severity="error")
@@ -170,6 +171,8 @@ class View3DScreen(Screen):
         self._req += 1
         self.scene.mode = self.mode
         self.scene.options.window = tuple(self.s.window)
+        # the volume only in volume modes: surfaces alone frame the objects, not the whole series
+        self.scene.set_volume(self.s.volume if self.mode in ("mip", "dvr") or not self.meshes else None)
         scene = self.scene.snapshot() if hasattr(self.scene, "snapshot") else copy.deepcopy(self.scene)
         size = self.query_one(ImageView).target_pixels()
         self._render_worker(scene, size, self._req)

@@ -13,8 +13,10 @@ from textual.containers import Grid, Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, ProgressBar, Static
 
+
 from ctui.engine.errors import CtuiError
 
+from .guard import GuardMixin
 from .imageview import ImageView
 from .session import VIEWS, Session, engine
 
@@ -25,7 +27,7 @@ class SidePanel(Static):
     """
 
 
-class WorkspaceScreen(Screen):
+class WorkspaceScreen(GuardMixin, Screen):
     """Slice view + side panel. Thin: every computation is an engine call."""
 
     DEFAULT_CSS = """

@@ -1,0 +1,38 @@
+"""Errors as notifications, never tracebacks.
+
+Textual ends the app on any unhandled exception in a handler, action or worker and
+prints a traceback. ctui keeps running instead: the failing step is reported in one
+line as an error notification (full traceback kept in ``app.internal_errors`` and
+shown by the ``Show last internal error`` command), the work in memory stays intact.
+Screens mix in :class:`GuardMixin` so a failing event handler does not stop their
+message loop.
+"""
+
+from __future__ import annotations
+
+import traceback
+
+
+def report_internal_error(app, exc: BaseException) -> None:
+    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    getattr(app, "internal_errors", []).append(tb)
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    where = ""
+    if exc.__traceback__ is not None:
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        where = f" in {last.name}"
+    try:
+        app.notify(f"Internal error{where}: {type(exc).__name__}: {msg[:200]} (ctui keeps running; your work is intact)",
+                   severity="error", timeout=12)
+    except Exception:
+        pass
+
+
+class GuardMixin:
+    """Catch exceptions of this node's own event handlers and report them."""
+
+    async def _dispatch_message(self, message) -> None:  # type: ignore[override]
+        try:
+            await super()._dispatch_message(message)  # type: ignore[misc]
+        except Exception as exc:  # noqa: BLE001 - the point is to catch everything
+            report_internal_error(self.app, exc)  # type: ignore[attr-defined]
