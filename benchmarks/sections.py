@@ -13,7 +13,7 @@ then for each plane build its grid, call ``map_coordinates`` and
 shoelace area. Same grid size and spacing as ctui's.
 
 Usage: python benchmarks/sections.py [--repeat 3] [--naive-repeat 1] [--radius 4]
-Prints medians, the ratio and peak (tracemalloc) memory of each.
+Prints medians, the ratio and peak (tracemalloc, separate run) memory of each.
 """
 
 from __future__ import annotations
@@ -117,15 +117,19 @@ def naive_sections(mask, path, step, *, half, n):
 
 
 def measure(fn, repeat):
-    times, peaks, out = [], [], None
+    """Median timings of ``repeat`` untraced runs, then one run under tracemalloc for the
+    peak memory (tracing slows Python-level allocations a lot, so it is kept out of
+    the timed runs)."""
+    times, out = [], None
     for _ in range(repeat):
-        tracemalloc.start()
         out, t = fn()
-        peaks.append(tracemalloc.get_traced_memory()[1])
-        tracemalloc.stop()
         times.append(t)
     med = {k: statistics.median(t[k] for t in times) for k in times[0]}
-    return out, med, max(peaks)
+    tracemalloc.start()
+    fn()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return out, med, peak
 
 
 def main() -> int:

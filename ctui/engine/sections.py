@@ -354,8 +354,13 @@ def _default_half_size(field: ObjectField, path_len: float) -> float:
     return float(np.clip(2.0 * r, 4 * sp.max(), 80.0))
 
 
-def _section_of_plane(g: np.ndarray, h: float) -> dict[str, Any]:
-    """Measure the section around the centre of one sampled plane ``g`` (n, n)."""
+def _section_of_plane(g: np.ndarray, h: float, tail: int = 4) -> dict[str, Any]:
+    """Measure the section around the centre of one sampled plane ``g`` (n, n).
+
+    ``tail``: cells beyond the 0.5 level where the smoothed indicator is still
+    noticeable (about 2.5 sigma). Work is restricted to the box of the centre's 0.5
+    region grown by ``tail`` (2 ``tail`` when looking for neighbours sharing it).
+    """
     from scipy import ndimage as ndi
     from skimage.measure import find_contours
 
@@ -365,29 +370,38 @@ def _section_of_plane(g: np.ndarray, h: float) -> dict[str, Any]:
     if not out["inside"]:
         return out
     hi_lab, nhi = ndi.label(g >= 0.5)
-    me = hi_lab[c, c]
-    region = hi_lab == me
-    if region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any():
+    me = int(hi_lab[c, c])
+    box = ndi.find_objects(hi_lab, max_label=me)[me - 1]
+    r0, r1, c0, c1 = box[0].start, box[0].stop, box[1].start, box[1].stop
+    if r0 == 0 or c0 == 0 or r1 == n or c1 == n:
         out["needs_larger"] = True
         return out
-    lo_lab, _ = ndi.label(g > 0.01)
-    foot = lo_lab == lo_lab[c, c]
+    # footprint box: the region's box grown by the blur tail; a larger box to look for neighbours
+    R0, R1, C0, C1 = max(r0 - tail, 0), min(r1 + tail, n), max(c0 - tail, 0), min(c1 + tail, n)
+    sub = g[R0:R1, C0:C1]
+    foot = sub > 0.01
     if nhi > 1:
-        others = np.unique(hi_lab[foot & (hi_lab > 0) & (hi_lab != me)])
-        if len(others):
+        Q0, Q1, K0, K1 = max(r0 - 2 * tail, 0), min(r1 + 2 * tail, n), max(c0 - 2 * tail, 0), min(c1 + 2 * tail, n)
+        big = hi_lab[Q0:Q1, K0:K1]
+        if np.any((big > 0) & (big != me)):
             # split a blur footprint shared with neighbours by nearest 0.5 region
-            _, ind = ndi.distance_transform_edt(hi_lab == 0, return_indices=True)
-            near = hi_lab[ind[0], ind[1]]
-            foot &= near == me
-    edge = np.concatenate([g[0][foot[0]], g[-1][foot[-1]], g[:, 0][foot[:, 0]], g[:, -1][foot[:, -1]]])
-    if edge.size and edge.max() > 0.05:
+            _, ind = ndi.distance_transform_edt(big == 0, return_indices=True)
+            near = big[ind[0], ind[1]]
+            foot &= near[R0 - Q0 : R1 - Q0, C0 - K0 : C1 - K0] == me
+    fg = np.where(foot, sub, 0.0)
+    if (R0 == 0 and fg[0].max() > 0.05) or (R1 == n and fg[-1].max() > 0.05) or \
+            (C0 == 0 and fg[:, 0].max() > 0.05) or (C1 == n and fg[:, -1].max() > 0.05):
         out["needs_larger"] = True
         return out
-    pv_area = float(g[foot].sum()) * h * h
+    pv_area = float(fg.sum()) * h * h
+    # contours on the region's box + 1 cell (closed there); back to full-grid indices
+    g2 = g[r0 - 1 : r1 + 1, c0 - 1 : c1 + 1]
+    off = np.array([r0 - 1, c0 - 1], dtype=np.float64)
     best = None
-    for cont in find_contours(g, 0.5):
+    for cont in find_contours(g2, 0.5):
         if len(cont) < 4 or np.any(np.abs(cont[0] - cont[-1]) > 1e-9):
             continue
+        cont = cont + off
         if _points_in_poly([[c, c]], cont)[0]:
             a = abs(shoelace_area(cont))
             if best is None or a < best[0]:
@@ -527,8 +541,9 @@ def sections_along_path(
                 vals = vals.reshape(len(ids), n, n)
                 tb = time.perf_counter()
                 t_sample += tb - ta
+                tail = int(math.ceil(2.5 * field.sigma_vox * float(sp.max()) / h)) + 1
                 for j, i in enumerate(ids):
-                    r = _section_of_plane(vals[j], h)
+                    r = _section_of_plane(vals[j], h, tail)
                     if r.get("needs_larger") and _round < 4:
                         retry.append(i)
                         continue
