@@ -113,12 +113,14 @@ class KernelEditor(GuardMixin, ModalScreen[list | None]):
         if n > o:
             off = (n - o) // 2
             new[off:off + o, off:off + o] = old
+            shift = off
         else:
             off = (o - n) // 2
             new[:] = old[off:off + n, off:off + n]
+            shift = -off
         self.k = new
-        self.cx = min(self.cx, n - 1)
-        self.cy = min(self.cy, n - 1)
+        self.cx = min(max(self.cx + shift, 0), n - 1)
+        self.cy = min(max(self.cy + shift, 0), n - 1)
         self._draw()
 
     def action_accept(self) -> None:
