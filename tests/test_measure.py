@@ -8,7 +8,15 @@ import math
 import numpy as np
 import pytest
 
-from ctui.engine.measure import label_stats, mesh_components, mesh_stats, object_stats, principal_axes, stats_json
+from ctui.engine.measure import (
+    label_stats,
+    measure_object,
+    mesh_components,
+    mesh_stats,
+    object_stats,
+    principal_axes,
+    stats_json,
+)
 from ctui.engine.meshdata import Mesh
 
 
@@ -136,3 +144,28 @@ def test_object_stats_geometry_and_json():
 
     with pytest.raises(CtuiError):
         object_stats(labels, 7, spacing=(1, 1, 1))
+
+
+def test_measure_object_report_for_the_tui():
+    """measure_object: the CLI's JSON keys plus drawable rows; voxel path points."""
+    sp = (0.5, 0.5, 0.5)
+    shape = (24, 24, 60)
+    zz, yy, xx = np.meshgrid(*[np.arange(n) * 0.5 for n in shape], indexing="ij")
+    labels = np.zeros(shape, np.uint8)
+    labels[((yy - 6.1) ** 2 + (zz - 5.9) ** 2 <= 2.5**2) & (xx > 2) & (xx < 27)] = 4
+    res = measure_object(labels, 4, spacing=sp, path="4,6.1,5.9;25,6.1,5.9", step_mm=1.0, between=(5, 15), mesh=False)
+    for k in ("volume_ml", "area_mm2", "path_length_mm", "sections", "between", "rows", "path_mm"):
+        assert k in res
+    assert res["path_length_mm"] == pytest.approx(21.0, abs=1e-6)
+    assert len(res["sections"]) == 22 and len(res["rows"]) == 22
+    mid = res["rows"][10]
+    assert mid["area_mm2"] == pytest.approx(math.pi * 2.5**2, rel=0.03)
+    # the drawn contour lies on the cylinder (patient mm)
+    c = mid["contour_mm"]
+    assert np.abs(np.hypot(c[:, 1] - 6.1, c[:, 2] - 5.9) - 2.5).max() < 0.3
+    assert res["between"]["volume_ml"] == pytest.approx(math.pi * 2.5**2 * 10 / 1000, rel=0.03)
+    # the same path as voxel indices (z, y, x)
+    res2 = measure_object(labels, 4, spacing=sp, path=[[11.8, 12.2, 8], [11.8, 12.2, 50]], path_voxels=True,
+                          step_mm=1.0, mesh=False)
+    assert res2["path_length_mm"] == pytest.approx(21.0, abs=1e-6)
+    assert res2["sections"][10]["area_mm2"] == pytest.approx(res["sections"][10]["area_mm2"], rel=1e-3)

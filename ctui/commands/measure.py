@@ -153,53 +153,26 @@ def run(args: argparse.Namespace) -> int:
         report["area_mm2"] = st["area_mm2"]
         report["warnings"] += st["warnings"]
     else:
-        from ctui.engine.measure import object_stats
+        from ctui.engine.measure import measure_object
 
         labels, spacing, origin, direction, notes = _load_labels(args.input)
-        report["warnings"] += notes
         oid = _pick_object(labels, args.object, args.input)
-        report["object"] = oid
-        st = object_stats(labels, oid, spacing=spacing, origin=origin, direction=direction, mesh=not args.no_mesh)
-        report["volume_ml"] = {"voxels": st["volume_voxels_ml"], "mesh": st["volume_mesh_ml"]}
-        report["volume_difference_percent"] = st["volume_difference_percent"]
-        report["area_mm2"] = st["area_mm2"]
-        report["centroid_mm"] = [float(v) for v in st["centroid_mm"]]
-        report["principal_axes_mm"] = [float(v) for v in st["principal_axes_mm"]]
-        report["warnings"] += st["warnings"]
-        if args.path:
-            from ctui.engine.centreline import centreline, parse_points, path_from_points, path_length
-            from ctui.engine.sections import object_field, sections_along_path, volume_between
+        res = measure_object(labels, oid, spacing=spacing, origin=origin, direction=direction, path=args.path or None,
+                             path_voxels=args.path_voxels, step_mm=args.step, between=tuple(between) if between else None,
+                             mesh=not args.no_mesh, area=args.area)
+        rows = res.pop("rows")
+        res.pop("stats")
+        res.pop("path_mm")
+        res["warnings"] = notes + res["warnings"]
+        report.update(res)
+        if args.csv:
+            from ctui.engine.sections import write_sections_csv
 
-            mask = labels == oid
-            if args.path.strip().lower() == "auto":
-                path = centreline(mask, spacing=spacing, origin=origin, direction=direction, step_mm=min(args.step, 0.5))
-            else:
-                pts = parse_points(args.path)
-                path = path_from_points(pts, step_mm=min(args.step, 0.5), voxel=args.path_voxels,
-                                        spacing=spacing, origin=origin, direction=direction)
-            field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
-            rows = sections_along_path(None, path, field=field, step_mm=args.step, area=args.area)
-            length = path_length(path)
-            report["path_length_mm"] = length
-            from ctui.engine.sections import sections_table
+            write_sections_csv(args.csv, rows)
+        if args.plot:
+            from ctui.engine.sections import plot_sections
 
-            report["sections"] = sections_table(rows)
-            outside = sum(1 for r in rows if not math.isfinite(r["area_mm2"]))
-            if outside:
-                report["warnings"].append(f"{outside} of {len(rows)} path points lie outside object {oid}")
-            if between:
-                s1, s2 = between
-                vb = volume_between(None, path, s1, s2, field=field)
-                report["between"] = {"volume_ml": vb["volume_ml"], "area1_mm2": vb["area1_mm2"], "area2_mm2": vb["area2_mm2"]}
-                report["warnings"] += vb["warnings"]
-            if args.csv:
-                from ctui.engine.sections import write_sections_csv
-
-                write_sections_csv(args.csv, rows)
-            if args.plot:
-                from ctui.engine.sections import plot_sections
-
-                plot_sections(args.plot, rows, references=refs, title=f"object {oid} sections")
+            plot_sections(args.plot, rows, references=refs, title=f"object {oid} sections")
     if args.json:
         def clean(v):
             if isinstance(v, dict):

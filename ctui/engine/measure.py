@@ -282,3 +282,101 @@ def stats_json(stats: dict[str, Any]) -> dict[str, Any]:
         return v
 
     return {k: clean(v) for k, v in stats.items() if k != "mesh"}
+
+
+def measure_object(
+    labels: np.ndarray,
+    object_id: int,
+    *,
+    spacing=(1.0, 1.0, 1.0),
+    origin=(0.0, 0.0, 0.0),
+    direction=None,
+    path: str | np.ndarray | None = None,
+    path_voxels: bool = False,
+    step_mm: float = 0.5,
+    between: tuple[float, float] | None = None,
+    mesh: bool = True,
+    area: str = "pv",
+) -> dict[str, Any]:
+    """Everything ``ctui measure`` reports for one object, for the TUI and scripts.
+
+    Parameters
+    ----------
+    labels, object_id, spacing, origin, direction
+        As :func:`object_stats`.
+    path : "auto", "x,y,z;x,y,z;...", (n, 3) array, or None
+        "auto": automatic centreline (:func:`ctui.engine.centreline.centreline`);
+        a string of points: a spline through them (patient mm, or voxel (z, y, x)
+        when ``path_voxels``); an array: a dense path in mm used as given (or control
+        points in voxels with ``path_voxels``; for a few mm control points call
+        :func:`ctui.engine.centreline.path_from_points` first); None: no sections.
+    step_mm : float
+        Distance between sections along the path.
+    between : (s1, s2) or None
+        Arc lengths (mm) of two planes for :func:`ctui.engine.sections.volume_between`.
+    mesh : bool
+        Compute the mesh (Gauss) volume and area with MESH's ``mask_surface``.
+    area : "pv" or "contour"
+        Section area estimate (see :mod:`ctui.engine.sections`).
+
+    Returns
+    -------
+    dict with the JSON keys of ``ctui measure``: ``object``, ``volume_ml``
+    ({``voxels``, ``mesh``}), ``volume_difference_percent``, ``area_mm2``,
+    ``path_length_mm``, ``sections`` (list of {s_mm, area_mm2, eq_diameter_mm,
+    min_diameter_mm, max_diameter_mm}), ``between`` ({volume_ml, area1_mm2,
+    area2_mm2} or None), ``centroid_mm``, ``principal_axes_mm``, ``warnings``; plus,
+    not for JSON: ``stats`` (:func:`object_stats`), ``path_mm`` (n, 3) and ``rows``
+    (full section dicts with ``contour_mm`` (k, 3) and ``point_mm``, for drawing;
+    pass them to :func:`ctui.engine.sections.plot_sections` for the area plot).
+    """
+    st = object_stats(labels, object_id, spacing=spacing, origin=origin, direction=direction, mesh=mesh)
+    out: dict[str, Any] = {
+        "object": int(object_id),
+        "volume_ml": {"voxels": st["volume_voxels_ml"], "mesh": st["volume_mesh_ml"]},
+        "volume_difference_percent": st["volume_difference_percent"],
+        "area_mm2": st["area_mm2"],
+        "path_length_mm": None,
+        "sections": [],
+        "between": None,
+        "centroid_mm": [float(v) for v in st["centroid_mm"]],
+        "principal_axes_mm": [float(v) for v in st["principal_axes_mm"]],
+        "warnings": list(st["warnings"]),
+        "stats": st,
+        "path_mm": None,
+        "rows": [],
+    }
+    if path is None:
+        if between is not None:
+            raise CtuiError("a volume between planes needs a path")
+        return out
+    from .centreline import centreline, path_from_points, path_length
+    from .sections import object_field, sections_along_path, sections_table, volume_between
+
+    lab = np.asarray(labels)
+    mask = lab.astype(bool) if lab.dtype == bool else lab == object_id
+    fine = min(step_mm, 0.5)
+    if isinstance(path, str) and path.strip().lower() == "auto":
+        path = centreline(mask, spacing=spacing, origin=origin, direction=direction, step_mm=fine)
+    elif isinstance(path, str) or path_voxels:
+        from .centreline import parse_points
+
+        pts = parse_points(path) if isinstance(path, str) else np.asarray(path, dtype=np.float64)
+        path = path_from_points(pts, step_mm=fine, voxel=path_voxels, spacing=spacing, origin=origin, direction=direction)
+    else:
+        path = np.asarray(path, dtype=np.float64)
+    field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
+    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area)
+    out["path_mm"] = path
+    out["path_length_mm"] = path_length(path)
+    out["rows"] = rows
+    out["sections"] = sections_table(rows)
+    outside = sum(1 for r in rows if not math.isfinite(r["area_mm2"]))
+    if outside:
+        out["warnings"].append(f"{outside} of {len(rows)} path points lie outside object {object_id}")
+    if between is not None:
+        s1, s2 = between
+        vb = volume_between(None, path, s1, s2, field=field)
+        out["between"] = {"volume_ml": vb["volume_ml"], "area1_mm2": vb["area1_mm2"], "area2_mm2": vb["area2_mm2"]}
+        out["warnings"] += vb["warnings"]
+    return out
