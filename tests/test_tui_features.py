@@ -240,3 +240,26 @@ async def test_ascii_mode_draws_a_character_ramp(monkeypatch):
         assert "@" in text and " " in text and "+" in text  # bright spine, air, cursor
         # no colour in the cells
         assert all(seg.style is None or seg.style.color is None for st in mv._strips for seg in st)
+
+
+async def test_autosave_is_offered_on_next_start(tmp_path):
+    o = _obj("kidney_right")
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await goto_voxel(pilot, app, *o["seed_zyx"])
+        app.session.range_ = (130.0, 400.0)
+        await pilot.press("enter")
+        await pilot.pause()
+        labels = app.session.seg.labels.copy()
+        app.autosave_worker()
+        auto = tmp_path / "autosave"
+        await wait_for(pilot, lambda: auto.exists() and any(auto.iterdir()), what="the autosave")
+        app.session.dirty = False  # as if the app was killed: no save, no question
+    app2 = CtuiApp()
+    async with app2.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda: type(app2.screen).__name__ == "ConfirmScreen", what="the recovery question")
+        await pilot.press("y")
+        await wait_for(pilot, lambda: app2.session is not None and app2.session.seg.labels.any(), what="recovered labels")
+        assert np.array_equal(app2.session.seg.labels, labels)
+        assert app2.session.dirty

@@ -82,3 +82,17 @@ def test_real_binary_in_tmux(tmux_session, tmp_path, size):
     screen = _wait(tmux_session, "CTUI-EXIT=")
     assert "CTUI-EXIT=0" in screen, screen
     assert "Traceback" not in screen
+
+
+def test_tmux_without_colorterm_tells_how_to_fix(tmux_session, tmp_path):
+    """Over SSH COLORTERM is usually not forwarded: Rich drops to 256 colours and grey
+    slices band. ctui says once how to fix it."""
+    env = {k: v for k, v in os.environ.items() if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM")}
+    env.update({"CTUI_AUTOSAVE_DIR": str(tmp_path / "autosave"), "SSH_CONNECTION": "10.0.0.1 5555 10.0.0.2 22"})
+    cmd = (f"cd {tmp_path} && unset COLORTERM TEXTUAL_COLOR_SYSTEM && TERM=screen-256color "
+           f"SSH_CONNECTION='10.0.0.1 5555 10.0.0.2 22' {sys.executable} -m ctui --graphics halfblock; sleep 30")
+    subprocess.run(["tmux", "new-session", "-d", "-s", tmux_session, "-x", "160", "-y", "50", cmd],
+                   check=True, env=env, timeout=10)
+    screen = _wait(tmux_session, "SendEnv")
+    assert "TEXTUAL_COLOR_SYSTEM=truecolor" in screen.replace("\n", " ") or "TEXTUAL_COLOR_SYSTEM" in screen
+    assert "Traceback" not in screen

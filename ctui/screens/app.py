@@ -183,6 +183,54 @@ class CtuiApp(App):
         while len(self.screen_stack) > 1:
             self.pop_screen()
         self.push_screen(ws)
+        self.call_after_refresh(self._offer_recovery, session)
+
+    def _offer_recovery(self, session: Session) -> None:
+        """An autosave newer than the project (or of an unsaved source): offer it."""
+        try:
+            project = engine("project")
+            key = session.project_path or session.source_path
+            auto = project.find_autosave(key) if key else None
+        except Exception:
+            return
+        if auto is None or str(auto) == str(session.project_path):
+            return
+        from .dialogs import ConfirmScreen
+
+        def done(ok: bool) -> None:
+            if ok:
+                self._recover(session, str(auto))
+            else:
+                try:
+                    project.remove_autosave(key)
+                except Exception:
+                    pass
+
+        self.push_screen(ConfirmScreen(f"Unsaved work from an earlier session was autosaved ({auto.name}). Recover it?",
+                                       "Recover", "Discard"), done)
+
+    def _recover(self, session: Session, auto: str) -> None:
+        try:
+            proj = engine("project").load_project(auto)
+            new = session_from_project(proj, session.volume, session.project_path or "")
+        except (CtuiError, ValueError) as exc:
+            self.notify(f"Autosave not recovered: {exc}", severity="error")
+            return
+        new.project_path = session.project_path
+        new.source_path = session.source_path
+        new.dirty = True
+        self._start_workspace_no_recovery(new)
+        self.notify(f"Recovered {auto}", timeout=4)
+
+    def _start_workspace_no_recovery(self, session: Session) -> None:
+        from .workspace import WorkspaceScreen
+
+        self.session = session
+        ws = WorkspaceScreen(session)
+        self.workspace = ws
+        while len(self.screen_stack) > 1:
+            self.pop_screen()
+        self.push_screen(ws)
 
     def open_path(self, path: str, series: str | None = None) -> None:
         """Open another series or project (from the open screen)."""
