@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .meshdata import Mesh
 
@@ -96,64 +96,90 @@ def tile_dp(P, Q, pid, qid, band):
 
     Returns triangles (n + m, 3) of ids from ``pid`` / ``qid``, oriented so that for
     counter-clockwise loops (seen from +z) with Q above P the normals point outwards.
-    ``band``: half-width of the searched band around the diagonal in points
-    (<= 0: full table).
+    The path starts at P[0] and the point of Q closest to it. ``band``: half-width
+    (in points of Q) of the searched band around the arc-length diagonal ``j = i m / n``
+    (<= 0: the full table). Returns an empty array if the band admits no path.
     """
     n = P.shape[0]
     m = Q.shape[0]
     s = _closest_start(P, Q)
-    INF = 1e300
-    cost = np.full((n + 1, m + 1), INF)
-    choice = np.zeros((n + 1, m + 1), np.uint8)
-    cost[0, 0] = 0.0
+    # unrolled copies: P2[i] = P[i % n], Q2[j] = Q[(j + s) % m], for i <= n, j <= m
+    P2 = np.empty((n + 1, 3))
+    Q2 = np.empty((m + 1, 3))
     for i in range(n + 1):
-        # band limits for j
-        if band > 0:
-            jc = i * m / n
-            jlo = max(0, int(jc - band))
-            jhi = min(m, int(jc + band) + 1)
+        for c in range(3):
+            P2[i, c] = P[i % n, c]
+    for j in range(m + 1):
+        for c in range(3):
+            Q2[j, c] = Q[(j + s) % m, c]
+    if band <= 0 or 2 * band + 2 >= m + 1:
+        W = m + 1
+        full = True
+    else:
+        W = 2 * band + 2
+        full = False
+    lo = np.empty(n + 1, np.int64)
+    for i in range(n + 1):
+        if full:
+            lo[i] = 0
         else:
-            jlo = 0
-            jhi = m
-        pi = i % n
-        pn = (i + 1) % n
-        for j in range(jlo, jhi + 1):
-            c = cost[i, j]
+            jl = int(i * m / n) - band
+            if jl < 0:
+                jl = 0
+            if jl > m + 1 - W:
+                jl = m + 1 - W
+            lo[i] = jl
+    INF = 1e300
+    cost = np.full((n + 1, W), INF)
+    choice = np.zeros((n + 1, W), np.uint8)
+    cost[0, 0 - lo[0]] = 0.0
+    for i in range(n + 1):
+        li = lo[i]
+        ln = lo[i + 1] if i < n else 0
+        px = P2[i, 0]
+        py = P2[i, 1]
+        pz = P2[i, 2]
+        for k in range(W):
+            c = cost[i, k]
             if c >= INF:
                 continue
-            qj = (j + s) % m
-            qn = (j + 1 + s) % m
+            j = li + k
             if i < n:
-                a = c + _tri_area(P[pi, 0], P[pi, 1], P[pi, 2], P[pn, 0], P[pn, 1], P[pn, 2],
-                                  Q[qj, 0], Q[qj, 1], Q[qj, 2])
-                if a < cost[i + 1, j]:
-                    cost[i + 1, j] = a
-                    choice[i + 1, j] = 1
-            if j < m:
-                a = c + _tri_area(P[pi, 0], P[pi, 1], P[pi, 2], Q[qn, 0], Q[qn, 1], Q[qn, 2],
-                                  Q[qj, 0], Q[qj, 1], Q[qj, 2])
-                if a < cost[i, j + 1]:
-                    cost[i, j + 1] = a
-                    choice[i, j + 1] = 2
+                kk = j - ln
+                if 0 <= kk < W:
+                    a = c + _tri_area(px, py, pz, P2[i + 1, 0], P2[i + 1, 1], P2[i + 1, 2],
+                                      Q2[j, 0], Q2[j, 1], Q2[j, 2])
+                    if a < cost[i + 1, kk]:
+                        cost[i + 1, kk] = a
+                        choice[i + 1, kk] = 1
+            if j < m and k + 1 < W:
+                a = c + _tri_area(px, py, pz, Q2[j + 1, 0], Q2[j + 1, 1], Q2[j + 1, 2],
+                                  Q2[j, 0], Q2[j, 1], Q2[j, 2])
+                if a < cost[i, k + 1]:
+                    cost[i, k + 1] = a
+                    choice[i, k + 1] = 2
     out = np.empty((n + m, 3), np.int64)
-    if cost[n, m] >= INF:
+    kend = m - lo[n]
+    if kend < 0 or kend >= W or cost[n, kend] >= INF:
         return out[:0]
     i = n
     j = m
-    k = n + m - 1
+    t = n + m - 1
     while i > 0 or j > 0:
-        ch = choice[i, j]
+        ch = choice[i, j - lo[i]]
         if ch == 1:
             i -= 1
-            out[k, 0] = pid[i % n]
-            out[k, 1] = pid[(i + 1) % n]
-            out[k, 2] = qid[(j + s) % m]
-        else:
+            out[t, 0] = pid[i % n]
+            out[t, 1] = pid[(i + 1) % n]
+            out[t, 2] = qid[(j + s) % m]
+        elif ch == 2:
             j -= 1
-            out[k, 0] = pid[i % n]
-            out[k, 1] = qid[(j + 1 + s) % m]
-            out[k, 2] = qid[(j + s) % m]
-        k -= 1
+            out[t, 0] = pid[i % n]
+            out[t, 1] = qid[(j + 1 + s) % m]
+            out[t, 2] = qid[(j + s) % m]
+        else:
+            return out[:0]
+        t -= 1
     return out
 
 
@@ -194,6 +220,29 @@ def tile_greedy(P, Q, pid, qid):
     return out
 
 
+@njit(cache=True, parallel=True)
+def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out):
+    """Tile many loop pairs in parallel: pair k is P[poff[k]:poff[k+1]] with
+    Q[qoff[k]:qoff[k+1]]; its n + m triangles go to out[toff[k]:toff[k+1]].
+    Returns per pair 1 (ok) or 0 (band too narrow: caller retries with the full table)."""
+    npair = poff.shape[0] - 1
+    ok = np.ones(npair, np.int64)
+    for k in prange(npair):
+        a0, a1 = poff[k], poff[k + 1]
+        b0, b1 = qoff[k], qoff[k + 1]
+        if use_dp:
+            t = tile_dp(P[a0:a1], Q[b0:b1], pid[a0:a1], qid[b0:b1], bands[k])
+            if t.shape[0] == 0:
+                t = tile_dp(P[a0:a1], Q[b0:b1], pid[a0:a1], qid[b0:b1], 0)
+        else:
+            t = tile_greedy(P[a0:a1], Q[b0:b1], pid[a0:a1], qid[b0:b1])
+        if t.shape[0] != toff[k + 1] - toff[k]:
+            ok[k] = 0
+            continue
+        out[toff[k]:toff[k + 1]] = t
+    return ok
+
+
 # --------------------------------------------------------------------------- loops
 
 
@@ -201,7 +250,7 @@ def _signed_area(p: np.ndarray) -> float:
     if len(p) < 3:
         return 0.0
     x, y = p[:, 0], p[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    return 0.5 * float(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]) + x[-1] * y[0] - x[0] * y[-1])
 
 
 def offset_pixel_boundary(points: np.ndarray, *, hole: bool = False) -> np.ndarray:
@@ -276,6 +325,7 @@ class _Loop:
     hole: bool
     z: int
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     box: tuple[int, int, int, int] = (0, 0, 0, 0)  # x0, y0, x1, y1 (exclusive)
     mask: np.ndarray | None = None
     parent: int = -1
@@ -314,7 +364,7 @@ def _rasterise(loop: _Loop) -> None:
         ij = np.clip(np.round(p - [x0, y0]).astype(int), 0, [x1 - x0 - 1, y1 - y0 - 1])
         m[ij[:, 1], ij[:, 0]] = 1
     loop.box = (x0, y0, x1, y1)
-    loop.mask = m.astype(bool)
+    loop.mask = m
 
 
 def _overlap(a: _Loop, b: _Loop) -> bool:
@@ -324,28 +374,27 @@ def _overlap(a: _Loop, b: _Loop) -> bool:
         return False
     ma = a.mask[y0 - a.box[1]:y1 - a.box[1], x0 - a.box[0]:x1 - a.box[0]]
     mb = b.mask[y0 - b.box[1]:y1 - b.box[1], x0 - b.box[0]:x1 - b.box[0]]
-    return bool(np.logical_and(ma, mb).any())
+    return bool((ma & mb).any())
 
 
-def _merge_loops(loops: list[_Loop], xyz_of) -> tuple[np.ndarray, np.ndarray]:
+def _merge_loops(loops: list[_Loop]) -> tuple[np.ndarray, np.ndarray]:
     """One loop (positions (k, 3), ids (k,)) from several, joined by closest-point bridges."""
     ids = loops[0].ids.copy()
-    pos = xyz_of(ids)
+    pos = loops[0].xyz.copy()
     rest = list(loops[1:])
     while rest:
         # the remaining loop closest to the merged loop
         best = None
         for li, lp in enumerate(rest):
-            q = xyz_of(lp.ids)
+            q = lp.xyz
             d = ((pos[:, None, :2] - q[None, :, :2]) ** 2).sum(-1)
             a, b = np.unravel_index(int(np.argmin(d)), d.shape)
             if best is None or d[a, b] < best[0]:
                 best = (d[a, b], li, a, b)
         _, li, a, b = best
         lp = rest.pop(li)
-        qids = lp.ids
-        ids = np.concatenate([ids[: a + 1], qids[b:], qids[: b + 1], ids[a:]])
-        pos = xyz_of(ids)
+        ids = np.concatenate([ids[: a + 1], lp.ids[b:], lp.ids[: b + 1], ids[a:]])
+        pos = np.concatenate([pos[: a + 1], lp.xyz[b:], lp.xyz[: b + 1], pos[a:]])
     return pos, ids
 
 
@@ -453,7 +502,8 @@ def connect_contours(
                 continue
             lp.pts = pts
             _rasterise(lp)
-            lp.ids = builder.add(np.column_stack([pts, np.full(len(pts), float(z))]))
+            lp.xyz = np.column_stack([pts, np.full(len(pts), float(z))])
+            lp.ids = builder.add(lp.xyz)
         loops = [lp for lp in loops if len(lp.ids)]
         for i, lp in enumerate(loops):
             if lp.hole:
@@ -463,50 +513,49 @@ def connect_contours(
                         break
         slices.append(loops)
 
-    def xyz_of(ids: np.ndarray) -> np.ndarray:
-        return verts_idx[ids]
-
-    verts_idx = builder.all_verts()
-
-    def refresh() -> None:
-        nonlocal verts_idx
-        if len(verts_idx) != builder.nv:
-            verts_idx = builder.all_verts()
-
-    mm = verts_idx @ aff[:3, :3].T + aff[:3, 3] if len(verts_idx) else verts_idx
     lin = aff[:3, :3]
 
     def to_mm(p_idx: np.ndarray) -> np.ndarray:
         return p_idx @ lin.T
 
+    jobs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
     def tile(lower: list[_Loop], upper: list[_Loop]) -> None:
-        refresh()
-        pos_p, pid = _merge_loops(lower, xyz_of) if len(lower) > 1 else (xyz_of(lower[0].ids), lower[0].ids)
-        pos_q, qid = _merge_loops(upper, xyz_of) if len(upper) > 1 else (xyz_of(upper[0].ids), upper[0].ids)
-        P = np.ascontiguousarray(to_mm(pos_p))
-        Q = np.ascontiguousarray(to_mm(pos_q))
-        if method == "greedy":
-            tris = tile_greedy(P, Q, pid, qid)
+        pos_p, pid = _merge_loops(lower) if len(lower) > 1 else (lower[0].xyz, lower[0].ids)
+        pos_q, qid = _merge_loops(upper) if len(upper) > 1 else (upper[0].xyz, upper[0].ids)
+        jobs.append((to_mm(pos_p), pid, to_mm(pos_q), qid))
+
+    def run_jobs() -> None:
+        if not jobs:
+            return
+        lens_p = np.array([len(j[1]) for j in jobs], np.int64)
+        lens_q = np.array([len(j[3]) for j in jobs], np.int64)
+        poff = np.concatenate([[0], np.cumsum(lens_p)])
+        qoff = np.concatenate([[0], np.cumsum(lens_q)])
+        toff = np.concatenate([[0], np.cumsum(lens_p + lens_q)])
+        mx = np.maximum(lens_p, lens_q)
+        if band > 0:
+            bands = np.full(len(jobs), int(band), np.int64)
         else:
-            n, m = len(P), len(Q)
-            b = band
-            if b <= 0:
-                b = 0 if max(n, m) <= 200 else max(24, int(0.15 * max(n, m)))
-            tris = tile_dp(P, Q, pid, qid, b)
-            if len(tris) == 0:
-                tris = tile_dp(P, Q, pid, qid, 0)
-        builder.faces.append(tris)
+            bands = np.where(mx <= 200, 0, np.maximum(24, (0.15 * mx).astype(np.int64)))
+        out = np.empty((int(toff[-1]), 3), np.int64)
+        ok = tile_many(np.ascontiguousarray(np.concatenate([j[0] for j in jobs])), poff,
+                       np.concatenate([j[1] for j in jobs]).astype(np.int64),
+                       np.ascontiguousarray(np.concatenate([j[2] for j in jobs])), qoff,
+                       np.concatenate([j[3] for j in jobs]).astype(np.int64),
+                       bands.astype(np.int64), method == "dp", toff, out)
+        if not ok.all():  # cannot happen for valid loops; keep the surface closed anyway
+            raise RuntimeError("contour tiling failed")
+        builder.faces.append(out)
 
     def end(loop_group: list[_Loop], up: bool) -> None:
         """Cap an ending outer loop with its holes (or a lone hole), after a half-slice extrusion."""
-        refresh()
         rings = []
         for lp in loop_group:
             ids = lp.ids
             if half_slice_ends:
                 dz = 0.5 if up else -0.5
                 new = builder.add(np.column_stack([lp.pts, np.full(len(lp.pts), lp.z + dz)]))
-                refresh()
                 lo, hi = (ids, new) if up else (new, ids)
                 k = len(ids)
                 i = np.arange(k)
@@ -561,8 +610,8 @@ def connect_contours(
                 else:
                     holes = [h for k, h in enumerate(loops) if h.hole and h.parent == i and not matched[k]]
                     end([lp] + holes, up)
-    refresh()
-    v_idx = verts_idx
+    run_jobs()
+    v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
     faces = np.concatenate(builder.faces).astype(np.int32) if builder.faces else np.zeros((0, 3), np.int32)
     faces = _fix_handedness(faces, aff)
@@ -570,7 +619,6 @@ def connect_contours(
 
     mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces, normals=vertex_normals(v_mm, faces),
                 meta={"method": f"contours-{method}"})
-    del mm
     return mesh
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import Iterable
 
 import numpy as np
+from numba import njit
 
 from .meshdata import Mesh, signed_volume_mm3
 
@@ -153,16 +154,37 @@ def mesh_report(mesh: Mesh) -> dict:
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, float32 (n, 3) (outward for CCW-outside faces)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    n = np.zeros_like(v)
-    if len(f):
-        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        for k in range(3):
-            np.add.at(n, f[:, k], fn)
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    ln[ln == 0] = 1.0
-    return (n / ln).astype(np.float32)
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    return _vertex_normals(v, f)
+
+
+@njit(cache=True)
+def _vertex_normals(v, f):
+    n = np.zeros((v.shape[0], 3))
+    for t in range(f.shape[0]):
+        a, b, c = f[t, 0], f[t, 1], f[t, 2]
+        ux = v[b, 0] - v[a, 0]
+        uy = v[b, 1] - v[a, 1]
+        uz = v[b, 2] - v[a, 2]
+        wx = v[c, 0] - v[a, 0]
+        wy = v[c, 1] - v[a, 1]
+        wz = v[c, 2] - v[a, 2]
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        for k in (a, b, c):
+            n[k, 0] += nx
+            n[k, 1] += ny
+            n[k, 2] += nz
+    out = np.empty((v.shape[0], 3), np.float32)
+    for i in range(v.shape[0]):
+        ln = np.sqrt(n[i, 0] ** 2 + n[i, 1] ** 2 + n[i, 2] ** 2)
+        if ln == 0.0:
+            ln = 1.0
+        for c in range(3):
+            out[i, c] = n[i, c] / ln
+    return out
 
 
 def _laplacian(faces: np.ndarray, n: int):
