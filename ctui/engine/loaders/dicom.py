@@ -140,9 +140,22 @@ def _num(v: Any, default: float | None = None) -> float | None:
             return default
         if isinstance(v, (list, tuple)) or hasattr(v, "__len__") and not isinstance(v, (str, bytes)):
             v = v[0]
-        return float(v)
-    except (TypeError, ValueError, IndexError):
+        f = float(v)
+    except (TypeError, ValueError, IndexError, OverflowError):
         return default
+    return f if np.isfinite(f) else default
+
+
+def _slope(v: Any, default: float = 1.0) -> float:
+    """RescaleSlope, or ``default`` when missing or implausible (0, non-finite, > 1e6)."""
+    f = _num(v)
+    return f if f is not None and f != 0 and abs(f) <= 1e6 else default
+
+
+def _intercept(v: Any, default: float = 0.0) -> float:
+    """RescaleIntercept, or ``default`` when missing or implausible (non-finite, > 1e7)."""
+    f = _num(v)
+    return f if f is not None and abs(f) <= 1e7 else default
 
 
 def _int_or_none(v: Any) -> int | None:
@@ -155,9 +168,10 @@ def _vec(v: Any, n: int) -> np.ndarray | None:
         if v is None:
             return None
         a = np.array([float(x) for x in v], dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return None
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
+    # positions / orientations beyond a kilometre are corrupt values, not geometry
+    if a.shape != (n,) or not np.all(np.isfinite(a)) or np.abs(a).max() > 1e6:
         return None
     return a
 
@@ -270,8 +284,19 @@ def _pixel_element(fh, pos: int, implicit: bool, little: bool, size: int) -> tup
 def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     """Read one file's header: its frames and the patient identifiers found (for scrubbing).
 
-    Raises _Skip(reason) when the file is not a loadable DICOM image.
+    Raises _Skip(reason) when the file is not a loadable DICOM image. pydicom's
+    validation warnings about malformed values are silenced: bad values are judged
+    here (a skip with a reason, or a default with a Volume warning).
     """
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with np.errstate(all="ignore"):
+            return _read_header(path)
+
+
+def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     import pydicom
     from pydicom.errors import InvalidDicomError
 
@@ -382,8 +407,8 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -
         bits_stored=max(1, min(bs, bits)),
         signed=signed,
         photometric=str(ds.get("PhotometricInterpretation") or "MONOCHROME2").strip(),
-        slope=_num(ds.get("RescaleSlope"), 1.0) or 1.0,
-        intercept=_num(ds.get("RescaleIntercept"), 0.0) or 0.0,
+        slope=_slope(ds.get("RescaleSlope")),
+        intercept=_intercept(ds.get("RescaleIntercept")),
         ipp=_vec(ds.get("ImagePositionPatient"), 3),
         iop=_vec(ds.get("ImageOrientationPatient"), 6),
         pixel_spacing=None,
@@ -445,8 +470,8 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -
                 f.spacing_between = sb
         pv = lookup(own, "PixelValueTransformationSequence")
         if pv is not None:
-            f.slope = _num(pv.get("RescaleSlope"), f.slope) or 1.0
-            f.intercept = _num(pv.get("RescaleIntercept"), f.intercept) or 0.0
+            f.slope = _slope(pv.get("RescaleSlope"), f.slope)
+            f.intercept = _intercept(pv.get("RescaleIntercept"), f.intercept)
         voi = lookup(own, "FrameVOILUTSequence")
         if voi is not None:
             wc, ww = _num(voi.get("WindowCenter")), _num(voi.get("WindowWidth"))
@@ -572,9 +597,17 @@ def _geometry(frames: list[Frame], *, quiet: bool = False) -> dict[str, Any]:
         else:
             row, col = row / nr, col / nc
             if abs(float(row @ col)) > 1e-3:
-                warnings.append("ImageOrientationPatient row and column vectors are not orthogonal; made orthogonal")
                 col = col - (col @ row) * row
-                col = col / np.linalg.norm(col)
+                nc = float(np.linalg.norm(col))
+                if nc < 1e-3:
+                    warnings.append("ImageOrientationPatient row and column vectors are parallel (invalid): "
+                                    "axial orientation assumed")
+                    iop = None
+                else:
+                    col = col / nc
+                    warnings.append("ImageOrientationPatient row and column vectors are not orthogonal; made orthogonal")
+    elif any(f.ipp is not None for f in frames) and f0.sop_class != "1.2.840.10008.5.1.4.1.1.7":
+        warnings.append("no ImageOrientationPatient: axial orientation assumed")
     if iop is None:
         row, col = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     normal = np.cross(row, col)
