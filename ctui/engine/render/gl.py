@@ -19,6 +19,7 @@ from .transfer import resolve_preset, transfer_table
 BRICK = 8
 TF_SIZE = 1024
 MAX_TEXTURE_VOXELS = 300_000_000  # ~600 MB as 16-bit; larger volumes are subsampled
+GRADIENT_TEXTURE_MAX_VOXELS = 80_000_000  # 320 MB of RGBA8 gradients at most
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -48,14 +49,42 @@ class _MeshGPU:
         self.vbo = ctx.buffer(inter.tobytes())
         self.ibo = ctx.buffer(f.tobytes())
         self.vao = ctx.vertex_array(progs["surface"], [(self.vbo, "3f 3f", "in_pos", "in_normal")], self.ibo)
+        self.vao_v = ctx.vertex_array(progs["surface_v"], [(self.vbo, "3f 3f", "in_pos", "in_normal")], self.ibo)
         self.vao_depth = ctx.vertex_array(progs["depth"], [(self.vbo, "3f 12x", "in_pos")], self.ibo)
         self.nbytes = inter.nbytes + f.nbytes
+        from ..meshdata import face_areas
+
+        self.mean_area = float(face_areas(v, f).mean()) if len(f) else 0.0
+        self.cull = _cull_mode(v, f)
+        from .scene import mesh_bounds
+
+        self.lo, self.hi = mesh_bounds(mesh)
         self.ref = weakref.ref(mesh.vertices) if isinstance(mesh.vertices, np.ndarray) else None
         self.fref = weakref.ref(mesh.faces) if isinstance(mesh.faces, np.ndarray) else None
 
     def release(self) -> None:
-        for o in (self.vao, self.vao_depth, self.vbo, self.ibo):
+        for o in (self.vao, self.vao_v, self.vao_depth, self.vbo, self.ibo):
             o.release()
+
+
+def _cull_mode(v: np.ndarray, f: np.ndarray) -> str | None:
+    """"back" for a closed, consistently oriented mesh with outward faces (its back
+    faces can never be seen from outside), "front" when its faces point inwards,
+    None for open or inconsistent meshes (both sides may show)."""
+    if len(f) == 0:
+        return None
+    n = np.int64(len(v))
+    f = f.astype(np.int64)
+    a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
+    fwd = np.sort(a * n + b)
+    if np.any(fwd[1:] == fwd[:-1]):
+        return None  # a directed edge used twice: inconsistent or non-manifold
+    if not np.array_equal(fwd, np.sort(b * n + a)):
+        return None  # an edge without its twin: open surface
+    from ..meshdata import signed_volume_mm3
+
+    vol = signed_volume_mm3(v, f)
+    return "back" if vol > 0 else "front"
 
 
 class _VolumeGPU:
@@ -81,12 +110,11 @@ class _VolumeGPU:
         self.tex.filter = (ctx.LINEAR, ctx.LINEAR)
         self.tex.repeat_x = self.tex.repeat_y = self.tex.repeat_z = False
         self.bmin, self.bmax = _brick_minmax(u16, BRICK)
-        nb = self.bmin.shape  # (bz, by, bx)
-        self.nbricks = (nb[2], nb[1], nb[0])
-        self.brick_tex = ctx.texture3d(self.nbricks, 4, None, dtype="f4")
-        self.brick_tex.filter = (ctx.NEAREST, ctx.NEAREST)
-        self._occ_key: Any = None
+        self._proxy_key: Any = None
+        self._proxy = None  # (vbo, vao) or None when nothing is occupied
+        self.occ: np.ndarray | None = None
         self.nbytes = u16.nbytes
+        self.grad_tex = None
         self.ref = weakref.ref(data) if isinstance(data, np.ndarray) else None
         # geometry: voxel index (of the subsampled grid) -> world
         a = vol.affine()
@@ -94,28 +122,135 @@ class _VolumeGPU:
         self.vox_to_world = a @ s
         self.world_to_vox = np.linalg.inv(self.vox_to_world)
 
+    def gradients(self, ctx, data: np.ndarray):
+        """RGBA8 signed 3D texture: unit gradient (index space) and an edge weight
+        (precomputed once: one fetch per sample instead of six in the ray caster).
+        Built from ``data`` (the volume's voxels) slab by slab; volumes above
+        GRADIENT_TEXTURE_MAX_VOXELS get it at a coarser stride (trilinear
+        interpolation of the normals keeps shading smooth)."""
+        if self.grad_tex is None:
+            step = self.step
+            while data[::step, ::step, ::step].size > GRADIENT_TEXTURE_MAX_VOXELS:
+                step += 1
+            src = data[::step, ::step, ::step]
+            nz, ny, nx = src.shape
+            scale = 1.0 / max(self.vmax - self.vmin, 1e-12)
+            out = np.empty((nz, ny, nx, 4), np.int8)
+            for z0 in range(0, nz, 16):
+                z1 = min(z0 + 16, nz)
+                lo, hi = max(z0 - 1, 0), min(z1 + 1, nz)
+                blk = np.asarray(src[lo:hi], np.float32) * scale
+                core = blk[z0 - lo:z0 - lo + (z1 - z0)]
+                gz = (np.gradient(blk, axis=0)[z0 - lo:z0 - lo + (z1 - z0)] * 2.0 if hi - lo > 1
+                      else np.zeros_like(core))
+                gy = np.gradient(core, axis=1) * 2.0 if ny > 1 else np.zeros_like(core)
+                gx = np.gradient(core, axis=2) * 2.0 if nx > 1 else np.zeros_like(core)
+                mag = np.sqrt(gx * gx + gy * gy + gz * gz)
+                inv = 127.0 / np.maximum(mag, 1e-12)
+                out[z0:z1, ..., 0] = np.rint(gx * inv).astype(np.int8)
+                out[z0:z1, ..., 1] = np.rint(gy * inv).astype(np.int8)
+                out[z0:z1, ..., 2] = np.rint(gz * inv).astype(np.int8)
+                # edge weight: 0 at noise-level gradients, 1 at >= ~2.5% of the range per voxel
+                out[z0:z1, ..., 3] = np.rint(np.clip((mag * 40.0 - 0.25) / 0.75, 0.0, 1.0) * 127.0).astype(np.int8)
+            self.grad_tex = ctx.texture3d((nx, ny, nz), 4, out.tobytes(), dtype="ni1")
+            self.grad_tex.filter = (ctx.LINEAR, ctx.LINEAR)
+            self.grad_tex.repeat_x = self.grad_tex.repeat_y = self.grad_tex.repeat_z = False
+            self.nbytes += out.nbytes
+        return self.grad_tex
+
     def norm(self, value: float) -> float:
         return (value - self.vmin) / max(self.vmax - self.vmin, 1e-12)
 
-    def update_bricks(self, tf: np.ndarray | None, key: Any) -> None:
-        """Fill the brick texture: r = min, g = max (normalised), b = occupancy for ``tf``."""
-        if key == self._occ_key:
-            return
-        occ = np.ones_like(self.bmin, dtype=np.float32)
-        if tf is not None:
-            vis = tf[:, 3] > 0.001
+    def occupancy(self, kind: str, param: Any) -> np.ndarray:
+        """Bool (bz, by, bx): bricks where a sample can change the result.
+
+        kind "dvr": ``param`` = TF table (n, 4) with step-corrected alpha; "mip": param =
+        normalised window low; "minip": normalised window high."""
+        if kind == "dvr":
+            vis = param[:, 3] > 0.002
             c = np.concatenate([[0], np.cumsum(vis)])
-            n = len(tf) - 1
-            lo = np.floor(self.bmin * n).astype(np.int64)
-            hi = np.ceil(self.bmax * n).astype(np.int64)
-            occ = ((c[hi + 1] - c[lo]) > 0).astype(np.float32)
-        arr = np.stack([self.bmin, self.bmax, occ, np.zeros_like(occ)], axis=-1).astype(np.float32)
-        self.brick_tex.write(np.ascontiguousarray(arr).tobytes())
-        self._occ_key = key
+            n = len(param) - 1
+            lo = np.clip(np.floor(self.bmin * n).astype(np.int64), 0, n)
+            hi = np.clip(np.ceil(self.bmax * n).astype(np.int64), 0, n)
+            return (c[hi + 1] - c[lo]) > 0
+        if kind == "mip":
+            return self.bmax > param
+        return self.bmin < param
+
+    def proxy(self, ctx, prog, occ: np.ndarray, key: Any):
+        """VAO of the occupied bricks' boundary faces (voxel coordinates), cached by key."""
+        if key == self._proxy_key:
+            return self._proxy[1] if self._proxy else None
+        if self._proxy:
+            self._proxy[1].release()
+            self._proxy[0].release()
+        self._proxy = None
+        self._proxy_key = key
+        self.occ = occ
+        tris = _proxy_triangles(occ, BRICK, self.dims)
+        if len(tris):
+            vbo = ctx.buffer(tris.astype("f4").tobytes())
+            self._proxy = (vbo, ctx.vertex_array(prog, [(vbo, "3f", "in_pos")]))
+            return self._proxy[1]
+        return None
+
+    def eye_near_occupied(self, eye_world: np.ndarray) -> bool:
+        """True when the eye is in or next to an occupied brick (the near proxy
+        faces may then be clipped away: sample from the eye)."""
+        if self.occ is None:
+            return True
+        p = self.world_to_vox @ np.r_[eye_world, 1.0]
+        b = np.floor((p[:3] + 0.5) / BRICK).astype(int)[::-1]  # (bz, by, bx)
+        sh = np.array(self.occ.shape)
+        lo = np.clip(b - 1, 0, sh)
+        hi = np.clip(b + 2, 0, sh)
+        if np.any(hi <= lo):
+            return False
+        return bool(self.occ[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]].any())
 
     def release(self) -> None:
         self.tex.release()
-        self.brick_tex.release()
+        if self._proxy:
+            self._proxy[1].release()
+            self._proxy[0].release()
+        if self.grad_tex is not None:
+            self.grad_tex.release()
+
+
+def _proxy_triangles(occ: np.ndarray, b: int, dims: tuple[int, int, int]) -> np.ndarray:
+    """Triangles (k*3, 3) in voxel (x, y, z) coordinates of the faces between occupied
+    and empty bricks (and the grid's border), clipped to the voxel grid."""
+    nx, ny, nz = dims
+    ext = np.array([nx, ny, nz], float) - 0.5
+    out = []
+    occ_xyz = np.transpose(occ, (2, 1, 0))  # index [bx, by, bz]
+    for ax in range(3):
+        pad = [(0, 0)] * 3
+        pad[ax] = (1, 1)
+        p = np.pad(occ_xyz, pad)
+        lo_sl = [slice(None)] * 3
+        hi_sl = [slice(None)] * 3
+        lo_sl[ax] = slice(0, -1)
+        hi_sl[ax] = slice(1, None)
+        face = p[tuple(lo_sl)] != p[tuple(hi_sl)]
+        idx = np.argwhere(face)  # (k, 3): along ax: boundary index, others: brick index
+        if not len(idx):
+            continue
+        a1, a2 = [k for k in range(3) if k != ax]
+        k = len(idx)
+        c = np.zeros((k, 4, 3))
+        pos = np.minimum(idx[:, ax] * b - 0.5, ext[ax])
+        u0 = idx[:, a1] * b - 0.5
+        u1 = np.minimum(u0 + b, ext[a1])
+        v0 = idx[:, a2] * b - 0.5
+        v1 = np.minimum(v0 + b, ext[a2])
+        c[:, :, ax] = pos[:, None]
+        c[:, 0, a1], c[:, 0, a2] = u0, v0
+        c[:, 1, a1], c[:, 1, a2] = u1, v0
+        c[:, 2, a1], c[:, 2, a2] = u1, v1
+        c[:, 3, a1], c[:, 3, a2] = u0, v1
+        out.append(c[:, [0, 1, 2, 0, 2, 3]].reshape(-1, 3))
+    return np.concatenate(out) if out else np.zeros((0, 3))
 
 
 def _brick_minmax(u16: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -172,12 +307,19 @@ class _Targets:
     def volume_target(self, ctx, vsize: tuple[int, int]):
         if self.vol_tex is None or self.vol_tex.size != vsize:
             if self.vol_fbo is not None:
-                self.vol_fbo.release()
-                self.vol_tex.release()
+                for o in (self.vol_fbo, self.vol_tex, self.near_fbo, self.near_tex, self.far_fbo, self.far_tex):
+                    o.release()
             self.vol_tex = ctx.texture(vsize, 4, dtype="f2")
             self.vol_tex.filter = (ctx.LINEAR, ctx.LINEAR)
             self.vol_tex.repeat_x = self.vol_tex.repeat_y = False
             self.vol_fbo = ctx.framebuffer([self.vol_tex])
+            self.near_tex = ctx.depth_texture(vsize)
+            self.far_tex = ctx.depth_texture(vsize)
+            for t in (self.near_tex, self.far_tex):
+                t.compare_func = ""
+                t.filter = (ctx.NEAREST, ctx.NEAREST)
+            self.near_fbo = ctx.framebuffer(depth_attachment=self.near_tex)
+            self.far_fbo = ctx.framebuffer(depth_attachment=self.far_tex)
         return self.vol_fbo
 
     def release(self) -> None:
@@ -186,7 +328,7 @@ class _Targets:
         if self.ms is not None:
             objs += [self.ms, self.ms_oit, *self._ms_objs]
         if self.vol_fbo is not None:
-            objs += [self.vol_fbo, self.vol_tex]
+            objs += [self.vol_fbo, self.vol_tex, self.near_fbo, self.near_tex, self.far_fbo, self.far_tex]
         for o in objs:
             o.release()
 
@@ -201,14 +343,18 @@ class GLEngine:
         c = ctx
         self.progs = {
             "surface": c.program(vertex_shader=shaders.SURFACE_VS, fragment_shader=shaders.SURFACE_FS),
+            "surface_v": c.program(vertex_shader=shaders.SURFACE_VERTEX_VS, fragment_shader=shaders.SURFACE_VERTEX_FS),
             "depth": c.program(vertex_shader=shaders.DEPTH_VS, fragment_shader=shaders.DEPTH_FS),
             "oit": c.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.OIT_COMPOSITE_FS),
             "fxaa": c.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.FXAA_FS),
             "slice": c.program(vertex_shader=shaders.SLICE_VS, fragment_shader=shaders.SLICE_FS),
             "ray": c.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.RAYCAST_FS),
+            "ray_shaded": c.program(vertex_shader=shaders.FULLSCREEN_VS,
+                                    fragment_shader=shaders.RAYCAST_FS.replace("//DEFINES", "#define SHADING 1")),
+            "proxy": c.program(vertex_shader=shaders.PROXY_VS, fragment_shader=shaders.DEPTH_FS),
             "vcomp": c.program(vertex_shader=shaders.FULLSCREEN_VS, fragment_shader=shaders.VOLUME_COMPOSITE_FS),
         }
-        self.fs_vaos = {k: c.vertex_array(self.progs[k], []) for k in ("oit", "fxaa", "ray", "vcomp")}
+        self.fs_vaos = {k: c.vertex_array(self.progs[k], []) for k in ("oit", "fxaa", "ray", "ray_shaded", "vcomp")}
         self.meshes: OrderedDict[tuple, _MeshGPU] = OrderedDict()
         self.volumes: OrderedDict[int, _VolumeGPU] = OrderedDict()
         self.targets: _Targets | None = None
@@ -314,33 +460,28 @@ class GLEngine:
         ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
         scene_fbo.clear(*bg, 1.0, depth=1.0)
-        prog = self.progs["surface"]
-        self._set_surface_uniforms(prog, scene, cs, lpos, ldir, light_vp, shadows)
+        for p in (self.progs["surface"], self.progs["surface_v"]):
+            self._set_surface_uniforms(p, scene, cs, lpos, ldir, light_vp, shadows)
+        self._draw_ctx = (cs, (w, h), opts.lighting)
         wire_only = mode == "wire"
         if wire_only:
             ctx.wireframe = True
-            prog["u_pass"].value = 2
             for m, _ in opaque + transparent:
-                prog["u_color"].value = m.rgb()
-                self._mesh(m.mesh).vao.render()
+                self._draw(m, 2, m.rgb(), cull=False)
             ctx.wireframe = False
         else:
-            prog["u_pass"].value = 0
             if opts.wireframe_overlay:
                 ctx.polygon_offset = (1.0, 1.0)
             for m, _ in opaque:
-                prog["u_color"].value = m.rgb()
-                self._mesh(m.mesh).vao.render()
+                self._draw(m, 0, m.rgb())
             ctx.polygon_offset = (0.0, 0.0)
             if opts.slice_plane is not None and scene.volume is not None:
                 self._draw_slice(scene, cs)
             if opts.wireframe_overlay and opaque:
                 ctx.wireframe = True
                 ctx.depth_func = "<="
-                prog["u_pass"].value = 2
-                prog["u_color"].value = tuple(opts.wire_color)
                 for m, _ in opaque:
-                    self._mesh(m.mesh).vao.render()
+                    self._draw(m, 2, tuple(opts.wire_color))
                 ctx.wireframe = False
                 ctx.depth_func = "<"
 
@@ -354,11 +495,8 @@ class GLEngine:
             ctx.enable(ctx.BLEND)
             ctx.blend_func = ctx.ONE, ctx.ONE
             ctx.blend_equation = ctx.FUNC_ADD
-            prog["u_pass"].value = 1
             for m, a in transparent:
-                prog["u_color"].value = m.rgb()
-                prog["u_opacity"].value = a
-                self._mesh(m.mesh).vao.render()
+                self._draw(m, 1, m.rgb(), opacity=a, cull=False)  # both sides of see-through objects
             ctx.disable(ctx.BLEND)
             oit_fbo.depth_mask = True
             if samples:
@@ -403,6 +541,37 @@ class GLEngine:
         return np.ascontiguousarray(img[::-1])
 
     # ------------------------------------------------------------------ pieces
+    def _draw(self, item: SceneMesh, pass_: int, color, *, opacity: float = 1.0, cull: bool = True) -> None:
+        """Draw one mesh with the surface program chosen for its on-screen triangle size."""
+        ctx = self.ctx
+        g = self._mesh(item.mesh)
+        cs, size, lighting = self._draw_ctx
+        per_vertex = lighting == "vertex"
+        if lighting == "auto" and pass_ != 2:
+            # per-vertex lighting when triangles are ~pixel-sized (looks the same, far cheaper)
+            if cs.ortho:
+                ppm = size[1] / (2.0 * cs.half_height)
+            else:
+                c = (g.lo + g.hi) / 2.0
+                dist = max(float(np.dot(c - cs.eye, cs.forward)) - float(np.linalg.norm(g.hi - g.lo)) / 2.0, 1e-3)
+                ppm = size[1] / (2.0 * cs.half_height * dist)
+            per_vertex = g.mean_area * ppm * ppm < 3.0
+        prog = self.progs["surface_v" if per_vertex else "surface"]
+        prog["u_pass"].value = pass_
+        prog["u_color"].value = tuple(color)
+        _set(prog, "u_opacity", float(opacity))
+        mode = g.cull if cull else None
+        if mode is not None and cs.eye is not None and not cs.ortho:
+            if np.all(cs.eye > g.lo) and np.all(cs.eye < g.hi):
+                mode = None  # camera may be inside: show both sides
+        if mode is not None:
+            ctx.enable(ctx.CULL_FACE)
+            ctx.front_face = "ccw"
+            ctx.cull_face = mode
+        (g.vao_v if per_vertex else g.vao).render()
+        if mode is not None:
+            ctx.disable(ctx.CULL_FACE)
+
     def _set_surface_uniforms(self, prog, scene, cs: CameraSetup, lpos, ldir, light_vp, shadows) -> None:
         lt = scene.light
         mat = scene.material
@@ -507,9 +676,12 @@ class GLEngine:
     def _tf(self, scene: Scene, g: _VolumeGPU) -> np.ndarray:
         name = resolve_preset(scene.options.preset)
         win = scene.options.window or scene.volume.window
-        key = (name, g.vmin, g.vmax, tuple(win) if win else None)
+        step = 1.0 / max(float(scene.options.samples_per_voxel), 0.05)
+        key = (name, g.vmin, g.vmax, tuple(win) if win else None, step)
         if key != self._tf_key:
             tab = transfer_table(name, g.vmin, g.vmax, window=win, n=TF_SIZE)
+            # opacity correction for the sampling step (alpha is per voxel length)
+            tab[:, 3] = 1.0 - np.power(1.0 - np.clip(tab[:, 3], 0.0, 0.999), step)
             if self.tf_tex is None:
                 self.tf_tex = self.ctx.texture((TF_SIZE, 1), 4, dtype="f4")
                 self.tf_tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
@@ -524,20 +696,50 @@ class GLEngine:
         g = self._volume(scene.volume)
         mode = {"mip": 0, "minip": 1, "dvr": 2}[scene.mode]
         w, h = t.size
+        tab = self._tf(scene, g)
+        wlo, whi = self._window_norm(scene, g)
         if mode == 2:
-            tab = self._tf(scene, g)
-            g.update_bricks(tab, ("tf", self._tf_key))
+            kind, param, key = "dvr", tab, ("dvr", self._tf_key)
+        elif mode == 0:
+            kind, param, key = "mip", wlo, ("mip", round(wlo, 6))
         else:
-            g.update_bricks(None, "none")
+            kind, param, key = "minip", whi, ("minip", round(whi, 6))
         s = float(np.clip(opts.volume_scale, 0.1, 1.0))
         vsize = (max(1, int(round(w * s))), max(1, int(round(h * s))))
         fbo = t.volume_target(ctx, vsize)
+        skip = 0
+        if opts.empty_space_skipping:
+            # proxy geometry: nearest and farthest occupied-brick faces per pixel
+            if key != g._proxy_key:
+                occ = g.occupancy(kind, param)
+            else:
+                occ = g.occ
+            vao = g.proxy(ctx, self.progs["proxy"], occ, key)
+            pp = self.progs["proxy"]
+            pp["u_vp"].write((cs.vp @ g.vox_to_world).T.astype("f4").tobytes())
+            ctx.viewport = (0, 0, *vsize)
+            ctx.enable(ctx.DEPTH_TEST)
+            ctx.disable(ctx.BLEND)
+            t.near_fbo.use()
+            t.near_fbo.clear(depth=1.0)
+            ctx.depth_func = "<"
+            if vao is not None:
+                vao.render()
+            t.far_fbo.use()
+            t.far_fbo.clear(depth=0.0)
+            ctx.depth_func = ">"
+            if vao is not None:
+                vao.render()
+            ctx.depth_func = "<"
+            skip = 1 if (not cs.ortho and g.eye_near_occupied(cs.eye)) else 2
         fbo.use()
         ctx.viewport = (0, 0, *vsize)
         ctx.disable(ctx.DEPTH_TEST)
         ctx.disable(ctx.BLEND)
         fbo.clear(0.0, 0.0, 0.0, 0.0)
-        p = self.progs["ray"]
+        shaded = mode == 2 and bool(opts.shading)
+        ray_key = "ray_shaded" if shaded else "ray"
+        p = self.progs[ray_key]
         inv_vp = np.linalg.inv(cs.vp)
         _set(p, "u_inv_vp", inv_vp.T.astype("f4").tobytes(), raw=True)
         _set(p, "u_world_to_vox", g.world_to_vox.T.astype("f4").tobytes(), raw=True)
@@ -554,12 +756,9 @@ class GLEngine:
             lo, hi = lo + span * np.minimum(c0, c1), lo + span * np.maximum(c0, c1)
         _set(p, "u_crop_lo", tuple(lo))
         _set(p, "u_crop_hi", tuple(hi))
-        _set(p, "u_brick", float(BRICK))
-        _set(p, "u_nbricks", tuple(int(v) for v in g.nbricks))
         _set(p, "u_mode", mode)
         _set(p, "u_step", 1.0 / max(float(opts.samples_per_voxel), 0.05))
-        _set(p, "u_window", self._window_norm(scene, g))
-        _set(p, "u_shading", 1 if opts.shading else 0)
+        _set(p, "u_window", (wlo, whi))
         _set(p, "u_light_dir", tuple(-np.asarray(ldir)))
         _set(p, "u_light_intensity", float(scene.light.intensity))
         _set(p, "u_headlight", float(opts.headlight))
@@ -568,19 +767,22 @@ class GLEngine:
         has_surf = any(m.visible and m.mesh.n_faces for m in scene.meshes) and opts.show_surfaces
         _set(p, "u_use_depth", 1 if has_surf else 0)
         _set(p, "u_jitter", 1 if mode == 2 else 0)
-        _set(p, "u_skip", 1 if opts.empty_space_skipping else 0)
+        _set(p, "u_skip", skip)
         _set(p, "u_tf_scale", ((TF_SIZE - 1) / TF_SIZE, 0.5 / TF_SIZE))
+        if shaded:
+            g.gradients(ctx, scene.volume.data).use(4)
+            _set(p, "u_grad", 4)
         g.tex.use(0)
-        g.brick_tex.use(1)
-        if self.tf_tex is None:
-            self._tf(scene, g)
+        t.near_tex.use(1)
+        t.far_tex.use(5)
         self.tf_tex.use(2)
         t.depth.use(3)
         _set(p, "u_vol", 0)
-        _set(p, "u_bricks", 1)
+        _set(p, "u_near", 1)
+        _set(p, "u_far", 5)
         _set(p, "u_tf", 2)
         _set(p, "u_depth", 3)
-        self.fs_vaos["ray"].render(vertices=3)
+        self.fs_vaos[ray_key].render(vertices=3)
         # composite over the surfaces / background at full size
         out = t.out if scene_tex is not t.out_tex else t.comp
         out.use()

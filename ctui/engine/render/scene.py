@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -136,6 +137,8 @@ class RenderOptions:
     show_surfaces : in volume modes, draw the scene's meshes inside the volume (the
         rays stop at them).
     shadow_map_size : shadow map resolution in texels.
+    lighting : "auto" (per-vertex lighting for meshes whose triangles cover under ~3
+        pixels, per-pixel otherwise), "pixel" or "vertex".
     empty_space_skipping : skip volume bricks that cannot contribute (on; off only
         for measuring its effect).
     """
@@ -156,6 +159,7 @@ class RenderOptions:
     shading: bool = True
     show_surfaces: bool = True
     shadow_map_size: int = 2048
+    lighting: str = "auto"
     empty_space_skipping: bool = True
 
 
@@ -284,8 +288,8 @@ class Scene:
         pts = []
         for m in self.mesh_items():
             if m.visible and m.mesh.n_vertices:
-                lo, hi = m.mesh.bounds()
-                pts += [np.asarray(lo, float), np.asarray(hi, float)]
+                lo, hi = mesh_bounds(m.mesh)
+                pts += [lo, hi]
         if self.volume is not None:
             c = self.volume.corners()
             pts += [c.min(0), c.max(0)]
@@ -353,6 +357,32 @@ class Scene:
         if volume is not None:
             scene.set_volume(volume)
         return scene
+
+
+_BOUNDS: dict[int, tuple[Any, np.ndarray, np.ndarray]] = {}
+
+
+def mesh_bounds(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(min_xyz, max_xyz) of a mesh, cached per vertex array (a 1M-vertex min/max
+    costs ~50 ms and the camera needs it several times per frame)."""
+    v = mesh.vertices
+    key = id(v)
+    hit = _BOUNDS.get(key)
+    if hit is not None and hit[0]() is v:
+        return hit[1], hit[2]
+    arr = np.asarray(v)
+    lo, hi = arr.min(axis=0).astype(float), arr.max(axis=0).astype(float)
+    try:
+        ref = weakref.ref(v)
+    except TypeError:
+        return lo, hi
+    if len(_BOUNDS) > 256:
+        for k in [k for k, e in _BOUNDS.items() if e[0]() is None]:
+            del _BOUNDS[k]
+        if len(_BOUNDS) > 256:
+            _BOUNDS.clear()
+    _BOUNDS[key] = (ref, lo, hi)
+    return lo, hi
 
 
 def _tuples(d: dict[str, Any]) -> dict[str, Any]:
