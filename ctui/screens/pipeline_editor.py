@@ -143,7 +143,8 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
     PipelineEditor #pe-left { width: 46; }
     PipelineEditor #pe-steps { height: 1fr; }
     PipelineEditor #pe-help { height: auto; color: $text-muted; }
-    PipelineEditor ImageView { width: 1fr; }
+    PipelineEditor .pe-prev { width: 1fr; }
+    PipelineEditor .pe-prev Label { height: 1; color: $text-muted; }
     """
     BINDINGS = [
         Binding("a", "add", "Add step"),
@@ -176,8 +177,12 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
                         "shift+up/down reorder · m HU/8-bit · PgUp/PgDn slice · Esc done",
                         id="pe-help",
                     )
-                yield ImageView(id="pe-inter")
-                yield ImageView(id="pe-final")
+                with Vertical(classes="pe-prev"):
+                    yield Label("intermediate (after stage 1)")
+                    yield ImageView(id="pe-inter")
+                with Vertical(classes="pe-prev"):
+                    yield Label("final (after stage 2): fills threshold this")
+                    yield ImageView(id="pe-final")
         yield Footer()
 
     def on_mount(self) -> None:
