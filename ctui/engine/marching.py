@@ -99,6 +99,62 @@ def _faces_ccw() -> list[list[int]]:
     return faces
 
 
+def _edge_faces() -> list[set[int]]:
+    """For each cube edge, the two cube faces (axis, side) it lies on, as ints."""
+    out = []
+    for a, b in _EDGES:
+        ca, cb = _CORNER_OFFSETS[a], _CORNER_OFFSETS[b]
+        out.append({ax * 2 + int(ca[ax]) for ax in range(3) if ca[ax] == cb[ax]})
+    return out
+
+
+_EDGE_FACES = _edge_faces()
+_EDGE_MID = np.array([(_CORNER_OFFSETS[a] + _CORNER_OFFSETS[b]) / 2.0 for a, b in _EDGES])
+
+
+def _triangulate_loop(loop: list[int]) -> list[tuple[int, int, int]]:
+    """Triangulate one edge loop without a diagonal between two vertices on the same
+    cube face (such a diagonal would lie in the face and be shared with the
+    neighbouring cell: a non-manifold edge). Among the valid triangulations the one
+    with the shortest diagonals (at the edge midpoints) is kept."""
+    n = len(loop)
+    if n == 3:
+        return [tuple(loop)]
+
+    def ok(i: int, j: int) -> bool:
+        if (j - i) % n in (1, n - 1):
+            return True
+        return not (_EDGE_FACES[loop[i]] & _EDGE_FACES[loop[j]])
+
+    def dist(i: int, j: int) -> float:
+        return float(np.linalg.norm(_EDGE_MID[loop[i]] - _EDGE_MID[loop[j]]))
+
+    from functools import lru_cache
+
+    @lru_cache(maxsize=None)
+    def best(i: int, j: int):
+        """Best triangulation of the sub-polygon i..j (i < j), diagonal (i, j) given."""
+        if j - i < 2:
+            return 0.0, ()
+        res = None
+        for k in range(i + 1, j):
+            if not (ok(i, k) and ok(k, j)):
+                continue
+            c1, t1 = best(i, k)
+            c2, t2 = best(k, j)
+            if c1 == math.inf or c2 == math.inf:
+                continue
+            c = c1 + c2 + (dist(i, k) if k - i > 1 else 0.0) + (dist(k, j) if j - k > 1 else 0.0)
+            if res is None or c < res[0]:
+                res = (c, t1 + t2 + ((i, k, j),))
+        return res if res is not None else (math.inf, ())
+
+    cost, tris = best(0, n - 1)
+    if cost == math.inf:
+        raise RuntimeError(f"no valid triangulation for edge loop {loop}")
+    return [(loop[a], loop[b], loop[c]) for a, b, c in tris]
+
+
 def _build_case_table() -> tuple[np.ndarray, np.ndarray]:
     """Generate (ntri (256,), tris (256, maxT, 3)) edge-index triangle table."""
     edge_of = {}
@@ -132,8 +188,7 @@ def _build_case_table() -> tuple[np.ndarray, np.ndarray]:
                 loop.append(e)
                 seen.add(e)
                 e = nxt[e]
-            for k in range(1, len(loop) - 1):
-                tris.append((loop[0], loop[k], loop[k + 1]))
+            tris.extend(_triangulate_loop(loop))
         all_tris.append(tris)
     # orientation: corner 0 alone inside -> outward normal must point to (+,+,+)
     mid = np.array([(_CORNER_OFFSETS[a] + _CORNER_OFFSETS[b]) / 2.0 for a, b in _EDGES])
@@ -493,7 +548,7 @@ def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, 
                 _put(verts, bz00, r00[b + 1], r01[b + 1], level, b + 1, y, z, 2)
 
 
-_KERNEL_DTYPES = (np.dtype(np.uint8), np.dtype(np.int16), np.dtype(np.float32))
+_KERNEL_DTYPES = (np.dtype(np.int16), np.dtype(np.float32))
 
 
 def _threshold(data: np.ndarray, level: float):
@@ -546,9 +601,10 @@ def marching_cubes(
         data = data.view(np.uint8)
     if data.dtype not in _KERNEL_DTYPES:
         # each dtype is a separate numba compilation (tens of seconds cold): the kernel
-        # is compiled for uint8 (masks, label maps), int16 (CT) and float32 (fields);
-        # other types are converted (int8 -> int16 exactly, the rest -> float32).
-        data = data.astype(np.int16 if data.dtype == np.int8 else np.float32)
+        # is compiled for int16 (CT) and float32 (distance fields, MR...); other types
+        # are converted (int8/uint8/bool -> int16 exactly, the rest -> float32).
+        small_int = data.dtype in (np.dtype(np.int8), np.dtype(np.uint8))
+        data = data.astype(np.int16 if small_int else np.float32)
     if not data.flags.c_contiguous:
         data = np.ascontiguousarray(data)
     nz, ny, nx = data.shape
