@@ -451,3 +451,21 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path):
         lines = res.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("ctui render:"), res.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_brick_minmax_matches_filtered_reference():
+    """The empty-space skipping bounds: per 8^3 brick, min/max over the brick grown by
+    one voxel (what trilinear sampling and gradients can reach) == scipy filters."""
+    from scipy import ndimage
+
+    from ctui.engine.render.gl import _brick_minmax
+
+    rng = np.random.default_rng(1)
+    for shape in [(37, 50, 64), (9, 8, 17)]:
+        u = rng.integers(0, 65535, size=shape).astype(np.uint16)
+        mn, mx = _brick_minmax(u, 8)
+        fx = ndimage.maximum_filter(u, 3, mode="nearest")
+        fn = ndimage.minimum_filter(u, 3, mode="nearest")
+        for i, j, k in np.ndindex(*mn.shape):
+            sl = (slice(i * 8, i * 8 + 8), slice(j * 8, j * 8 + 8), slice(k * 8, k * 8 + 8))
+            assert mx[i, j, k] * 65535 == pytest.approx(fx[sl].max()) and mn[i, j, k] * 65535 == pytest.approx(fn[sl].min())

@@ -42,7 +42,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--window", default=None, help="C,W display window for mip/minip and slice planes")
     p.add_argument("--slice", default=None, metavar="AXIS[:INDEX]",
                    help="show a slice plane in place (axis z|y|x; needs a series or project source)")
-    p.add_argument("--series", default=None, help="series UID when the path holds several")
+    p.add_argument("--series", default=None, help="series UID (or index) when the path holds several")
+    p.add_argument("--shape", default=None, metavar="ZxYxX|YxX", help="raw data: volume or per-slice shape")
+    p.add_argument("--dtype", default=None, help="raw data: numpy dtype, e.g. '>u2' for big-endian uint16")
+    p.add_argument("--spacing", default=None, metavar="DZ,DY,DX", help="spacing in mm for stacks and raw data")
     p.add_argument("--background", default=None, help="R,G,B 0..255 (default dark grey)")
     p.set_defaults(func=run)
 
@@ -93,7 +96,18 @@ def _load_series(path, args):
         from ctui.engine.loaders import load
     except ImportError as exc:
         raise CtuiError("not a mesh (.stl/.ply/.obj), project (.ctui) or readable series", path=path) from exc
-    opts = {"series": args.series} if args.series else {}
+    opts = {}
+    if getattr(args, "series", None):
+        opts["series"] = int(args.series) if str(args.series).isdigit() else args.series
+    if getattr(args, "shape", None):
+        try:
+            opts["shape"] = tuple(int(v) for v in str(args.shape).lower().replace(",", "x").split("x"))
+        except ValueError:
+            raise CtuiError(f"bad --shape {args.shape!r} (want ZxYxX or YxX)") from None
+    if getattr(args, "dtype", None):
+        opts["dtype"] = args.dtype
+    if getattr(args, "spacing", None):
+        opts["spacing"] = _pair(args.spacing, "--spacing (want DZ,DY,DX)", 3)
     return load(path, **opts)
 
 
