@@ -30,34 +30,42 @@ def list_files(path: Path, *, recursive: bool = True) -> list[Path]:
     out: list[Path] = []
     seen: set[tuple[int, int]] = set()
 
-    def walk(folder: Path) -> None:
+    def entries(folder: Path):
         try:
             st = folder.stat()
         except OSError:
-            return
+            return None
         key = (st.st_dev, st.st_ino)
         if key in seen:  # symlink loop
-            return
+            return None
         seen.add(key)
         try:
-            entries = sorted(os.scandir(folder), key=lambda e: natural_key(e.name))
+            return iter(sorted(os.scandir(folder), key=lambda e: natural_key(e.name)))
         except OSError:
-            return
-        for e in entries:
-            if e.name.startswith("."):
-                continue
-            try:
-                if e.is_dir():
-                    if recursive:
-                        walk(Path(e.path))
-                elif e.is_file():
-                    out.append(Path(e.path))
-                    if len(out) > MAX_FILES:
-                        raise LoadError(f"more than {MAX_FILES} files; point ctui at one series folder", path=path)
-            except OSError:
-                continue
+            return None
 
-    walk(path)
+    # iterative depth-first walk (same order as a recursive one): a tree deeper than
+    # Python's recursion limit raised RecursionError (found by FMT's fuzzing)
+    stack = [it for it in (entries(path),) if it is not None]
+    while stack:
+        e = next(stack[-1], None)
+        if e is None:
+            stack.pop()
+            continue
+        if e.name.startswith("."):
+            continue
+        try:
+            if e.is_dir():
+                if recursive:
+                    sub = entries(Path(e.path))
+                    if sub is not None:
+                        stack.append(sub)
+            elif e.is_file():
+                out.append(Path(e.path))
+                if len(out) > MAX_FILES:
+                    raise LoadError(f"more than {MAX_FILES} files; point ctui at one series folder", path=path)
+        except OSError:
+            continue
     return out
 
 

@@ -281,6 +281,28 @@ def _pixel_element(fh, pos: int, implicit: bool, little: bool, size: int) -> tup
     return off, length, PIXEL_TAGS[tag]
 
 
+class _Capped:
+    """File wrapper whose ``read(n)`` never asks for more than the bytes left.
+
+    CPython's buffered ``read(n)`` allocates ``n`` bytes up front, and pydicom reads
+    file-meta elements whole (``defer_size`` does not apply there), so a corrupted
+    0x7FFFFFFF element length in a 1 kB file allocated 2 GiB (found by FMT's
+    tests/test_fuzz_dicom.py).
+    """
+
+    def __init__(self, fh: Any, size: int) -> None:
+        self._fh = fh
+        self._size = size
+
+    def read(self, n: int | None = -1) -> bytes:
+        if n is not None and n >= 0:
+            n = min(n, max(self._size - self._fh.tell(), 0))
+        return self._fh.read(n)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._fh, name)
+
+
 def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     """Read one file's header: its frames and the patient identifiers found (for scrubbing).
 
@@ -313,13 +335,14 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
         raise _Skip(f"cannot read ({exc.strerror or exc})") from None
     with fh:
         forced = False
+        capped = _Capped(fh, size)
         try:
-            ds = pydicom.dcmread(fh, stop_before_pixels=True, defer_size=_DEFER)
+            ds = pydicom.dcmread(capped, stop_before_pixels=True, defer_size=_DEFER)
         except InvalidDicomError:
             fh.seek(0)
             forced = True
             try:
-                ds = pydicom.dcmread(fh, stop_before_pixels=True, force=True, defer_size=_DEFER)
+                ds = pydicom.dcmread(capped, stop_before_pixels=True, force=True, defer_size=_DEFER)
             except Exception:
                 raise _Skip("not a DICOM file or image") from None
         except Exception as exc:
@@ -388,6 +411,13 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -
     nframes = int(_num(ds.get("NumberOfFrames"), 1) or 1)
     if nframes < 1 or nframes > 100_000:
         raise _Skip(f"implausible NumberOfFrames {ds.get('NumberOfFrames')}")
+    if nframes > 1:  # before building one record per frame (FMT fuzz: 65535 frames in 1 kB took 10 s)
+        try:
+            fsize = os.path.getsize(path)
+        except OSError:
+            fsize = 0
+        if rows * cols * samples * bits // 8 * nframes > MAX_COMPRESSION * fsize + (1 << 20):
+            raise _Skip(f"truncated or corrupt: header claims {nframes} frames of {rows}x{cols}, too many for a {fsize}-byte file")
     bs = int(ds.get("BitsStored") or bits)
     signed = int(ds.get("PixelRepresentation") or 0) == 1
     window = None
