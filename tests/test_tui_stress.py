@@ -172,7 +172,7 @@ async def test_render_requested_while_another_runs():
         assert app.screen is app.workspace
 
 
-async def test_quit_during_propagation():
+async def test_quit_during_propagation(monkeypatch):
     from ctui.engine.volume import Volume
     from ctui.screens.session import Session
 
@@ -184,7 +184,16 @@ async def test_quit_during_propagation():
     data[:, disk] = 300
     vol = Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT")
     sess = Session(vol, source_path="synthetic")
-    sess.pipeline.add("median", size=7)  # ~5 s of propagation: still running when q comes
+    # make every slice of the propagation slow (20 ms), so it is surely running when q comes
+    from ctui.engine.pipeline import Pipeline
+
+    orig = Pipeline.final_region
+
+    def slow_final_region(self, *a, **k):
+        time.sleep(0.02)
+        return orig(self, *a, **k)
+
+    monkeypatch.setattr(Pipeline, "final_region", slow_final_region)
     before = {t.ident for t in threading.enumerate()}
     app = CtuiApp(session=sess)
     async with app.run_test(size=(120, 40)) as pilot:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 
 
-async def wait_for(pilot, predicate, *, timeout: float = 30.0, what: str = "condition") -> None:
+async def wait_for(pilot, predicate, *, timeout: float = 90.0, what: str = "condition") -> None:
     """Pause the pilot until ``predicate()`` is true (or raise TimeoutError)."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -19,7 +19,7 @@ async def wait_for(pilot, predicate, *, timeout: float = 30.0, what: str = "cond
     raise TimeoutError(f"timed out waiting for {what}")
 
 
-async def wait_workspace(pilot, app, timeout: float = 60.0) -> None:
+async def wait_workspace(pilot, app, timeout: float = 120.0) -> None:
     await wait_for(pilot, lambda: app.workspace is not None and app.screen is app.workspace, timeout=timeout, what="the workspace")
 
 
