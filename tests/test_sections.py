@@ -42,15 +42,20 @@ def _grid(shape, sp=SP, sub=None):
     return xx, yy, zz
 
 
-def _soft(inside, shape, sp=SP, ss=4):
-    """Partial-volume fraction of each voxel: mean of ss**3 sub-samples of inside(x, y, z)."""
+def _soft(inside, shape, sp=SP, ss=(4, 4, 4)):
+    """Partial-volume fraction of each voxel: mean of sub-samples of inside(x, y, z),
+    ``ss`` (z, y, x) per voxel. The sub-sampling is itself a (finer) pixel count: 4 per
+    axis leaves up to 2.5% error on a 2-voxel disk seen along a grid axis, so straight
+    grid-aligned tubes use 16 in-plane."""
+    if np.isscalar(ss):
+        ss = (ss, ss, ss)
     acc = np.zeros(shape, np.float32)
-    for dz in range(ss):
-        for dy in range(ss):
-            for dx in range(ss):
-                o = (np.array([dz, dy, dx]) + 0.5) / ss - 0.5
+    for dz in range(ss[0]):
+        for dy in range(ss[1]):
+            for dx in range(ss[2]):
+                o = (np.array([dz, dy, dx]) + 0.5) / np.array(ss) - 0.5
                 acc += inside(*_grid(shape, sp, o))
-    return acc / ss**3
+    return acc / np.prod(ss)
 
 
 def _cylinder(c, a, r, half_len):
@@ -118,7 +123,7 @@ def test_partial_volume_cylinder_every_section(axis, radius, tol):
     shape = (56, 28, 28) if axis[0] == 0 else (48, 40, 32)
     ext = np.array(shape[::-1]) * 0.5
     inside, c, a = _cylinder(ext / 2 + np.array([0.13, 0.21, 0.07]), axis, radius, 10.0)
-    m = _soft(inside, shape)
+    m = _soft(inside, shape, ss=(1, 16, 16) if axis[0] == 0 else (4, 4, 4))
     rows = sections_along_path(m, _axis_path(c, a, 7.0), spacing=SP, step_mm=0.5)
     s, area = _areas(rows)
     err = area / (math.pi * radius**2) - 1
@@ -167,10 +172,10 @@ def _torus(rt, r0, c):
     return inside
 
 
-@pytest.mark.parametrize("r0,tol", [(1.0, 0.02), (1.5, 0.015)])
+@pytest.mark.parametrize("r0,tol", [(1.0, 0.02), (1.5, 0.01)])
 def test_torus_segment_partial_volume(r0, tol):
     c = (20.1, 20.2, 6.05)
-    m = _soft(_torus(15.0, r0, c), (24, 80, 80))
+    m = _soft(_torus(15.0, r0, c), (24, 80, 80), ss=(8, 4, 4))  # z lies in every section plane: finer
     path = centreline(m > 0.5, spacing=SP)
     rows = sections_along_path(m, path, spacing=SP, step_mm=0.5)
     s, area = _areas(rows)
