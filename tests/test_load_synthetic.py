@@ -447,8 +447,15 @@ def test_symlink_loop_and_fifo_in_folder(tmp_path, ref):
     shutil.copytree(SAMPLE_DIR, d)
     (d / "loop").symlink_to(d, target_is_directory=True)
     os.mkfifo(d / "pipe")
+    (d / "dangling.dcm").symlink_to(tmp_path / "nowhere.dcm")
     vol = load(d)
     np.testing.assert_array_equal(vol.data, ref.data)
+    reasons = {s["file"]: s["reason"] for s in vol.skipped}
+    assert reasons["loop"] == "symbolic link to a folder (not followed)"
+    assert reasons["pipe"].startswith("not a regular file")
+    assert reasons["dangling.dcm"] == "broken or looping symbolic link"
+    with pytest.raises(LoadError, match="not a regular file"):
+        load(d / "pipe")
 
 
 def test_scan_matches_load():

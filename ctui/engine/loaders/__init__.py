@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import glob
 import os
+import stat
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -190,14 +191,19 @@ def load(
         p = single
         assert p is not None
         if not p.exists():
+            if p.is_symlink():
+                raise LoadError("broken or looping symbolic link", path=p)
             raise LoadError("no such file or folder", path=p)
         if p.is_dir():
             base = p
-            files = list_files(p)
+            files = list_files(p, skipped=skipped)
             if not files:
-                raise LoadError("empty folder: no files to load", path=p)
+                raise LoadError("empty folder: no files to load" if not skipped else
+                                f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
         else:
             base = p.parent
+            if not stat.S_ISREG(p.stat().st_mode):
+                raise LoadError("not a regular file (FIFO, device or socket)", path=p)
             if not os.access(p, os.R_OK):
                 raise LoadError("cannot read (permission denied)", path=p)
             if p.stat().st_size == 0:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import stat
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,47 +26,64 @@ def natural_key(s: str) -> tuple:
     return tuple((0, int(p), p) if p.isdigit() else (1, 0, p.lower()) for p in parts)
 
 
-def list_files(path: Path, *, recursive: bool = True) -> list[Path]:
-    """Regular files under ``path`` (recursive, symlink loops safe, hidden files skipped)."""
+def list_files(path: Path, *, recursive: bool = True, skipped: list[dict[str, str]] | None = None) -> list[Path]:
+    """Regular files under ``path`` (recursive; hidden entries ignored).
+
+    Symbolic links to files are followed; links to folders are not (no loops, no
+    escaping the series folder). Broken links, FIFOs, devices and linked folders are
+    reported in ``skipped`` (when given) with a reason.
+    """
     out: list[Path] = []
     seen: set[tuple[int, int]] = set()
 
-    def entries(folder: Path):
+    def note(p: str, reason: str) -> None:
+        if skipped is not None:
+            skipped.append({"file": rel(p, path), "reason": reason})
+
+    def walk(folder: Path) -> None:
         try:
             st = folder.stat()
         except OSError:
-            return None
+            return
         key = (st.st_dev, st.st_ino)
-        if key in seen:  # symlink loop
-            return None
+        if key in seen:
+            return
         seen.add(key)
         try:
-            return iter(sorted(os.scandir(folder), key=lambda e: natural_key(e.name)))
-        except OSError:
-            return None
-
-    # iterative depth-first walk (same order as a recursive one): a tree deeper than
-    # Python's recursion limit raised RecursionError (found by FMT's fuzzing)
-    stack = [it for it in (entries(path),) if it is not None]
-    while stack:
-        e = next(stack[-1], None)
-        if e is None:
-            stack.pop()
-            continue
-        if e.name.startswith("."):
-            continue
-        try:
-            if e.is_dir():
-                if recursive:
-                    sub = entries(Path(e.path))
-                    if sub is not None:
-                        stack.append(sub)
-            elif e.is_file():
+            entries = sorted(os.scandir(folder), key=lambda e: natural_key(e.name))
+        except OSError as exc:
+            note(str(folder), f"cannot list folder ({exc.strerror or exc})")
+            return
+        for e in entries:
+            if e.name.startswith("."):
+                continue
+            try:
+                if e.is_symlink():
+                    try:
+                        target = os.stat(e.path)
+                    except OSError:
+                        note(e.path, "broken or looping symbolic link")
+                        continue
+                    if stat.S_ISDIR(target.st_mode):
+                        note(e.path, "symbolic link to a folder (not followed)")
+                        continue
+                    mode = target.st_mode
+                elif e.is_dir(follow_symlinks=False):
+                    if recursive:
+                        walk(Path(e.path))
+                    continue
+                else:
+                    mode = e.stat(follow_symlinks=False).st_mode
+                if not stat.S_ISREG(mode):
+                    note(e.path, "not a regular file (FIFO, device or socket)")
+                    continue
                 out.append(Path(e.path))
                 if len(out) > MAX_FILES:
                     raise LoadError(f"more than {MAX_FILES} files; point ctui at one series folder", path=path)
-        except OSError:
-            continue
+            except OSError as exc:
+                note(e.path, f"cannot read ({exc.strerror or exc})")
+
+    walk(path)
     return out
 
 

@@ -56,9 +56,19 @@ def _finish(data: np.ndarray, spacing, direction, origin, *, path, fmt, skipped,
 
 
 # --------------------------------------------------------------------- NIfTI
+def _nib():
+    import logging
+
+    import nibabel as nib
+
+    # nibabel logs header repairs to stderr; ctui reports problems itself
+    logging.getLogger("nibabel").setLevel(logging.ERROR)
+    return nib
+
+
 def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
                spacing=None) -> Volume:
-    import nibabel as nib
+    nib = _nib()
 
     try:
         img = nib.load(str(path))
@@ -250,7 +260,7 @@ def header_info(path: Path) -> dict[str, Any]:
     """scan() entry of a NIfTI or NRRD file, from its header only."""
     name = path.name.lower()
     if name.endswith((".nii", ".nii.gz")):
-        import nibabel as nib
+        nib = _nib()
 
         try:
             img = nib.load(str(path))

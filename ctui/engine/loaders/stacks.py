@@ -457,6 +457,8 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     try:
         ndims = int(hdr.get("NDims", "3"))
         dims = [int(v) for v in hdr["DimSize"].split()]
+        hsize = int(hdr.get("HeaderSize", "0") or 0)
+        channels = int(hdr.get("ElementNumberOfChannels", "1") or 1)
     except (KeyError, ValueError):
         raise CtuiError("MetaImage header lacks a valid DimSize", path=path) from None
     if ndims not in (2, 3) or len(dims) != ndims or min(dims) < 1:
@@ -464,27 +466,35 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     et = hdr.get("ElementType", "")
     if et not in _MET_TYPES:
         raise CtuiError(f"unsupported MetaImage ElementType {et!r}", path=path)
-    if int(hdr.get("ElementNumberOfChannels", "1") or 1) != 1:
+    if channels != 1:
         raise CtuiError("multi-channel MetaImage is not supported", path=path)
     msb = (hdr.get("ElementByteOrderMSB") or hdr.get("BinaryDataByteOrderMSB") or "False").lower() == "true"
     dt = np.dtype(_MET_TYPES[et]).newbyteorder(">" if msb else "<")
     if ndims == 2:
         dims = dims + [1]
     nx, ny, nz = dims
-    sp_x = [float(v) for v in (hdr.get("ElementSpacing") or hdr.get("ElementSize") or "1 1 1").split()]
-    sp_x = (sp_x + [1.0, 1.0, 1.0])[:3]
-    given = "ElementSpacing" in hdr or "ElementSize" in hdr
-    org = [float(v) for v in (hdr.get("Offset") or hdr.get("Position") or hdr.get("Origin") or "0 0 0").split()]
-    org = (org + [0.0, 0.0, 0.0])[:3]
+    def floats(text: str | None, n: int, default: float) -> list[float] | None:
+        try:
+            vals = [float(v) for v in (text or "").split()]
+        except ValueError:
+            return None
+        if not all(np.isfinite(vals)) or any(abs(v) > 1e6 for v in vals):
+            return None
+        return (vals + [default] * n)[:n] if text else [default] * n
+
+    sp_x = floats(hdr.get("ElementSpacing") or hdr.get("ElementSize"), 3, 1.0)
+    given = ("ElementSpacing" in hdr or "ElementSize" in hdr) and sp_x is not None and min(sp_x) > 0
+    if not given:
+        sp_x = [1.0, 1.0, 1.0]
+    org = floats(hdr.get("Offset") or hdr.get("Position") or hdr.get("Origin"), 3, 0.0) or [0.0, 0.0, 0.0]
     tm = hdr.get("TransformMatrix") or hdr.get("Rotation") or hdr.get("Orientation")
     direction = np.eye(3)
     if tm:
-        v = [float(x) for x in tm.split()]
-        if len(v) == 9:
+        v = floats(tm, 9, 0.0)
+        if v is not None and abs(np.linalg.det(np.array(v).reshape(3, 3))) > 1e-6:
             direction = np.array(v).reshape(3, 3).T  # each triple: one index axis (ITK MetaImageIO)
     datafile = hdr["ElementDataFile"]
     compressed = hdr.get("CompressedData", "False").lower() == "true"
-    hsize = int(hdr.get("HeaderSize", "0") or 0)
     modality = {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT")
     warnings: list[str] = []
     if datafile.upper() == "LOCAL":
