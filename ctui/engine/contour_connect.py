@@ -430,14 +430,27 @@ def _cap(builder: _Builder, rings: list[tuple[np.ndarray, np.ndarray]], up: bool
     xy = np.concatenate([r[0] for r in rings]).astype(np.float64)
     ids = np.concatenate([r[1] for r in rings])
     ends = np.cumsum([len(r[0]) for r in rings]).astype(np.uint32)
-    tri = np.asarray(earcut.triangulate_float64(xy, ends), dtype=np.int64).reshape(-1, 3)
+    # earcut drops collinear and duplicate points (straight pixel runs are full of
+    # them), which would leave those ring edges unused: the surface must use every
+    # ring edge, so earcut gets coordinates jittered by ~1e-6 px (the mesh keeps the
+    # true positions); a polygon with h holes must give n + 2h - 2 triangles.
+    want = len(xy) + 2 * (len(rings) - 1) - 2
+    rng = np.random.default_rng(len(xy))
+    scale = max(float(np.ptp(xy)), 1.0) * 1e-7
+    tri = np.zeros((0, 3), np.int64)
+    for _ in range(4):
+        jit = xy + rng.uniform(-scale, scale, size=xy.shape)
+        tri = np.asarray(earcut.triangulate_float64(jit, ends), dtype=np.int64).reshape(-1, 3)
+        if len(tri) == want:
+            break
+        scale *= 10
     if len(tri) == 0:
         # degenerate ring (zero area): fan, still closes the surface
         k = len(rings[0][0])
         tri = np.array([[0, i, i + 1] for i in range(1, k - 1)], dtype=np.int64).reshape(-1, 3)
-    a = xy[tri[:, 0]]
-    b = xy[tri[:, 1]]
-    c = xy[tri[:, 2]]
+    a = jit[tri[:, 0]]  # orientation in the coordinates earcut saw (no zero areas)
+    b = jit[tri[:, 1]]
+    c = jit[tri[:, 2]]
     sa = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     want_pos = up != outer_hole  # CCW in xy <=> normal +z
     flip = (sa < 0) if want_pos else (sa > 0)
