@@ -40,20 +40,23 @@ def list_files(path: Path, *, recursive: bool = True, skipped: list[dict[str, st
         if skipped is not None:
             skipped.append({"file": rel(p, path), "reason": reason})
 
-    def walk(folder: Path) -> None:
+    def walk(folder: Path) -> list[Path]:
+        """Files of one folder into ``out``; returns its sub-folders (iterative walk:
+        no recursion limit on deep trees)."""
+        subs: list[Path] = []
         try:
             st = folder.stat()
         except OSError:
-            return
+            return subs
         key = (st.st_dev, st.st_ino)
         if key in seen:
-            return
+            return subs
         seen.add(key)
         try:
             entries = sorted(os.scandir(folder), key=lambda e: natural_key(e.name))
         except OSError as exc:
             note(str(folder), f"cannot list folder ({exc.strerror or exc})")
-            return
+            return subs
         for e in entries:
             if e.name.startswith("."):
                 continue
@@ -70,7 +73,7 @@ def list_files(path: Path, *, recursive: bool = True, skipped: list[dict[str, st
                     mode = target.st_mode
                 elif e.is_dir(follow_symlinks=False):
                     if recursive:
-                        walk(Path(e.path))
+                        subs.append(Path(e.path))
                     continue
                 else:
                     mode = e.stat(follow_symlinks=False).st_mode
@@ -82,8 +85,12 @@ def list_files(path: Path, *, recursive: bool = True, skipped: list[dict[str, st
                     raise LoadError(f"more than {MAX_FILES} files; point ctui at one series folder", path=path)
             except OSError as exc:
                 note(e.path, f"cannot read ({exc.strerror or exc})")
+        return subs
 
-    walk(path)
+    stack = [path]
+    while stack:
+        # depth-first, in natural name order
+        stack.extend(reversed(walk(stack.pop())))
     return out
 
 
