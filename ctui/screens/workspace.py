@@ -290,10 +290,10 @@ class WorkspaceScreen(GuardMixin, Screen):
             t.append(" (selection engine missing)\n", style="dim")
         if s.dirty:
             t.append("\n● unsaved changes", style="yellow")
-        self.query_one("#panel", SidePanel).update(t)
+        self.query_one("#panel", SidePanel).update(t, layout=False)  # fixed size: no relayout
 
     def set_status(self, msg: str) -> None:
-        self.query_one("#status", Static).update(msg)
+        self.query_one("#status", Static).update(msg, layout=False)
 
     # ------------------------------------------------------------------ navigation
     def action_move(self, dx: int, dy: int) -> None:
