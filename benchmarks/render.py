@@ -170,16 +170,27 @@ def vtk_surface_runner(mesh, size, multisamples):
     return one
 
 
-def interleaved(runners: dict, repeat: int) -> dict:
+def cpu_seconds() -> float:
+    """CPU time of this process, all threads (llvmpipe's and VTK's render threads)."""
+    u = resource.getrusage(resource.RUSAGE_SELF)
+    return u.ru_utime + u.ru_stime
+
+
+def interleaved(runners: dict, repeat: int) -> tuple[dict, dict]:
     """Time each runner ``repeat`` times, alternating between them so that load
-    changes on a shared machine hit all of them alike; returns {name: [seconds]}."""
+    changes on a shared machine hit all of them alike; returns ({name: [wall s]},
+    {name: [cpu s]}). CPU time (all threads of this process) is the steadier figure
+    on a shared machine; wall time is what a user waits."""
     ts = {k: [] for k in runners}
+    cs = {k: [] for k in runners}
     for i in range(repeat):
         for k, fn in runners.items():
+            c0 = cpu_seconds()
             t0 = time.perf_counter()
             fn(i)
             ts[k].append(time.perf_counter() - t0)
-    return ts
+            cs[k].append(cpu_seconds() - c0)
+    return ts, cs
 
 
 def bench_ctui_dvr(vol, size, repeat, **opts):
@@ -198,8 +209,10 @@ def bench_ctui_dvr(vol, size, repeat, **opts):
         scene.camera.azimuth = 35.0 + 2.0 * i
         img = r.render(scene, size=size)
         assert img.shape == (size[1], size[0], 3)
+    c0 = cpu_seconds()
     med, ts = median_time(one, repeat)
-    return med, ts, first, img
+    cpu = (cpu_seconds() - c0) / repeat
+    return med, ts, first, img, cpu
 
 
 def bench_vtk_dvr(vol, size, repeat):
@@ -238,9 +251,11 @@ def bench_vtk_dvr(vol, size, repeat):
         cam.Azimuth(2.0)
         rw.Render()
         _vtk_read(rw, size)
+    c0 = cpu_seconds()
     med, ts = median_time(one, repeat)
+    cpu = (cpu_seconds() - c0) / repeat
     rw.Finalize()
-    return med, ts
+    return med, ts, cpu
 
 
 def peak_rss_mb() -> float:
@@ -257,7 +272,8 @@ def main() -> int:
 
     r = get_renderer()
     print(f"ctui renderer: {r.info['renderer']} | {r.info['version']}")
-    print(f"machine: {platform.machine()} {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    print(f"machine: {platform.machine()} {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} "
+          "(other processes share the CPUs: compare the interleaved figures, and CPU seconds)")
 
     n_lat, n_lon = (126, 250) if args.quick else (501, 1000)
     t0 = time.perf_counter()
@@ -276,14 +292,17 @@ def main() -> int:
         for label, ms in (("VTK no MSAA", 0), ("VTK default", None)):
             runners[label] = vtk_surface_runner(mesh, size, ms)
         print(f"  VTK default multisampling: {runners['VTK default'].multisamples}x")
-    ts = interleaved(runners, args.repeat)
+    ts, cs = interleaved(runners, args.repeat)
     res = {k: statistics.median(v) for k, v in ts.items()}
+    cres = {k: statistics.median(v) for k, v in cs.items()}
     for k, v in ts.items():
-        print(f"  {k:<14} median {res[k]:.3f} s   (runs: {', '.join(f'{t:.3f}' for t in v)})")
+        print(f"  {k:<14} median {res[k]:.3f} s wall, {cres[k]:.3f} s CPU   "
+              f"(wall runs: {', '.join(f'{t:.3f}' for t in v)})")
     if have_vtk:
-        print("  ratios ctui / VTK (goal <= 0.8 with anti-aliasing on):")
+        print("  ratios ctui / VTK, wall (CPU) (goal <= 0.8 with anti-aliasing on):")
         for a in ("fxaa", "msaa", "none"):
-            print("    " + "   ".join(f"ctui {a:<4} / {b:<11} = {res[f'ctui AA={a}'] / res[b]:.2f}"
+            print("    " + "   ".join(f"ctui {a:<4} / {b:<11} = {res[f'ctui AA={a}'] / res[b]:.2f} "
+                                     f"({cres[f'ctui AA={a}'] / cres[b]:.2f})"
                                      for b in ("VTK default", "VTK no MSAA")))
         for k in ("VTK no MSAA", "VTK default"):
             runners[k].window.Finalize()
@@ -300,19 +319,20 @@ def main() -> int:
                         ("no empty-space skipping", {"empty_space_skipping": False}),
                         ("half resolution (volume_scale=0.5)", {"volume_scale": 0.5}),
                         ("0.5 samples/voxel", {"samples_per_voxel": 0.5})):
-        med, ts, first, img = bench_ctui_dvr(vol, size, args.repeat, **opts)
+        med, ts, first, img, cpu = bench_ctui_dvr(vol, size, args.repeat, **opts)
         dres[label] = med
-        print(f"  ctui {label:<62} median {med:.3f} s  first {first:.2f} s (upload+bricks)")
+        print(f"  ctui {label:<62} median {med:.3f} s wall, {cpu:.3f} s CPU; first frame {first:.2f} s")
     base = dres["default (skipping, early termination, 1 sample/voxel, shading)"]
     print(f"  empty-space skipping speed-up: {dres['no empty-space skipping'] / base:.2f}x; goal <= 0.15 s: "
           f"{'met' if base <= 0.15 else 'NOT met'} ({base:.3f} s)")
     if have_vtk:
         try:
-            med, ts = bench_vtk_dvr(vol, size, args.repeat)
-            print(f"  VTK  vtkGPUVolumeRayCastMapper (shade on)   median {med:.3f} s; ctui/VTK = {base / med:.2f}")
+            med, ts, cpu = bench_vtk_dvr(vol, size, args.repeat)
+            print(f"  VTK  vtkGPUVolumeRayCastMapper (shade on)   median {med:.3f} s wall, {cpu:.3f} s CPU; "
+                  f"ctui/VTK = {base / med:.2f}")
         except Exception as exc:  # noqa: BLE001
             print(f"  VTK volume mapper failed: {exc}")
-    print(f"\npeak RSS {peak_rss_mb():.0f} MB")
+    print(f"\nload average at the end {os.getloadavg()[0]:.2f}; peak RSS {peak_rss_mb():.0f} MB")
     return 0
 
 

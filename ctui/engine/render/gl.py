@@ -40,6 +40,10 @@ class _MeshGPU:
     def __init__(self, ctx, progs, mesh) -> None:
         v = np.ascontiguousarray(mesh.vertices, dtype=np.float32)
         f = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
+        if len(f) > 50_000:
+            # faces ordered by their lowest vertex index: neighbouring triangles share
+            # vertices in the vertex cache (llvmpipe: ~15% less CPU on a 1M mesh)
+            f = f[np.argsort(f.min(axis=1), kind="stable")]
         nrm = mesh.normals
         if nrm is None or np.shape(nrm) != v.shape:
             nrm = vertex_normals(v, f)

@@ -334,7 +334,7 @@ void main() {
 #endif
                 acc.rgb += (1.0 - acc.a) * c.a * min(col, vec3(1.0));
                 acc.a += (1.0 - acc.a) * c.a;
-                if (acc.a > 0.97) break;                     // early ray termination
+                if (acc.a > 0.95) break;                     // early ray termination
             }
         }
         f_color = acc;
