@@ -129,7 +129,7 @@ async def test_open_filter_select_propagate_export_project(tmp_path):
         assert not s2.dirty
 
 
-async def test_render_3d_shows_rendered_pixels():
+async def test_render_3d_shows_rendered_pixels(tmp_path):
     render = pytest.importorskip("ctui.engine.render")
     if not render.egl_available():
         pytest.skip("no EGL context on this machine (install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri)")
@@ -165,4 +165,21 @@ async def test_render_3d_shows_rendered_pixels():
         await pilot.press("m")
         await wait_for(pilot, lambda: v3.shown_requests[-1] == v3._req, timeout=60, what="the next mode")
         assert v3.mode == MODES[(MODES.index(before) + 1) % len(MODES)]
+        # s: PNG of the view at 1024x1024; t: a turntable GIF
+        png = tmp_path / "view 3d.png"
+        await pilot.press("s")
+        await answer_prompt(pilot, str(png))
+        await wait_for(pilot, lambda: png.exists(), timeout=120, what="the PNG")
+        import cv2
+
+        im = cv2.imread(str(png))
+        assert im.shape == (1024, 1024, 3) and im.std() > 5
+        gif = tmp_path / "turn.gif"
+        await pilot.press("t")
+        await answer_prompt(pilot, str(gif))
+        await wait_for(pilot, lambda: gif.exists(), timeout=180, what="the turntable")
+        from PIL import Image
+
+        with Image.open(gif) as g:
+            assert g.n_frames == 36
         assert not app.errors, app.errors
