@@ -76,12 +76,13 @@ def face_components(mesh: Mesh) -> tuple[int, np.ndarray]:
 
 
 def components(mesh: Mesh) -> list[Mesh]:
-    """Split into connected components, largest (most faces) first; vertices compacted."""
+    """Split into connected components, largest first (by enclosed |volume|, then area,
+    then triangles); vertices compacted."""
     ncomp, flab = face_components(mesh)
     out = []
     for c in range(ncomp):
         out.append(_submesh(mesh, flab == c))
-    out.sort(key=lambda m: -m.n_faces)
+    out.sort(key=lambda m: (-abs(m.volume_mm3()), -m.area_mm2(), -m.n_faces))
     return out
 
 
@@ -242,7 +243,7 @@ def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7) -> M
 
 
 def keep_largest(mesh: Mesh, n: int = 1) -> Mesh:
-    """The ``n`` largest components (by triangle count)."""
+    """The ``n`` largest components (by enclosed volume, see :func:`components`)."""
     parts = components(mesh)
     return merge(parts[: max(int(n), 1)], object_id=mesh.object_id, meta=mesh.meta) if parts else _copy(mesh)
 
