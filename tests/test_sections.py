@@ -228,6 +228,7 @@ def test_volume_between_excludes_parallel_neighbour():
     res = volume_between(mask, path, 10.0, 30.0, spacing=SP, return_mesh=True)
     want = math.pi * r * r * 20.0
     assert res["volume_mm3"] == pytest.approx(want, rel=0.02)
+    assert res["volume_pv_mm3"] == pytest.approx(want, rel=0.02)
     assert res["closed"]
     assert res["area1_mm2"] == pytest.approx(math.pi * r * r, rel=0.03)
     assert res["area2_mm2"] == pytest.approx(math.pi * r * r, rel=0.03)
