@@ -263,3 +263,30 @@ async def test_autosave_is_offered_on_next_start(tmp_path):
         await wait_for(pilot, lambda: app2.session is not None and app2.session.seg.labels.any(), what="recovered labels")
         assert np.array_equal(app2.session.seg.labels, labels)
         assert app2.session.dirty
+
+
+async def test_propagation_3d_mode_and_reject():
+    o = _obj("kidney_left")
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s, ws = app.session, app.workspace
+        await goto_voxel(pilot, app, *o["seed_zyx"])
+        s.range_ = ((o["hu"] + 40) / 2, o["hu"] + 200)
+        await pilot.press("enter", "m")
+        assert s.prop_mode == "3d"
+        # reject first: labels unchanged
+        before = int((s.seg.labels == 1).sum())
+        await pilot.press("p")
+        await wait_for(pilot, lambda: ws.proposal is not None, what="proposal")
+        await pilot.press("x")
+        await pilot.pause()
+        assert ws.proposal is None and int((s.seg.labels == 1).sum()) == before
+        # then accept: the kidney's analytic volume within 3%
+        await pilot.press("p")
+        await wait_for(pilot, lambda: ws.proposal is not None, what="proposal")
+        await pilot.press("a")
+        await pilot.pause()
+        ml = int((s.seg.labels == 1).sum()) * s.volume.voxel_volume_mm3() / 1000
+        assert abs(ml - o["volume_ml"]) / o["volume_ml"] < 0.03, ml
+        assert not app.errors, app.errors

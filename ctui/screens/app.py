@@ -429,7 +429,7 @@ def project_from_session(s: Session):
         labels=labels,
         objects=objects,
         propagation={"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None,
-                     "connectivity": s.connectivity, "current": s.current},
+                     "connectivity": s.connectivity, "current": s.current, "mode": s.prop_mode},
         drift=dict(s.drift_info or {}),
         window=tuple(s.window),
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view},
@@ -454,6 +454,7 @@ def session_from_project(proj, volume, path: str) -> Session:
     s.tolerance = float(prop.get("tolerance", s.tolerance))
     s.range_ = tuple(prop["range"]) if prop.get("range") else None
     s.connectivity = int(prop.get("connectivity", 8))
+    s.prop_mode = str(prop.get("mode", "slice")) if prop.get("mode") in ("slice", "3d") else "slice"
     s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
     s.view = str(meta.get("view", s.view))
     s.drift_info = dict(proj.drift or {})

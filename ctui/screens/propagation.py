@@ -38,7 +38,8 @@ def settings_for(session, direction: str):
         lo, hi = s.range_
     else:
         raise CtuiError(f"object {s.current} has no fill yet: press Enter on it first")
-    return prop.PropagationSettings(low=lo, high=hi, direction=direction, connectivity=int(st.get("connectivity", s.connectivity)))
+    return prop.PropagationSettings(low=lo, high=hi, direction=direction, mode=s.prop_mode,
+                                    connectivity=int(st.get("connectivity", s.connectivity)))
 
 
 def start_propagation(ws, direction: str) -> None:

@@ -62,6 +62,7 @@ class Session:
     tolerance: float = 60.0
     range_: tuple[float, float] | None = None
     connectivity: int = 8
+    prop_mode: str = "slice"  # or "3d" (engine's one-pass 3D flood fill)
     current: int = 1
     pipeline: Any = None
     seg: Any = None

@@ -35,6 +35,7 @@ class WorkspaceScreen(GuardMixin, Screen):
     WorkspaceScreen #grid { grid-size: 2 2; grid-gutter: 0 1; display: none; width: 1fr; }
     WorkspaceScreen #grid.on { display: block; }
     WorkspaceScreen #main.off { display: none; }
+    WorkspaceScreen .cell-label { height: 1; color: $text-muted; }
     WorkspaceScreen #progress-row { height: 1; display: none; }
     WorkspaceScreen #progress-row.on { display: block; }
     WorkspaceScreen #progress-row Label { width: auto; padding: 0 1; }
@@ -71,6 +72,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         Binding("right_square_bracket", "tolerance(1)", "Tolerance +", show=False),
         Binding("T", "range_edit", "Edit range/tolerance", show=False),
         Binding("c", "connectivity", "4/8 connectivity", show=False),
+        Binding("m", "prop_mode", "Propagation slice/3D", show=False),
         Binding("n", "new_object", "New object"),
         Binding("tab", "cycle_object", "Next object", show=False, priority=True),
         Binding("u", "undo", "Undo"),
@@ -106,7 +108,9 @@ class WorkspaceScreen(GuardMixin, Screen):
             yield ImageView(id="main")
             with Grid(id="grid"):
                 for v in VIEWS:
-                    yield ImageView(id=f"g-{v}")
+                    with Vertical(classes="cell"):
+                        yield Label(v, classes="cell-label")
+                        yield ImageView(id=f"g-{v}")
             yield SidePanel(id="panel")
         with Horizontal(id="progress-row"):
             yield Label("", id="progress-label")
@@ -261,7 +265,7 @@ class WorkspaceScreen(GuardMixin, Screen):
             t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n")
         else:
             t.append(f"Tolerance ±{s.tolerance:g} {dom}\n")
-        t.append(f"Connectivity {s.connectivity}\n")
+        t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
         t.append("\nPipeline", style="bold underline")
         steps = s.pipeline_steps()
         t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
@@ -479,6 +483,11 @@ class WorkspaceScreen(GuardMixin, Screen):
 
         cur = f"{self.s.range_[0]:g}:{self.s.range_[1]:g}" if self.s.range_ else f"{self.s.tolerance:g}"
         self.app.push_screen(PromptScreen("Tolerance (±T around the seed value) or range LO:HI", cur), done)
+
+    def action_prop_mode(self) -> None:
+        self.s.prop_mode = "3d" if self.s.prop_mode == "slice" else "slice"
+        self.app.notify(f"Propagation: {'one 3D flood fill' if self.s.prop_mode == '3d' else 'slice by slice'}", timeout=2)
+        self.update_panel()
 
     def action_connectivity(self) -> None:
         self.s.connectivity = 4 if self.s.connectivity == 8 else 8
