@@ -83,7 +83,7 @@ class Ctx:
         sys.stdout.write(json.dumps(obj) + "\n")
         sys.stdout.flush()
 
-    def check(self, reader: Callable[[Path], Any], data: bytes | Path, *, name: str = "case.bin", tag: str = "", size_hint: int | None = None, mem_budget: int | None = None) -> str:
+    def check(self, reader: Callable[[Path], Any], data: bytes | Path, *, name: str = "case.bin", tag: str = "", size_hint: int | None = None, mem_budget: int | None = None, note: str = "") -> str:
         """Run ``reader(path)`` on ``data`` (bytes written to ``name``, or an existing path).
 
         Returns the outcome: "ok", "error" (a proper CtuiError) or "FINDING:...".
@@ -92,17 +92,17 @@ class Ctx:
 
         self.n += 1
         if isinstance(data, (bytes, bytearray)):
-            path = self.tmp(f"c{self.n % 7}/{name}")
-            if path.is_dir():
+            path = self.tmp(f"case/{name}")
+            if path.is_dir() or path.is_symlink():
                 import shutil
 
-                shutil.rmtree(path)
+                shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
             path.write_bytes(bytes(data))
             size = len(data)
         else:
             path = Path(data)
             size = size_hint if size_hint is not None else _tree_size(path)
-        self._emit({"start": self.n, "tag": tag, "path": str(path)})
+        self._emit({"start": self.n, "tag": tag, "path": str(path), "note": note})
         budget = mem_budget or max(self.mem_floor, self.mem_factor * size)
         outcome = "ok"
         detail = ""
@@ -138,7 +138,7 @@ class Ctx:
         self.counts[key] = self.counts.get(key, 0) + 1
         if outcome.startswith("FINDING"):
             saved = self._save(path, tag, name)
-            f = {"tag": tag, "kind": outcome[8:], "detail": detail, "saved": str(saved)}
+            f = {"tag": tag, "kind": outcome[8:], "detail": detail, "saved": str(saved), "note": note}
             self.findings.append(f)
             self._emit({"finding": f})
         self._emit({"done": self.n, "key": key})
@@ -149,7 +149,7 @@ class Ctx:
         if path.is_file():
             data = path.read_bytes()
             h = hashlib.sha1(data).hexdigest()[:10]
-            dest = self.outdir / f"{tag or 'case'}-{h}-{name}"
+            dest = self.outdir / f"{tag or 'case'}-{h}-{name.replace('/', '_')}"
             dest.write_bytes(data)
             return dest
         return path
@@ -276,7 +276,7 @@ def run_campaign(module: str, campaign: str, *, examples: int, timeout_s: float 
         total["cases"] += 1
         ck = f"{inflight.get('tag') or 'case'}:FINDING"
         total["counts"][ck] = total["counts"].get(ck, 0) + 1
-        total["findings"].append({"tag": inflight.get("tag"), "kind": kind, "detail": err.strip().splitlines()[-1:] if err.strip() else "", "saved": inflight.get("path")})
+        total["findings"].append({"tag": inflight.get("tag"), "note": inflight.get("note", ""), "kind": kind, "detail": err.strip().splitlines()[-1:] if err.strip() else "", "saved": inflight.get("path")})
         skip = inflight["start"]
         if total["restarts"] > 20:
             raise RuntimeError(f"fuzz worker {module}.{campaign} keeps dying: {total['findings'][-3:]}")

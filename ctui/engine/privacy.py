@@ -58,7 +58,8 @@ def scrub(obj: Any) -> Any:
 def _variants(s: str) -> list[bytes]:
     out = {s.encode("utf-8"), s.encode("utf-16-le")}
     if "^" in s:  # DICOM PN: also the rendered "Family Given" form and each component
-        out |= {s.replace("^", " ").encode(), *(p.encode() for p in s.split("^") if len(p) >= 4)}
+        # components only when distinctive enough (a "NAME" component would match "Name" keys)
+        out |= {s.replace("^", " ").encode(), *(p.encode() for p in s.split("^") if len(p) >= 6)}
     return sorted(out)
 
 

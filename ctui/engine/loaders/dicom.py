@@ -303,6 +303,29 @@ class _Capped:
         return getattr(self._fh, name)
 
 
+_QUIET = False
+
+
+def _quiet_pydicom() -> None:
+    """Stop pydicom echoing element values in warnings and log records.
+
+    pydicom's value validation warns *and logs* (logger "pydicom") with the offending
+    value, which for a corrupted header can include the patient's name and ID (found
+    by FMT's tests/test_privacy.py). ctui judges values itself, so validation on
+    reading is turned off and the logger's non-error records are dropped.
+    """
+    global _QUIET
+    if _QUIET:
+        return
+    import logging
+
+    from pydicom import config
+
+    config.settings.reading_validation_mode = config.IGNORE
+    logging.getLogger("pydicom").addFilter(lambda rec: rec.levelno >= logging.ERROR)
+    _QUIET = True
+
+
 def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     """Read one file's header: its frames and the patient identifiers found (for scrubbing).
 
@@ -312,6 +335,7 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     """
     import warnings
 
+    _quiet_pydicom()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
@@ -840,6 +864,7 @@ def _decode_pydicom(f: Frame) -> np.ndarray:
     import pydicom
     from pydicom.pixels import pixel_array
 
+    _quiet_pydicom()
     try:
         ds = pydicom.dcmread(f.file, force=True)
         if not hasattr(ds, "file_meta") or "TransferSyntaxUID" not in ds.file_meta:
