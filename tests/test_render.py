@@ -521,3 +521,24 @@ def test_cli_volume_modes_on_the_sample_series(renderer, tmp_path):
 
     with Image.open(out) as im:
         assert im.n_frames == 3
+
+
+@pytest.mark.parametrize("aa", ["fxaa", "msaa"])
+def test_antialiasing_blends_the_silhouette(renderer, aa):
+    """Flat white disc on black: without AA every pixel is 0 or 255; with FXAA/MSAA
+    the silhouette gets intermediate values along most of its length."""
+    scene = Scene.from_meshes(icosphere(20.0, subdiv=4))
+    scene.meshes[0].color = (1.0, 1.0, 1.0)
+    scene.material = Material(ambient=1.0, diffuse=0.0, specular=0.0)
+    scene.options.headlight = 0.0
+    scene.options.background = BG
+    scene.camera.extent_mm = 100.0
+    scene.options.antialias = "none"
+    hard = renderer.render(scene, size=(200, 200))[..., 1]
+    assert np.isin(hard, [0, 255]).mean() > 0.999
+    scene.options.antialias = aa
+    soft = renderer.render(scene, size=(200, 200))[..., 1]
+    mid = ((soft > 25) & (soft < 230)).sum()
+    perimeter = 2 * math.pi * 40
+    assert mid > 0.5 * perimeter
+    assert abs((soft / 255.0).sum() - (hard / 255.0).sum()) < 0.01 * (hard / 255.0).sum()  # same coverage

@@ -2,13 +2,26 @@
 (weighted blended OIT), wireframe, slice planes, and volume ray casting (MIP, MinIP,
 DVR with transfer-function presets).
 
-Typical use (from any thread)::
+Blocking use (any thread)::
 
     from ctui.engine.render import Scene, get_renderer, save_png
-    scene = Scene.from_meshes(meshes)          # list of ctui Mesh
+    scene = Scene.from_meshes(meshes)          # ctui Mesh, list of Mesh, or {id: Mesh}
     scene.camera.azimuth = 30
-    img = get_renderer().render(scene, size=(800, 600))   # (600, 800, 3) uint8 RGB
+    img = get_renderer().render(scene, size=(800, 600))   # (600, 800, 3) uint8 RGB, row 0 = top
     save_png("view.png", img)
+
+From a UI (non-blocking, newest request wins)::
+
+    fut = get_renderer().submit(scene, (w, h), supersede_key="view3d")
+    # a request with the same key still waiting in the queue is cancelled
+    fut.add_done_callback(lambda f: f.cancelled() or f.exception() or app.call_from_thread(show, f.result()))
+    # or, in asyncio code: img = await asyncio.wrap_future(fut)
+
+The callback runs on the render thread: hand the image to the UI thread. ``submit``
+snapshots the scene's settings, so the caller may keep changing its Scene; mesh and
+volume arrays are shared, treat them as immutable (the GPU copies are cached per array).
+For interactive volume rendering set ``scene.options.volume_scale = 0.5`` while the
+user moves the camera and 1.0 for the still frame.
 """
 
 from .camera import CameraSetup, setup_camera

@@ -338,17 +338,17 @@ class Scene:
         """
         opts = dict(d.get("options", {}))
         if opts.get("slice_plane"):
-            opts["slice_plane"] = SlicePlane(**opts["slice_plane"])
+            opts["slice_plane"] = _make(SlicePlane, opts["slice_plane"])
         if opts.get("crop_box"):
             opts["crop_box"] = tuple(tuple(v) for v in opts["crop_box"])
         cam = dict(d.get("camera", {}))
         for k in ("pan", "target", "eye", "look_at", "up"):
             if cam.get(k) is not None:
                 cam[k] = tuple(cam[k])
-        scene = cls.from_meshes(list(meshes), mode=d.get("mode", "surface"), camera=Camera(**cam),
-                                light=Light(**_tuples(d.get("light", {}))),
-                                material=Material(**d.get("material", {})),
-                                options=RenderOptions(**_tuples(opts)))
+        scene = cls.from_meshes(list(meshes), mode=d.get("mode", "surface"), camera=_make(Camera, cam),
+                                light=_make(Light, _tuples(d.get("light", {}))),
+                                material=_make(Material, d.get("material", {})),
+                                options=_make(RenderOptions, _tuples(opts)))
         for item, md in zip(scene.meshes, d.get("meshes", [])):
             item.color = tuple(md.get("color")) if md.get("color") else None
             item.opacity = float(md.get("opacity", 1.0))
@@ -383,6 +383,12 @@ def mesh_bounds(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
             _BOUNDS.clear()
     _BOUNDS[key] = (ref, lo, hi)
     return lo, hi
+
+
+def _make(cls: Any, d: dict[str, Any]) -> Any:
+    """Dataclass from a dict, ignoring keys it does not know (newer/older versions)."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in d.items() if k in names})
 
 
 def _tuples(d: dict[str, Any]) -> dict[str, Any]:
