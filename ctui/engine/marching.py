@@ -383,6 +383,13 @@ def _put(verts, vid, va, vb, level, x, y, z, axis):
     a = float(va)
     d = float(vb) - a
     t = (level - a) / d if d != 0.0 else 0.5
+    # a voxel exactly at the level would put the vertices of all its crossed edges on
+    # the same point (degenerate triangles; STL readers weld them into non-manifold
+    # junk): keep every vertex at least 1/1000 voxel inside its edge
+    if t < 1e-3:
+        t = 1e-3
+    elif t > 0.999:
+        t = 0.999
     verts[vid, 0] = x + t if axis == 0 else x
     verts[vid, 1] = y + t if axis == 1 else y
     verts[vid, 2] = z + t if axis == 2 else z
