@@ -542,3 +542,34 @@ def test_antialiasing_blends_the_silhouette(renderer, aa):
     perimeter = 2 * math.pi * 40
     assert mid > 0.5 * perimeter
     assert abs((soft / 255.0).sum() - (hard / 255.0).sum()) < 0.01 * (hard / 255.0).sum()  # same coverage
+
+
+def test_cli_flythrough_inside_a_tube(renderer, tmp_path):
+    from PIL import Image
+
+    from ctui.cli import main
+
+    n_a, n_l = 32, 20
+    a = np.linspace(0, 2 * np.pi, n_a, endpoint=False)
+    zs = np.linspace(-50, 50, n_l)
+    v = np.array([[6 * np.cos(t), 6 * np.sin(t), z] for z in zs for t in a], "<f4")
+    f = []
+    for i in range(n_l - 1):
+        for j in range(n_a):
+            p, q = i * n_a + j, i * n_a + (j + 1) % n_a
+            f += [[p, q, p + n_a], [q, q + n_a, p + n_a]]
+    f = np.array(f)
+    rec = np.zeros(len(f), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["v"] = v[f]
+    stl = tmp_path / "tube.stl"
+    stl.write_bytes(b"\0" * 80 + np.uint32(len(rec)).tobytes() + rec.tobytes())
+    out = tmp_path / "fly.gif"
+    assert main(["render", str(stl), "--out", str(out), "--flythrough", "0,0,-45;0,0.5,0;0,0,45",
+                 "--frames", "4", "--size", "64x64"]) == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 4
+        im.seek(1)
+        fr = np.asarray(im.convert("RGB")).astype(int)
+    bg = np.array([18, 18, 23])
+    assert (np.abs(fr - bg).sum(axis=2) > 12).mean() > 0.7   # walls all around the view
+    assert main(["render", str(stl), "--out", str(out), "--flythrough", "auto"]) == 2  # auto needs a project

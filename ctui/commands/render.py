@@ -47,6 +47,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--dtype", default=None, help="raw data: numpy dtype, e.g. '>u2' for big-endian uint16")
     p.add_argument("--spacing", default=None, metavar="DZ,DY,DX", help="spacing in mm for stacks and raw data")
     p.add_argument("--background", default=None, help="R,G,B 0..255 (default dark grey)")
+    p.add_argument("--flythrough", default=None, metavar="auto|X,Y,Z;X,Y,Z;...",
+                   help="endoscopic fly-through along a path in patient mm, or 'auto': the centreline of "
+                        "the project object given with --object; --out a .gif/.apng or a folder for PNG frames")
+    p.add_argument("--frames", type=int, default=48, help="fly-through frames (default 48)")
+    p.add_argument("--fov", type=float, default=70.0, help="fly-through view angle in degrees (default 70)")
     p.set_defaults(func=run)
 
 
@@ -164,6 +169,7 @@ def _project_meshes(path, args):
             m.object_id = oid
             meshes.append(m)
     colors = {int(o.get("id", 0)): o.get("color") for o in (proj.objects or []) if isinstance(o, dict)}
+    args._project_geometry = (proj.labels, spacing, origin, direction)
     return meshes, vol, colors
 
 
@@ -180,8 +186,6 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not src.exists():
         raise CtuiError("no such file or folder", path=src)
-    if out.suffix.lower() not in (".png", ".gif", ".apng"):
-        raise CtuiError("output must end in .png, .gif or .apng", path=out)
     if out.parent and not out.parent.exists():
         raise CtuiError("output folder does not exist", path=out)
     w, h = (int(v) for v in _pair(args.size, "--size (want WxH)"))
@@ -196,6 +200,11 @@ def run(args: argparse.Namespace) -> int:
     volume = None
     colors: dict = {}
     suffix = src.suffix.lower()
+    fly = args.flythrough
+    if fly is not None and out.suffix.lower() not in (".gif", ".apng", ""):
+        raise CtuiError("--flythrough writes a .gif/.apng or a folder of PNG frames", path=out)
+    if out.suffix.lower() not in (".png", ".gif", ".apng") and fly is None:
+        raise CtuiError("output must end in .png, .gif or .apng", path=out)
     if src.is_file() and suffix in MESH_SUFFIXES:
         meshes = [_load_mesh_file(src)]
         kind = "mesh"
@@ -265,6 +274,15 @@ def run(args: argparse.Namespace) -> int:
         o.preset = "ct-bone" if str(volume.modality).upper() == "CT" else "mr-default"
 
     renderer = get_renderer()
+    if fly is not None:
+        path_mm = _fly_path(fly, args, kind, src)
+        from ctui.engine.render import save_flythrough
+
+        if args.frames < 2:
+            raise CtuiError("--frames must be at least 2")
+        save_flythrough(out, scene, path_mm, args.frames, (w, h), fov_deg=args.fov, fps=args.fps, renderer=renderer)
+        print(f"wrote {out} ({args.frames} fly-through frames, {w}x{h}, path {len(path_mm)} points)")
+        return 0
     animated = out.suffix.lower() in (".gif", ".apng") or args.turntable is not None
     if animated:
         n = args.turntable or 36
@@ -276,3 +294,29 @@ def run(args: argparse.Namespace) -> int:
         save_png(out, img)
         print(f"wrote {out} ({w}x{h}, mode {mode})")
     return 0
+
+
+def _fly_path(spec: str, args, kind: str, src):
+    """(n, 3) patient mm path for --flythrough."""
+    import numpy as np
+
+    from ctui.engine.errors import CtuiError
+
+    if spec.strip().lower() == "auto":
+        geo = getattr(args, "_project_geometry", None)
+        if kind != "project" or geo is None or not args.object or len(args.object) != 1:
+            raise CtuiError("--flythrough auto needs a .ctui project and one --object (a tubular object)", path=src)
+        labels, spacing, origin, direction = geo
+        from ctui.engine.centreline import centreline
+
+        path = centreline(labels == args.object[0], spacing=spacing, origin=origin, direction=direction)
+        if path is None or len(path) < 2:
+            raise CtuiError(f"no centreline found for object {args.object[0]}", path=src)
+        return np.asarray(path, float)
+    try:
+        pts = np.array([[float(v) for v in p.split(",")] for p in spec.split(";") if p.strip()])
+    except ValueError:
+        pts = np.zeros((0, 0))
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
+        raise CtuiError(f"bad --flythrough {spec!r} (want 'auto' or 'x,y,z;x,y,z;...' in mm)")
+    return pts

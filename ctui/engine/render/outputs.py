@@ -133,8 +133,12 @@ def flythrough_cameras(path_mm: np.ndarray, n_frames: int, *, fov_deg: float = 7
 
 
 def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, size: tuple[int, int] = (512, 512),
-                      *, fov_deg: float = 70.0, renderer=None) -> Iterator[np.ndarray]:
-    """Endoscopic views along ``path_mm`` (m, 3) (e.g. a centreline), one per frame."""
+                      *, fov_deg: float = 70.0, endoscope_light: bool = True,
+                      renderer=None) -> Iterator[np.ndarray]:
+    """Endoscopic views along ``path_mm`` (m, 3) (e.g. a centreline), one per frame.
+
+    ``endoscope_light``: light mostly from the camera (head light 0.8, the movable
+    light dimmed to 30%, no shadows), as an endoscope's own lamp."""
     from .context import get_renderer
 
     r = renderer or get_renderer()
@@ -142,6 +146,10 @@ def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, siz
     for cam in flythrough_cameras(path_mm, n_frames, fov_deg=fov_deg):
         s = scene.snapshot()
         s.camera = cam
+        if endoscope_light:
+            s.options.headlight = max(s.options.headlight, 0.8)
+            s.light.intensity *= 0.3
+            s.options.shadows = False
         futs.append(r.submit(s, size))
     for f in futs:
         yield f.result()
