@@ -590,15 +590,17 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = 0
     couple of iterations bring a voxel-level minimal path onto the object's axis
     (centroids of normal sections). Points outside the object are kept as they are.
 
-    Returns the new path (n, 3) mm at a uniform ``step_mm`` arc-length step.
+    Sections are taken every max(step_mm, 1 mm). Returns the new path (n, 3) mm at a
+    uniform ``step_mm`` arc-length step.
     """
     from .centreline import _spline_resample
 
     p = np.asarray(path_mm, dtype=np.float64)
     if smooth_mm is None:
-        smooth_mm = 0.5 * float(max(field.spacing))
+        # section centroids are precise (~0.05 voxel): a loose spline would cut bends
+        smooth_mm = 0.15 * float(min(field.spacing))
     for _ in range(iterations):
-        rows = sections_along_path(None, p, field=field, step_mm=step_mm)
+        rows = sections_along_path(None, p, field=field, step_mm=max(step_mm, 1.0))
         pts = np.array([r["point_mm"] for r in rows])
         cen = pts.copy()
         for i, r in enumerate(rows):
@@ -608,19 +610,24 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = 0
             lim = 0.25 * r["eq_diameter_mm"]  # half the equivalent radius per iteration
             n = float(np.linalg.norm(move))
             cen[i] = r["point_mm"] + (move if n <= lim else move * (lim / n))
-        # keep the two ends where they were (their sections are caps)
-        cen[0], cen[-1] = pts[0], pts[-1]
+        # the end sections are caps: move the ends with their neighbours
+        if len(cen) > 3:
+            cen[0] = pts[0] + (cen[1] - pts[1])
+            cen[-1] = pts[-1] + (cen[-2] - pts[-2])
         p = _spline_resample(cen, step_mm, smooth_mm=smooth_mm)
     return p
 
 
 # ------------------------------------------------------------------ steps
-def find_steps(s_mm: np.ndarray, values: np.ndarray, *, min_rel_jump: float = 0.1, window_mm: float = 2.0) -> list[dict[str, float]]:
+def find_steps(s_mm: np.ndarray, values: np.ndarray, *, min_rel_jump: float = 0.1, window_mm: float = 2.0,
+               margin_mm: float | None = None) -> list[dict[str, float]]:
     """Positions where a section quantity steps (e.g. a rod whose radius changes).
 
     A step at s is a change between the medians of ``values`` over
     [s - window, s) and (s, s + window] larger than ``min_rel_jump`` times the larger
-    of the two; the position is refined to the largest local change.
+    of the two; the position is refined to the largest local change. Changes within
+    ``margin_mm`` (default 2 windows) of the first/last valid section (the object's
+    end caps) are not reported.
 
     Returns a list of ``{"s_mm", "before", "after"}``, ordered by s.
     """
@@ -632,6 +639,7 @@ def find_steps(s_mm: np.ndarray, values: np.ndarray, *, min_rel_jump: float = 0.
         return []
     step = float(np.median(np.diff(s)))
     w = max(int(round(window_mm / step)), 2)
+    margin = 2.0 * window_mm if margin_mm is None else float(margin_mm)
     jumps = np.zeros(len(s))
     for i in range(w, len(s) - w):
         a = np.median(y[i - w : i])
@@ -643,6 +651,8 @@ def find_steps(s_mm: np.ndarray, values: np.ndarray, *, min_rel_jump: float = 0.
     for sign in (1, -1):
         peaks, _ = find_peaks(sign * jumps, height=min_rel_jump, distance=w)
         for p in peaks:
+            if s[p] - s[0] < margin or s[-1] - s[p] < margin:
+                continue
             out.append({
                 "s_mm": float(s[p]),
                 "before": float(np.median(y[max(p - w, 0) : p])),
