@@ -297,6 +297,7 @@ def measure_object(
     between: tuple[float, float] | None = None,
     mesh: bool = True,
     area: str = "pv",
+    average_mm: float = 0.0,
 ) -> dict[str, Any]:
     """Everything ``ctui measure`` reports for one object, for the TUI and scripts.
 
@@ -318,6 +319,8 @@ def measure_object(
         Compute the mesh (Gauss) volume and area with MESH's ``mask_surface``.
     area : "pv" or "contour"
         Section area estimate (see :mod:`ctui.engine.sections`).
+    average_mm : float
+        Thin-slab averaging of each section along the path (0 = single planes).
 
     Returns
     -------
@@ -366,7 +369,7 @@ def measure_object(
     else:
         path = np.asarray(path, dtype=np.float64)
     field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
-    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area)
+    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)
     out["path_mm"] = path
     out["path_length_mm"] = path_length(path)
     out["rows"] = rows
