@@ -243,3 +243,35 @@ async def test_internal_error_is_a_notification_not_a_traceback(monkeypatch):
         await pilot.press("pageup")
         assert app.session.z == z + 1
         assert app.screen is app.workspace
+
+
+async def test_random_key_monkey_finds_no_internal_error():
+    """300 seeded random keys over every screen (everything but quit): user errors may be
+    reported, but no internal error (a bug) and the app stays usable."""
+    import random
+
+    keys = ["left", "right", "up", "down", "H", "J", "K", "L", "pageup", "pagedown", "home", "end", "g", "w", "W",
+            "plus", "minus", "ctrl+left", "ctrl+up", "v", "V", "f", "enter", "left_square_bracket",
+            "right_square_bracket", "T", "c", "m", "n", "tab", "u", "U", "p", "less_than_sign", "greater_than_sign",
+            "a", "x", "escape", "escape", "escape", "d", "r", "M", "e", "s", "t", "K", "space", "1", "5", "0",
+            "colon", "shift+up", "shift+down", "question_mark", "y", "delete"]
+    rng = random.Random(1234)
+    app = CtuiApp(autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        for i in range(300):
+            await pilot.press(rng.choice(keys))
+            if i % 50 == 49:
+                await pilot.pause(0.2)
+        await pilot.pause(1.0)
+        assert not app.internal_errors, app.internal_errors[-1]
+        # back to the workspace and still responsive
+        for _ in range(6):
+            if app.screen is app.workspace:
+                break
+            await pilot.press("escape")
+            await pilot.pause(0.2)
+        assert app.screen is app.workspace, type(app.screen).__name__
+        z = app.session.z
+        await pilot.press("home", "pageup")
+        assert app.session.z == 1

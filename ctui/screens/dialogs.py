@@ -150,6 +150,16 @@ def bindings_help(screen) -> str:
             if (key, action) in seen:
                 continue
             seen.add((key, action))
-            keys = ", ".join(k.strip() for k in key.split(","))
-            lines.append(f"  [b]{keys:<28}[/b] {desc or action}")
+            shown = []
+            for k in key.split(","):
+                k = k.strip()
+                try:
+                    from textual.binding import Binding as _B
+
+                    d = screen.app.get_key_display(_B(k, action, desc or ""))
+                except Exception:
+                    d = k
+                shown.append(d if d == k else f"{d} ({k})")
+            keys = f"{', '.join(shown):<34}".replace("[", "\\[")
+            lines.append(f"  [b]{keys}[/b] {desc or action}")
     return "\n".join(lines)
