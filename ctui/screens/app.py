@@ -175,8 +175,13 @@ class CtuiApp(App):
         self.session = session
         for w in session.volume.warnings[:3]:
             self.notify(w, title="Series", severity="warning", timeout=6)
-        if session.volume.skipped:
-            self.notify(f"{len(session.volume.skipped)} file(s) skipped (see ctui info)", severity="warning", timeout=6)
+        skipped = session.volume.skipped
+        if len(skipped) == 1:
+            sk = skipped[0]
+            self.notify(f"Skipped {sk.get('file')}: {sk.get('reason')}", severity="information", timeout=4)
+        elif skipped:
+            self.notify(f"{len(skipped)} files skipped (ctui info lists them), e.g. {skipped[0].get('file')}: "
+                        f"{skipped[0].get('reason')}", severity="warning", timeout=6)
         ws = WorkspaceScreen(session)
         self.workspace = ws
         # replace whatever is on the stack (loading screen, old workspace)
