@@ -195,6 +195,8 @@ class WorkspaceScreen(GuardMixin, Screen):
 
     @work(thread=True, exclusive=True, group="views")
     def compute_stage_views(self, z: int, token: int) -> None:
+        if z != self.s.z or token != self._views_token:
+            return  # superseded before it started (key held down): skip the filtering
         try:
             views = self.s.stage_views(z)
         except Exception as exc:  # never let a filter error escape as a traceback
