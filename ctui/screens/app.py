@@ -453,7 +453,7 @@ def session_from_project(proj, volume, path: str) -> Session:
     meta = proj.meta or {}
     s = Session(volume, source_path=proj.source_path, source_options=dict(proj.source_options or {}),
                 pipeline=pipeline_mod.Pipeline.from_dict(proj.pipeline or {}), seg=seg,
-                z=int(meta.get("z", 0)), x=int(meta.get("x", 0)), y=int(meta.get("y", 0)))
+                z=meta.get("z"), x=meta.get("x"), y=meta.get("y"))
     if proj.window:
         s.window = (float(proj.window[0]), float(proj.window[1]))
     s.tolerance = float(prop.get("tolerance", s.tolerance))

@@ -51,9 +51,9 @@ class Session:
     volume: Volume
     source_path: str = ""
     source_options: dict = field(default_factory=dict)
-    z: int = 0
-    x: int = 0
-    y: int = 0
+    z: int | None = None  # None: the middle slice / centre pixel
+    x: int | None = None
+    y: int | None = None
     window: tuple[float, float] = (40.0, 400.0)
     view: str = "overlay"
     zoom: float = 1.0
@@ -72,9 +72,10 @@ class Session:
 
     def __post_init__(self) -> None:
         nz, ny, nx = self.volume.shape
-        self.z = min(max(self.z, 0), nz - 1) if self.z else nz // 2
-        self.x = self.x or nx // 2
-        self.y = self.y or ny // 2
+        self.z = nz // 2 if self.z is None else int(min(max(self.z, 0), nz - 1))
+        self.x = nx // 2 if self.x is None else int(self.x)
+        self.y = ny // 2 if self.y is None else int(self.y)
+        self.clamp()
         if self.volume.window:
             self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
         if self.pipeline is None:
