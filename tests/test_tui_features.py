@@ -290,3 +290,17 @@ async def test_propagation_3d_mode_and_reject():
         ml = int((s.seg.labels == 1).sum()) * s.volume.voxel_volume_mm3() / 1000
         assert abs(ml - o["volume_ml"]) / o["volume_ml"] < 0.03, ml
         assert not app.errors, app.errors
+
+
+async def test_mouse_click_moves_the_cursor():
+    app = CtuiApp()
+    async with app.run_test(size=(100, 30)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        mv = app.workspace.main_view
+        vm = mv.view_map
+        # the cell showing image pixel (40, 90): click it
+        xd, yd = vm.to_display(40, 90)
+        await pilot.click("#main", offset=(int(xd), int(yd) // 2))
+        await pilot.pause()
+        assert abs(app.session.x - 40) <= 2 and abs(app.session.y - 90) <= 2

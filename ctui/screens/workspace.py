@@ -415,9 +415,12 @@ class WorkspaceScreen(GuardMixin, Screen):
 
     def on_click(self, event) -> None:
         """Click on a view moves the cursor there."""
-        widget = event.widget
+        widget = getattr(event, "widget", None)
         if isinstance(widget, ImageView):
-            pos = widget.display_to_image(event.x, event.y)
+            off = event.get_content_offset(widget)
+            if off is None:
+                return
+            pos = widget.display_to_image(off.x, off.y)
             if pos is not None:
                 self.s.x, self.s.y = int(round(pos[0])), int(round(pos[1]))
                 self.s.clamp()
