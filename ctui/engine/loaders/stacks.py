@@ -408,15 +408,18 @@ def _inflate(path: Path, offset: int, expected: int) -> bytes:
     """zlib-decompress a MetaImage's data, never producing more than ``expected`` bytes."""
     d = zlib.decompressobj()
     out = bytearray()
-    with open(path, "rb") as fh:
-        fh.seek(offset)
-        while True:
-            chunk = fh.read(1 << 20)
-            if not chunk:
-                break
-            out += d.decompress(chunk, max(0, expected - len(out)) or 1)
-            if len(out) >= expected:
-                break
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            while True:
+                chunk = fh.read(1 << 20)
+                if not chunk:
+                    break
+                out += d.decompress(chunk, max(0, expected - len(out)) or 1)
+                if len(out) >= expected:
+                    break
+    except zlib.error as exc:  # corrupted stream (found by FMT's tests/test_fuzz_stacks.py)
+        raise LoadError(f"corrupted compressed data ({exc})", path=path) from None
     return bytes(out[:expected])
 
 
