@@ -210,7 +210,7 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
             if files is None:
                 target = (path.parent / str(datafile)).resolve()
                 if not target.is_file():
-                    raise LoadError(f"data file {datafile} named by the NRRD header is missing", path=path)
+                    raise LoadError(f"data file {datafile!r} named by the NRRD header is missing", path=path)
             if skip == -1:
                 off = None
         if files is not None:

@@ -7,6 +7,7 @@ None of these formats has patient geometry (MetaImage aside): spacing comes from
 
 from __future__ import annotations
 
+import io
 import os
 import zlib
 from pathlib import Path
@@ -96,6 +97,7 @@ def _finish(data, *, spacing, given, warnings, source, path, meta, skipped, moda
 
 # --------------------------------------------------------------------- image stacks
 MAX_RATIO = 1100  # pixels per stored byte an image header may claim
+SMALL_FILE = 64 << 20  # image files up to this size are decoded from memory
 def _image_mode_dtype(mode: str) -> np.dtype:
     if mode in ("I;16", "I;16L", "I;16B", "I;16N"):
         return np.dtype(np.uint16)
@@ -182,7 +184,13 @@ def load_images(
 
     def work(k: int, zi: int) -> str | None:
         p, page, _, _, mode = keep[zi]
-        with Image.open(p) as im:
+        # decode from memory when the file is small: a corrupt chunk length then cannot
+        # make the decoder's file reads allocate more than the file holds (CPython's
+        # buffered read(n) allocates n up front; BytesIO.read(n) only what is there)
+        src: Any = p
+        if p.stat().st_size <= SMALL_FILE:
+            src = io.BytesIO(p.read_bytes())
+        with Image.open(src) as im:
             if page:
                 im.seek(page)
             if mode in ("P", "PA", "1", "CMYK", "YCbCr", "LAB", "HSV"):
@@ -505,9 +513,13 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     elif datafile.upper().startswith("LIST") or "%" in datafile:
         raise CtuiError("MetaImage with per-slice data files (LIST / pattern) is not supported", path=path)
     else:
-        data_path = (path.parent / datafile).resolve()
-        if not data_path.is_file():
-            raise LoadError(f"data file {datafile} named by the header is missing", path=path)
+        try:
+            data_path = (path.parent / datafile).resolve()
+            ok = data_path.is_file()
+        except (OSError, ValueError):  # embedded NUL, name too long, link loop
+            ok = False
+        if not ok:
+            raise LoadError(f"data file {datafile!r} named by the header is missing", path=path)
         offset = None
         if hsize > 0:
             offset = hsize
