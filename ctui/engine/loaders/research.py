@@ -208,8 +208,12 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
         else:
             files, target, off = _nrrd_data_files(path, str(datafile), nz), None, max(skip, 0)
             if files is None:
-                target = (path.parent / str(datafile)).resolve()
-                if not target.is_file():
+                try:
+                    target = (path.parent / str(datafile)).resolve()
+                    ok = target.is_file()
+                except (OSError, ValueError):  # embedded NUL, name too long, link loop
+                    ok = False
+                if not ok:
                     raise LoadError(f"data file {datafile!r} named by the NRRD header is missing", path=path)
             if skip == -1:
                 off = None
