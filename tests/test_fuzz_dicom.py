@@ -300,5 +300,5 @@ def test_fuzz_dicom():
 
     if not HAVE_LOADERS:
         pytest.skip("ctui.engine.loaders not available yet")
-    res = run_campaign("test_fuzz_dicom", "campaign", examples=fuzz_examples(500), timeout_s=15.0)
+    res = run_campaign("test_fuzz_dicom", "campaign", examples=fuzz_examples(500))
     assert_clean("dicom", res, min_cases=2500)

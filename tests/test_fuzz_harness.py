@@ -161,7 +161,7 @@ def _tree_size(p: Path) -> int:
             return p.stat().st_size
         if p.is_dir():
             return sum(f.stat().st_size for f in p.rglob("*") if f.is_file() and not f.is_symlink())
-    except OSError:
+    except (OSError, RecursionError):
         pass
     return 0
 
@@ -184,7 +184,7 @@ def worker_main(argv: list[str]) -> int:
     ctx = Ctx(
         outdir,
         examples=int(os.environ.get("CTUI_FUZZ_N", "200")),
-        timeout_s=float(os.environ.get("CTUI_FUZZ_TIMEOUT", "10")),
+        timeout_s=float(os.environ.get("CTUI_FUZZ_TIMEOUT", "30")),
         mem_factor=int(os.environ.get("CTUI_FUZZ_MEM_FACTOR", "64")),
         mem_floor=int(os.environ.get("CTUI_FUZZ_MEM_FLOOR", str(96 * 2**20))),
     )
@@ -207,7 +207,7 @@ def worker_main(argv: list[str]) -> int:
     return 0
 
 
-def run_campaign(module: str, campaign: str, *, examples: int, timeout_s: float = 10.0, stall_s: float = 60.0, env: dict | None = None) -> dict:
+def run_campaign(module: str, campaign: str, *, examples: int, timeout_s: float = 30.0, stall_s: float = 90.0, env: dict | None = None) -> dict:
     """Run ``module.campaign(ctx)`` in worker subprocesses; restart after crashes.
 
     Returns ``{"cases": n, "counts": {...}, "findings": [...]}``; findings include
