@@ -190,6 +190,7 @@ def centreline(
     step_mm: float = 0.5,
     smooth_mm: float | None = None,
     recentre: int = 2,
+    straight_ends: bool = True,
 ) -> np.ndarray:
     """Automatic centred path of a tubular object, in patient mm.
 
@@ -217,6 +218,11 @@ def centreline(
     recentre : int
         Iterations of :func:`ctui.engine.sections.recentre_path` (points moved to
         their normal sections' centroids); 0 to skip.
+    straight_ends : bool
+        With automatic endpoints, replace the path's ends, which bend towards the
+        extremity voxels on the border, by the straight continuation of the centred
+        path up to the end caps (so the path length is the tube's length and the
+        last sections are not tilted).
 
     Returns
     -------
@@ -283,4 +289,55 @@ def centreline(
 
         field = object_field(m, spacing=sp, origin=origin, direction=direction)
         path = recentre_path(path, field=field, step_mm=step_mm, iterations=recentre)
+    if straight_ends and endpoints is None:
+        path = _straighten_ends(path, sub, dist, lo, step_mm, spacing=sp, origin=origin, direction=direction)
     return path
+
+
+def _straighten_ends(path, sub, dist, lo, step_mm, *, spacing, origin, direction) -> np.ndarray:
+    """Replace each end of a centred path, where it bends towards the extremity voxel
+    on the object's border, by the straight continuation of the path until it leaves
+    the object (through the end cap).
+
+    The bent part is where the arc length from the end is shorter than the local
+    distance to the border (the inscribed radius)."""
+    from scipy import ndimage as ndi
+
+    p = np.asarray(path, dtype=np.float64)
+    if len(p) < 8:
+        return p
+    idx = mm_to_index(p, spacing=spacing, origin=origin, direction=direction) - lo
+    r = ndi.map_coordinates(dist, idx.T, order=1, mode="constant", cval=0.0)
+    s = arc_length(p)
+    total = s[-1]
+    lim = np.asarray(sub.shape) - 1
+
+    def inside(q):
+        k = np.rint(mm_to_index(q, spacing=spacing, origin=origin, direction=direction) - lo).astype(int)
+        return bool(np.all(k >= 0) and np.all(k <= lim) and sub[tuple(k)])
+
+    ok_a = np.nonzero(s >= r)[0]
+    ok_b = np.nonzero(total - s >= r)[0]
+    if len(ok_a) == 0 or len(ok_b) == 0:
+        return p
+    i0, i1 = int(ok_a[0]), int(ok_b[-1])
+    if i1 - i0 < 4:
+        return p
+    fine = 0.25 * float(min(spacing))
+
+    def extend(i, j):
+        t = p[i] - p[j]
+        t /= np.linalg.norm(t)
+        pts = []
+        q = p[i].copy()
+        for _ in range(int(4 * r[i] / fine) + 8):
+            q = q + fine * t
+            if not inside(q):
+                break
+            pts.append(q.copy())
+        return pts
+
+    head = extend(i0, min(i0 + 2, len(p) - 1))[::-1]
+    tail = extend(i1, max(i1 - 2, 0))
+    parts = [np.asarray(head).reshape(-1, 3), p[i0 : i1 + 1], np.asarray(tail).reshape(-1, 3)]
+    return resample_path(np.concatenate(parts), step_mm)
