@@ -278,6 +278,11 @@ def test_outputs_csv_json_plot(tmp_path):
     red = (im[..., 0] > 180) & (im[..., 1] < 90) & (im[..., 2] < 90)
     blue = (im[..., 2] > 150) & (im[..., 0] < 80)
     assert red.sum() > 50 and blue.sum() > 50
+    from ctui.engine.sections import sections_plot_image
+
+    arr = sections_plot_image(rows, references=[math.pi * 4], size_px=(640, 320), quantity="eq_diameter_mm")
+    assert arr.shape == (320, 640, 3) and arr.dtype == np.uint8
+    assert ((arr[..., 2] > 150) & (arr[..., 0] < 80)).sum() > 50
 
 
 def test_points_outside_object_give_nan():

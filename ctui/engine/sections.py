@@ -730,32 +730,14 @@ def write_sections_json(path, rows: Iterable[dict[str, Any]], **extra: Any) -> N
     write_text(path, json.dumps(doc, indent=1) + "\n")
 
 
-def plot_sections(
-    path,
-    rows: Sequence[dict[str, Any]],
-    *,
-    quantity: str = "area_mm2",
-    references: Sequence[float] | None = None,
-    band: float | None = 0.02,
-    title: str | None = None,
-    size=(8.0, 4.0),
-    dpi: int = 100,
-) -> None:
-    """PNG plot of a section quantity against arc length (matplotlib Agg, atomic).
-
-    ``references``: horizontal reference values (same unit as ``quantity``), drawn as
-    dashed lines with a +-``band`` relative band, like the thesis's figure 7.11.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
+def _sections_figure(rows, *, quantity, references, band, title, size, dpi):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from .atomic import atomic_path
 
     s = np.array([r["s_mm"] for r in rows], dtype=np.float64)
     y = np.array([r.get(quantity, np.nan) for r in rows], dtype=np.float64)
     fig = Figure(figsize=size, dpi=dpi)
+    FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     ax.plot(s, y, "-", color="#1f77b4", lw=1.2, label=quantity)
     for ref in references or ():
@@ -769,8 +751,48 @@ def plot_sections(
         ax.set_title(title)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
+    return fig
+
+
+def plot_sections(
+    path,
+    rows: Sequence[dict[str, Any]],
+    *,
+    quantity: str = "area_mm2",
+    references: Sequence[float] | None = None,
+    band: float | None = 0.02,
+    title: str | None = None,
+    size=(8.0, 4.0),
+    dpi: int = 100,
+) -> None:
+    """PNG plot of a section quantity against arc length (matplotlib Agg, atomic).
+
+    ``quantity``: any numeric row key ("area_mm2", "eq_diameter_mm",
+    "min_diameter_mm", ...). ``references``: horizontal reference values (same unit),
+    drawn as dashed lines with a +-``band`` relative band, like the thesis's figure 7.11.
+    """
+    from .atomic import atomic_path
+
+    fig = _sections_figure(rows, quantity=quantity, references=references, band=band, title=title, size=size, dpi=dpi)
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png")
+
+
+def sections_plot_image(
+    rows: Sequence[dict[str, Any]],
+    *,
+    quantity: str = "area_mm2",
+    references: Sequence[float] | None = None,
+    band: float | None = 0.02,
+    title: str | None = None,
+    size_px: tuple[int, int] = (800, 400),
+) -> np.ndarray:
+    """The same plot as :func:`plot_sections`, as an RGB image (h, w, 3) uint8 (for the TUI)."""
+    dpi = 100
+    fig = _sections_figure(rows, quantity=quantity, references=references, band=band, title=title,
+                           size=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 
 # ------------------------------------------------------------------ volume between planes
