@@ -7,8 +7,10 @@ compile is excluded):
 
 * "wobbly tube": a contour of ~512 points per slice whose radius and centre drift slowly
   (the common case: similar consecutive contours);
-* "tilted, twisting": the same contours shifted 6 px per slice and rotated 4 degrees per
-  slice, with an elliptic cross-section (consecutive contours overlap only partly).
+* "tilted, twisting": elongated elliptic contours (aspect 2.5) shifted 4 px and rotated
+  12 degrees per slice (consecutive contours overlap only partly);
+* "branching 1-2-1": an oval that splits into two lobes for 10 of every 20 slices (each
+  split and join is tiled against a bridged composite contour).
 
 Printed: median time, triangles, total area, triangle quality (4*sqrt(3)*A / sum of
 squared edges: 1 equilateral, 0 degenerate; mean and 1st percentile), slivers
@@ -29,6 +31,24 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+def branching(n_slices: int, n_points: int) -> list[list[tuple[np.ndarray, bool]]]:
+    """A tube that splits into two lobes for 10 of every 20 slices (1 -> 2 -> 1 branchings)."""
+    t = np.linspace(0, 2 * np.pi, n_points, endpoint=False)
+    r0 = n_points / (2 * np.pi)
+    out = []
+    for z in range(n_slices):
+        if (z // 10) % 2:
+            lobes = []
+            for sx in (-1, 1):
+                r = 0.45 * r0
+                lobes.append((np.column_stack([300 + sx * 0.55 * r0 + r * np.cos(t[::2]), 300 + r * np.sin(t[::2])]),
+                              False))
+            out.append(lobes)
+        else:
+            out.append([(np.column_stack([300 + r0 * np.cos(t), 300 + 0.7 * r0 * np.sin(t)]), False)])
+    return out
+
+
 def stack(n_slices: int, n_points: int, *, tilt: bool) -> list[list[tuple[np.ndarray, bool]]]:
     r0 = n_points / (2 * np.pi)  # perimeter ~ n_points pixels -> ~n_points points at step 1
     out = []
@@ -38,9 +58,9 @@ def stack(n_slices: int, n_points: int, *, tilt: bool) -> list[list[tuple[np.nda
         cx = 300 + 20 * np.sin(z / 40.0)
         cy = 300 + 15 * np.cos(z / 33.0)
         if tilt:
-            ang = np.deg2rad(4.0 * z)
-            ex, ey = r * 1.3 * np.cos(t), r * 0.75 * np.sin(t)
-            x = cx + 6.0 * (z % 40) + ex * np.cos(ang) - ey * np.sin(ang)
+            ang = np.deg2rad(12.0 * z)
+            ex, ey = r * 1.5 * np.cos(t), r * 0.6 * np.sin(t)
+            x = cx + 4.0 * z + ex * np.cos(ang) - ey * np.sin(ang)
             y = cy + ex * np.sin(ang) + ey * np.cos(ang)
         else:
             x, y = cx + r * np.cos(t), cy + r * np.sin(t)
@@ -68,8 +88,10 @@ def main() -> int:
     from ctui.engine.meshtools import mesh_report
 
     spacing = (1.0, 0.7, 0.7)
-    for name, tilt in (("wobbly tube", False), ("tilted, twisting", True)):
-        st = stack(args.slices, args.points, tilt=tilt)
+    cases = (("wobbly tube", stack(args.slices, args.points, tilt=False)),
+             ("tilted, twisting", stack(args.slices, args.points, tilt=True)),
+             ("branching 1-2-1", branching(args.slices, args.points)))
+    for name, st in cases:
         slab = sum(abs(0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
                    for sl in st for p, _ in sl) * np.prod(spacing)
         print(f"{name}: {args.slices} slices x {args.points} points")

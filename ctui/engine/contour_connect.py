@@ -98,8 +98,22 @@ def tile_dp(P, Q, pid, qid, band):
     counter-clockwise loops (seen from +z) with Q above P the normals point outwards.
     The path starts at P[0] and the point of Q closest to it. ``band``: half-width
     (in points of Q) of the searched band around the arc-length diagonal ``j = i m / n``
-    (<= 0: the full table). Returns an empty array if the band admits no path.
+    (<= 0: the full table); the band is doubled while the best path touches its edge,
+    so the result is the full table's optimum whenever that lies inside a band.
     """
+    b = band
+    while True:
+        t, touched = _tile_dp_band(P, Q, pid, qid, b)
+        if b <= 0 or (t.shape[0] > 0 and not touched):
+            return t
+        b = 2 * b
+        if 2 * b + 2 >= Q.shape[0] + 1:
+            b = 0
+
+
+@njit(cache=True)
+def _tile_dp_band(P, Q, pid, qid, band):
+    """DP within one band; returns (triangles, whether the path touches the band edge)."""
     n = P.shape[0]
     m = Q.shape[0]
     s = _closest_start(P, Q)
@@ -161,12 +175,16 @@ def tile_dp(P, Q, pid, qid, band):
     out = np.empty((n + m, 3), np.int64)
     kend = m - lo[n]
     if kend < 0 or kend >= W or cost[n, kend] >= INF:
-        return out[:0]
+        return out[:0], True
     i = n
     j = m
     t = n + m - 1
+    touched = False
     while i > 0 or j > 0:
-        ch = choice[i, j - lo[i]]
+        kk = j - lo[i]
+        if not full and ((kk == 0 and lo[i] > 0) or (kk == W - 1 and lo[i] + W - 1 < m)):
+            touched = True
+        ch = choice[i, kk]
         if ch == 1:
             i -= 1
             out[t, 0] = pid[i % n]
@@ -178,9 +196,9 @@ def tile_dp(P, Q, pid, qid, band):
             out[t, 1] = qid[(j + 1 + s) % m]
             out[t, 2] = qid[(j + s) % m]
         else:
-            return out[:0]
+            return out[:0], True
         t -= 1
-    return out
+    return out, touched
 
 
 @njit(cache=True)
@@ -488,7 +506,8 @@ def connect_contours(
         the pixel edges so areas equal pixel counts.
     band : int
         DP band half-width in points (0: automatic: full table for loops up to 200
-        points, else max(24, 15 % of the loop)).
+        points, else max(8, 2 % of the loop), doubled while the best path touches
+        the band's edge, so the result equals the full table's optimum).
     half_slice_ends : bool
         Extrude ending contours by half a slice before capping (each contour stands
         for one slice's slab), so volumes match the voxel volume.
@@ -531,12 +550,12 @@ def connect_contours(
     def to_mm(p_idx: np.ndarray) -> np.ndarray:
         return p_idx @ lin.T
 
-    jobs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    jobs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]] = []
 
     def tile(lower: list[_Loop], upper: list[_Loop]) -> None:
         pos_p, pid = _merge_loops(lower) if len(lower) > 1 else (lower[0].xyz, lower[0].ids)
         pos_q, qid = _merge_loops(upper) if len(upper) > 1 else (upper[0].xyz, upper[0].ids)
-        jobs.append((to_mm(pos_p), pid, to_mm(pos_q), qid))
+        jobs.append((to_mm(pos_p), pid, to_mm(pos_q), qid, len(lower) > 1 or len(upper) > 1))
 
     def run_jobs() -> None:
         if not jobs:
@@ -550,7 +569,10 @@ def connect_contours(
         if band > 0:
             bands = np.full(len(jobs), int(band), np.int64)
         else:
-            bands = np.where(mx <= 200, 0, np.maximum(24, (0.15 * mx).astype(np.int64)))
+            bands = np.where(mx <= 200, 0, np.maximum(8, (0.02 * mx).astype(np.int64)))
+            # branch pairs (bridged composite loops) are far from the arc-length
+            # diagonal: full table (they are few)
+            bands[np.array([j[4] for j in jobs], bool)] = 0
         out = np.empty((int(toff[-1]), 3), np.int64)
         ok = tile_many(np.ascontiguousarray(np.concatenate([j[0] for j in jobs])), poff,
                        np.concatenate([j[1] for j in jobs]).astype(np.int64),
