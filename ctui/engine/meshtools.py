@@ -220,7 +220,8 @@ def smooth_taubin(mesh: Mesh, *, iterations: int = 10, lamb: float = 0.5, mu: fl
     return out
 
 
-def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7) -> Mesh:
+def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7,
+             min_component_triangles: int = 100) -> Mesh:
     """Quadric-error decimation to about ``target_triangles`` triangles.
 
     Uses fast-simplification (Fast Quadric Mesh Simplification); a closed input stays
@@ -233,11 +234,26 @@ def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7) -> M
         raise ValueError("target_triangles must be positive")
     if mesh.n_faces <= target:
         return _copy(mesh)
-    reduction = 1.0 - target / mesh.n_faces
-    v, f = fast_simplification.simplify(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32),
+    # tiny closed components (a few triangles: noise specks) collapse into non-manifold
+    # slivers under edge collapse: they are kept as they are and only the rest is
+    # decimated (to the remaining budget)
+    ncomp, flab = face_components(mesh)
+    small = np.zeros(len(mesh.faces), bool)
+    if ncomp > 1:
+        sizes = np.bincount(flab, minlength=ncomp)
+        small = sizes[flab] < min_component_triangles
+    keep_small = _submesh(mesh, small) if small.any() else None
+    big = _submesh(mesh, ~small) if small.any() else mesh
+    budget = max(target - (keep_small.n_faces if keep_small is not None else 0), 4)
+    if big.n_faces <= budget or big.n_faces == 0:
+        return _copy(mesh)
+    reduction = 1.0 - budget / big.n_faces
+    v, f = fast_simplification.simplify(np.asarray(big.vertices, np.float32), np.asarray(big.faces, np.int32),
                                         target_reduction=reduction, agg=aggressiveness)
-    out = _copy(mesh, vertices=np.asarray(v, np.float32), faces=np.asarray(f, np.int32),
-                normals=vertex_normals(v, f))
+    dec = Mesh(np.asarray(v, np.float32), np.asarray(f, np.int32))
+    merged = merge([dec] + ([keep_small] if keep_small is not None else []))
+    out = _copy(mesh, vertices=merged.vertices, faces=merged.faces,
+                normals=vertex_normals(merged.vertices, merged.faces))
     out.meta["decimated"] = {"from": mesh.n_faces, "to": int(len(f))}
     return out
 
