@@ -17,7 +17,7 @@ import sys
 
 from . import __version__
 
-OPEN_OPTIONS = ("--graphics", "--series")  # options of `open` accepted without the command name
+OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
 COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure")
 
 

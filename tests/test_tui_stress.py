@@ -275,3 +275,14 @@ async def test_random_key_monkey_finds_no_internal_error():
         z = app.session.z
         await pilot.press("home", "pageup")
         assert app.session.z == 1
+
+
+async def test_series_too_big_for_memory_offers_downsampling():
+    app = CtuiApp(str(SAMPLE_DIR), memory_limit=1_000_000)  # the 2.6 MB phantom "does not fit"
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda: app.errors, what="the memory error")
+        assert isinstance(app.screen, LoadingScreen) and app.screen.too_big
+        assert "downsample" in app.errors[0]
+        await pilot.press("d")
+        await wait_workspace(pilot, app)
+        assert app.session.volume.shape[1:] == (64, 64)  # LOAD downsamples in-plane (and maybe z)

@@ -19,6 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--graphics", choices=GRAPHICS, default=None,
                    help="how images reach the terminal (default: $CTUI_GRAPHICS or auto)")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) to open when PATH holds several")
+    p.add_argument("--downsample", type=int, default=None, metavar="N", help="load every N-th voxel (large series)")
+    p.add_argument("--crop", default=None, metavar="z0,z1,y0,y1,x0,x1", help="load only this box (voxel indices)")
     p.set_defaults(func=run)
 
 
@@ -42,6 +44,14 @@ def run(args: argparse.Namespace) -> int:
     options = {}
     if args.series:
         options["series"] = args.series
+    if args.downsample:
+        options["downsample"] = args.downsample
+    if args.crop:
+        try:
+            options["crop"] = tuple(int(v) for v in args.crop.split(","))
+            assert len(options["crop"]) == 6
+        except (ValueError, AssertionError):
+            raise CtuiError(f"--crop wants six integers z0,z1,y0,y1,x0,x1, got {args.crop!r}") from None
     app = CtuiApp(path, project=project, graphics=mode, **options)
     app.run()
     return int(app.return_code or 0)

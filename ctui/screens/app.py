@@ -32,11 +32,50 @@ class LoadingScreen(GuardMixin, Screen):
     LoadingScreen > Vertical { width: 80%; height: auto; border: round $accent; padding: 1 2; }
     LoadingScreen ProgressBar { margin: 1 0; }
     """
-    BINDINGS = [Binding("o", "app.open", "Open another"), Binding("escape", "back", "Back"), Binding("q", "app.quit", "Quit")]
+    BINDINGS = [
+        Binding("o", "app.open", "Open another"),
+        Binding("d", "reduced(2)", "Downsample x2", show=False),
+        Binding("D", "reduced(4)", "Downsample x4", show=False),
+        Binding("c", "crop", "Crop", show=False),
+        Binding("escape", "back", "Back"),
+        Binding("q", "app.quit", "Quit"),
+    ]
 
     def __init__(self, what: str) -> None:
         super().__init__()
         self.what = what
+        self.too_big = False  # the series would not fit in memory: offer downsampling/cropping
+        self.path: str | None = None
+        self.options: dict = {}
+
+    def action_reduced(self, factor: int) -> None:
+        if not self.too_big:
+            return
+        opts = {**self.options, "downsample": int(factor)}
+        self.app.load_worker(self.path, opts)
+        self.query_one("#load-title", Label).update(f"Loading [b]{self.what}[/b] downsampled x{factor} ...")
+        self.query_one("#load-progress").display = True
+        self.query_one("#load-reasons", Static).update("")
+
+    def action_crop(self) -> None:
+        if not self.too_big:
+            return
+        from .dialogs import PromptScreen
+
+        def done(val: str | None) -> None:
+            if not val:
+                return
+            try:
+                crop = tuple(int(v) for v in val.replace(" ", "").split(","))
+                if len(crop) != 6:
+                    raise ValueError
+            except ValueError:
+                self.app.notify("Crop: six integers z0,z1,y0,y1,x0,x1", severity="error")
+                return
+            self.app.load_worker(self.path, {**self.options, "crop": crop})
+            self.query_one("#load-progress").display = True
+
+        self.app.push_screen(PromptScreen("Crop z0,z1,y0,y1,x0,x1 (voxel indices)", ""), done)
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -128,7 +167,7 @@ class CtuiApp(App):
         try:
             vol = load_volume(path, progress=progress, **options)
         except CtuiError as exc:
-            self.call_from_thread(self._load_failed, path, [str(exc)])
+            self.call_from_thread(self._load_failed, path, [str(exc)], options)
             return
         except Exception as exc:  # a loader bug must not become a traceback
             self.call_from_thread(self._load_failed, path, [f"{type(exc).__name__}: {exc}"])
@@ -148,10 +187,15 @@ class CtuiApp(App):
         if isinstance(self.screen, LoadingScreen):
             self.screen.query_one("#load-progress", ProgressBar).update(total=total, progress=done)
 
-    def _load_failed(self, path: str | None, reasons: list[str]) -> None:
+    def _load_failed(self, path: str | None, reasons: list[str], options: dict | None = None) -> None:
         self.errors.extend(reasons)
         if isinstance(self.screen, LoadingScreen):
-            self.screen.show_error(f"Could not open {path or 'the sample series'}", reasons)
+            scr = self.screen
+            scr.path, scr.options = path, dict(options or {})
+            scr.too_big = any("downsample" in r for r in reasons)
+            if scr.too_big:
+                reasons = reasons + ["d opens it downsampled x2, D x4, c asks for a crop"]
+            scr.show_error(f"Could not open {path or 'the sample series'}", reasons)
         else:
             self.notify(f"Could not open {path}: {'; '.join(reasons)}", severity="error", timeout=10)
 
