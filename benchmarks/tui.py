@@ -1,7 +1,7 @@
 """Key-to-paint latency of a slice change in the TUI, ctui vs textual-image, in one run.
 
-ctui: the real app (WorkspaceScreen, half-block renderer forced) on a 512x512-pixel
-CT-like series at a 160x50 terminal; each PageUp/PageDown is timed from the key press
+ctui: the real app (WorkspaceScreen, half-block renderer forced, overlay view with one
+object, side panel updated) on a 512x512-pixel CT-like series at a 160x50 terminal; each PageUp/PageDown is timed from the key press
 until the frame holding the new slice has been composed AND turned into terminal
 escape codes (the headless driver skips that step, so the benchmark does it itself in
 App._display with a truecolor console, as a real terminal session would).
@@ -85,7 +85,11 @@ async def bench_ctui(vol, size, n: int) -> list[float]:
     from ctui.screens.session import Session
 
     sess = Session(vol, source_path="bench")
-    sess.view = "original"
+    sess.view = "overlay"  # the default view, with an object coloured over the slice
+    sess.seg.add_object()
+    yy, xx = np.mgrid[0:vol.shape[1], 0:vol.shape[2]]
+    disk = (xx - 0.32 * vol.shape[2]) ** 2 + (yy - 0.6 * vol.shape[1]) ** 2 <= (0.05 * vol.shape[1]) ** 2
+    sess.seg.labels[:, disk] = 1
     app = CtuiApp(session=sess)
     times: list[float] = []
     async with app.run_test(size=size) as pilot:
