@@ -286,3 +286,35 @@ async def test_series_too_big_for_memory_offers_downsampling():
         await pilot.press("d")
         await wait_workspace(pilot, app)
         assert app.session.volume.shape[1:] == (64, 64)  # LOAD downsamples in-plane (and maybe z)
+
+
+async def test_edits_wait_while_propagation_runs(monkeypatch):
+    from ctui.engine.pipeline import Pipeline
+
+    orig = Pipeline.final_region
+
+    def slow(self, *a, **k):
+        time.sleep(0.05)
+        return orig(self, *a, **k)
+
+    monkeypatch.setattr(Pipeline, "final_region", slow)
+    o = load_truth()["objects"][1]
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s, ws = app.session, app.workspace
+        await goto_voxel(pilot, app, *o["seed_zyx"])
+        s.range_ = ((o["hu"] + 40) / 2, o["hu"] + 200)
+        await pilot.press("enter", "p")
+        await pilot.pause(0.05)
+        assert ws._prop is not None
+        labels = s.seg.labels.copy()
+        t0 = time.monotonic()
+        await pilot.press("enter", "u", "U", "pageup", "pagedown")  # edits refused, navigation works
+        assert time.monotonic() - t0 < 2.0  # the UI did not wait for the propagation
+        assert np.array_equal(s.seg.labels, labels)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: ws._prop is None and ws.proposal is not None, what="the cancelled proposal")
+        assert ws.proposal.cancelled
+        await pilot.press("x")
+        assert not app.internal_errors

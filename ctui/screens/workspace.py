@@ -433,7 +433,16 @@ class WorkspaceScreen(GuardMixin, Screen):
             return False
         return True
 
+    def _busy(self) -> bool:
+        """Label edits wait while a propagation reads the labels (Escape cancels it)."""
+        if self._prop is not None:
+            self.app.notify("A propagation is running: wait for it or press Escape to cancel", severity="warning", timeout=3)
+            return True
+        return False
+
     def action_fill(self) -> None:
+        if self._busy():
+            return
         if not self._need_seg():
             return
         s = self.s
@@ -520,6 +529,8 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.update_panel()
 
     def action_undo(self) -> None:
+        if self._busy():
+            return
         if self.s.seg is None:
             return
         label = self.s.seg.undo()
@@ -529,6 +540,8 @@ class WorkspaceScreen(GuardMixin, Screen):
             self.refresh_view()
 
     def action_redo(self) -> None:
+        if self._busy():
+            return
         if self.s.seg is None:
             return
         label = self.s.seg.redo()
@@ -558,6 +571,8 @@ class WorkspaceScreen(GuardMixin, Screen):
     def action_accept(self) -> None:
         from .propagation import accept
 
+        if self._busy():
+            return
         accept(self)
 
     def action_reject(self) -> None:
@@ -572,6 +587,8 @@ class WorkspaceScreen(GuardMixin, Screen):
 
     # ------------------------------------------------------------------ other screens
     def action_filters(self) -> None:
+        if self._busy():
+            return
         from .pipeline_editor import PipelineEditor
 
         if self.s.pipeline is None:
@@ -587,6 +604,8 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.refresh_view()
 
     def action_drift(self) -> None:
+        if self._busy():
+            return
         from .drift_screen import DriftScreen
 
         self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
