@@ -5,7 +5,6 @@ the command palette, help, autosave, MRIC/PNG export, the ascii renderer."""
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -5,7 +5,6 @@ export STL and a project, resume the project."""
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
 
 import numpy as np
 import pytest
