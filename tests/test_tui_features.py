@@ -303,3 +303,27 @@ async def test_mouse_click_moves_the_cursor():
         await pilot.click("#main", offset=(int(xd), int(yd) // 2))
         await pilot.pause()
         assert abs(app.session.x - 40) <= 2 and abs(app.session.y - 90) <= 2
+
+
+async def test_rename_and_clear_object():
+    o = _obj("spine")
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        await goto_voxel(pilot, app, *o["seed_zyx"])
+        s.range_ = (370.0, 1000.0)
+        await pilot.press("enter")
+        await pilot.pause()
+        n = int((s.seg.labels == 1).sum())
+        assert n > 50
+        await pilot.press("N")
+        await answer_prompt(pilot, "spine L1")
+        assert s.seg.objects[1].name == "spine L1"
+        await pilot.press("delete", "y")
+        await pilot.pause()
+        assert not (s.seg.labels == 1).any()
+        await pilot.press("u")
+        await pilot.pause()
+        assert int((s.seg.labels == 1).sum()) == n
+        assert not app.errors

@@ -164,6 +164,14 @@ async def test_render_3d_shows_rendered_pixels(tmp_path):
         await pilot.press("m")
         await wait_for(pilot, lambda: v3.shown_requests[-1] == v3._req, timeout=60, what="the next mode")
         assert v3.mode == MODES[(MODES.index(before) + 1) % len(MODES)]
+        # p: the CT slice in place; the picture changes
+        shown = len(v3.shown_requests)
+        before_img = v3.last_image.copy()
+        await pilot.press("p")
+        await wait_for(pilot, lambda: len(v3.shown_requests) > shown and v3.shown_requests[-1] == v3._req, timeout=60,
+                       what="the slice plane render")
+        assert v3.scene.options.slice_plane is not None and v3.scene.options.slice_plane.index == s.z
+        assert np.abs(v3.last_image.astype(int) - before_img.astype(int)).mean() > 1
         # s: PNG of the view at 1024x1024; t: a turntable GIF
         png = tmp_path / "view 3d.png"
         await pilot.press("s")

@@ -70,6 +70,7 @@ class View3DScreen(GuardMixin, Screen):
         Binding("m", "mode", "Mode: surface/wire/transparent/MIP/DVR"),
         Binding("c", "method", "Contours/MC"),
         Binding("S", "shadows", "Shadows", show=False),
+        Binding("p", "slice_plane", "Slice plane", show=False),
         Binding("s", "save", "Save PNG"),
         Binding("t", "turntable", "Turntable"),
         Binding("escape,r", "close", "Back"),
@@ -118,7 +119,8 @@ class View3DScreen(GuardMixin, Screen):
             c, lt = self.scene.camera, self.scene.light
             lines += [f"azimuth {c.azimuth:g}°", f"elev.   {c.elevation:g}°", f"zoom    {c.zoom:.2f}",
                       f"light   {lt.azimuth:g}°, {lt.elevation:g}°",
-                      f"shadows {'on' if self.scene.options.shadows else 'off'}"]
+                      f"shadows {'on' if self.scene.options.shadows else 'off'}",
+                      f"slice   {'z ' + str(self.scene.options.slice_plane.index + 1) if self.scene.options.slice_plane else 'off'}"]
         if self.meshes:
             lines.append("")
             lines.append("[b]Objects[/b]")
@@ -128,7 +130,7 @@ class View3DScreen(GuardMixin, Screen):
                 except Exception:
                     vol = float("nan")
                 lines.append(f" {oid}: {len(m.faces)} tris, {vol:.1f} ml")
-        lines += ["", "[dim]arrows orbit 15°", "+/- zoom, shift+arrows light", "m mode, c method, S shadows",
+        lines += ["", "[dim]arrows orbit 15°", "+/- zoom, shift+arrows light", "m mode, c method, S shadows, p slice",
                   "s PNG, t turntable, Esc back[/dim]"]
         self.query_one("#v3-info", Static).update("\n".join(lines))
 
@@ -172,7 +174,8 @@ class View3DScreen(GuardMixin, Screen):
         self.scene.mode = self.mode
         self.scene.options.window = tuple(self.s.window)
         # the volume only in volume modes: surfaces alone frame the objects, not the whole series
-        self.scene.set_volume(self.s.volume if self.mode in ("mip", "dvr") or not self.meshes else None)
+        need_volume = self.mode in ("mip", "dvr") or not self.meshes or self.scene.options.slice_plane is not None
+        self.scene.set_volume(self.s.volume if need_volume else None)
         scene = self.scene.snapshot() if hasattr(self.scene, "snapshot") else copy.deepcopy(self.scene)
         size = self.query_one(ImageView).target_pixels()
         self._render_worker(scene, size, self._req)
@@ -251,6 +254,18 @@ class View3DScreen(GuardMixin, Screen):
         if self.scene is None:
             return
         self.scene.options.shadows = not self.scene.options.shadows
+        self._info()
+        self.request_render()
+
+    def action_slice_plane(self) -> None:
+        """Show the current CT slice in place inside the 3D view (or hide it)."""
+        if self.scene is None:
+            return
+        opts = self.scene.options
+        if opts.slice_plane is None:
+            opts.slice_plane = engine("render").SlicePlane(axis="z", index=int(self.s.z))
+        else:
+            opts.slice_plane = None
         self._info()
         self.request_render()
 

@@ -74,6 +74,8 @@ class WorkspaceScreen(GuardMixin, Screen):
         Binding("m", "prop_mode", "Propagation slice/3D", show=False),
         Binding("n", "new_object", "New object"),
         Binding("tab", "cycle_object", "Next object", show=False, priority=True),
+        Binding("N", "rename_object", "Rename object", show=False),
+        Binding("delete", "clear_object", "Clear object", show=False),
         Binding("u", "undo", "Undo"),
         Binding("U", "redo", "Redo", show=False),
         Binding("less_than_sign", "propagate('backward')", "Propagate back", show=False),
@@ -516,6 +518,39 @@ class WorkspaceScreen(GuardMixin, Screen):
             return
         self.s.dirty = True
         self.update_panel()
+
+    def action_rename_object(self) -> None:
+        from .dialogs import PromptScreen
+
+        s = self.s
+        if not self._need_seg():
+            return
+        s.seg.add_object(object_id=s.current)
+        info = s.seg.objects[s.current]
+
+        def done(val: str | None) -> None:
+            if val and val.strip():
+                info.name = val.strip()[:40]
+                s.dirty = True
+                self.update_panel()
+
+        self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+
+    def action_clear_object(self) -> None:
+        from .dialogs import ConfirmScreen
+
+        s = self.s
+        if not self._need_seg() or self._busy():
+            return
+
+        def done(ok: bool) -> None:
+            if ok:
+                n = s.seg.clear_object(s.current)
+                self.labels_changed()
+                self.set_status(f"Cleared {n} voxels of object {s.current} (u undoes)")
+                self.refresh_view()
+
+        self.app.push_screen(ConfirmScreen(f"Erase every voxel of object {s.current}? (u undoes)", "Erase", "Keep"), done)
 
     def action_cycle_object(self) -> None:
         if self.s.seg is None:
