@@ -175,7 +175,7 @@ def campaign(ctx) -> None:
         return load(p.parent)
 
     # one mutated file, loaded alone
-    standard_campaign(ctx, load, seed, name="one.dcm", tag="dicom-file", flips_every=3, trunc_limit=300)
+    standard_campaign(ctx, load, seed, name="one.dcm", tag="dicom-file", flips_every=3, trunc_limit=300, positions=400)
     # the same mutations inside a series folder (the other slices must still load)
     import numpy.random as npr
 
@@ -300,5 +300,5 @@ def test_fuzz_dicom():
 
     if not HAVE_LOADERS:
         pytest.skip("ctui.engine.loaders not available yet")
-    res = run_campaign("test_fuzz_dicom", "campaign", examples=fuzz_examples(500))
+    res = run_campaign("test_fuzz_dicom", "campaign", examples=fuzz_examples(400))
     assert_clean("dicom", res, min_cases=2500)

@@ -381,10 +381,19 @@ def hypothesis_mutations(ctx: Ctx, reader, seed: bytes, *, name: str, tag: str, 
     run()
 
 
-def standard_campaign(ctx: Ctx, reader, seed: bytes, *, name: str, tag: str, flips_every: int = 1, trunc_limit: int | None = None) -> None:
+def standard_campaign(ctx: Ctx, reader, seed: bytes, *, name: str, tag: str, flips_every: int = 1, trunc_limit: int | None = None, positions: int = 150) -> None:
     """Truncation at every offset, bit flips, interesting 32-bit values, random and
-    hypothesis mutations of one valid ``seed`` file."""
+    hypothesis mutations of one valid ``seed`` file.
+
+    In CI the deterministic loops are spread over at most ``positions`` offsets per seed
+    (``CTUI_FUZZ_POSITIONS``); set ``CTUI_FUZZ_EXAMPLES`` / ``CTUI_FUZZ_POSITIONS``
+    higher locally for every offset and more random cases.
+    """
     import numpy as np
+
+    positions = int(os.environ.get("CTUI_FUZZ_POSITIONS", str(positions)))
+    flips_every = max(flips_every, -(-len(seed) // positions))
+    trunc_limit = min(trunc_limit or positions, positions) if positions < len(seed) else trunc_limit
 
     ctx.check(reader, seed, name=name, tag=tag + "-valid")
     for t in truncations(seed, trunc_limit):

@@ -129,5 +129,5 @@ def campaign(ctx) -> None:
 
 
 def test_fuzz_labels():
-    res = run_campaign("test_fuzz_labels", "campaign", examples=fuzz_examples(200))
-    assert_clean("labels", res, min_cases=5000)
+    res = run_campaign("test_fuzz_labels", "campaign", examples=fuzz_examples(150))
+    assert_clean("labels", res, min_cases=4000)

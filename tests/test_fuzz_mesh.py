@@ -116,5 +116,5 @@ def test_fuzz_mesh():
 
     if not HAVE_MESHIO:
         pytest.skip("ctui.engine.meshio not available yet")
-    res = run_campaign("test_fuzz_mesh", "campaign", examples=fuzz_examples(200))
+    res = run_campaign("test_fuzz_mesh", "campaign", examples=fuzz_examples(150))
     assert_clean("mesh", res, min_cases=2500)

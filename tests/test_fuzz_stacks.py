@@ -205,5 +205,5 @@ def test_fuzz_stacks_raw_mhd():
 
     if not HAVE_LOADERS:
         pytest.skip("ctui.engine.loaders not available yet")
-    res = run_campaign("test_fuzz_stacks", "campaign", examples=fuzz_examples(160))
+    res = run_campaign("test_fuzz_stacks", "campaign", examples=fuzz_examples(60))
     assert_clean("stacks/raw/mhd/nifti/nrrd", res, min_cases=2000)
