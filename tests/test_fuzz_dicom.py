@@ -13,6 +13,8 @@ allocation the input cannot justify.
 
 from __future__ import annotations
 
+import pytest
+
 import os
 from pathlib import Path
 
@@ -295,6 +297,7 @@ def fs_cases(ctx, load, series: Path) -> None:
         ctx.check(load, path, tag=f"dicom-fs-{tag}", size_hint=4096)
 
 
+@pytest.mark.slow
 def test_fuzz_dicom():
     import pytest
 

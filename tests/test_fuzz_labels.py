@@ -4,6 +4,8 @@ mutations (NIfTI dim/datatype/vox_offset/pixdim/affine fields, NRRD header field
 
 from __future__ import annotations
 
+import pytest
+
 import gzip
 import struct
 
@@ -128,6 +130,7 @@ def campaign(ctx) -> None:
     ctx.check(load_labels, loop, tag="labels-symlink-loop", size_hint=0)
 
 
+@pytest.mark.slow
 def test_fuzz_labels():
     res = run_campaign("test_fuzz_labels", "campaign", examples=fuzz_examples(150))
     assert_clean("labels", res, min_cases=4000)

@@ -5,6 +5,8 @@ loads must be usable: finite vertices and face indices within range."""
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
@@ -111,6 +113,7 @@ def campaign(ctx) -> None:
     ctx.check(checked_load, s["b.stl"], name="x.vtk", tag="mesh-ext")
 
 
+@pytest.mark.slow
 def test_fuzz_mesh():
     import pytest
 

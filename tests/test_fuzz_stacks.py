@@ -6,6 +6,8 @@ volumes. Same rule and harness as the other fuzzers (see test_fuzz_harness)."""
 
 from __future__ import annotations
 
+import pytest
+
 import io
 from pathlib import Path
 
@@ -200,6 +202,7 @@ def campaign(ctx) -> None:
         standard_campaign(ctx, load, s[name], name=name, tag=name.split(".")[1], flips_every=6, trunc_limit=100)
 
 
+@pytest.mark.slow
 def test_fuzz_stacks_raw_mhd():
     import pytest
 

@@ -127,6 +127,7 @@ def test_volume_metadata_logs_and_warnings_clean(series, caplog):
     assert find_strings([], NEEDLES, texts=[blob, repr(vol.skipped), repr(vol.warnings)]) == []
 
 
+@pytest.mark.slow
 def test_every_command_and_export_is_clean(series, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
