@@ -505,6 +505,8 @@ def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, 
             prev = nib[o + a]
             for x in range(a, b + 1):
                 cur = nib[o + x + 1]
+                if cur == prev and (cur == 0 or cur == 15):
+                    continue  # empty or full cell, no crossing at column x: nothing to do
                 case = prev | (cur << 4)
                 xc00 = (prev ^ cur) & 1
                 ly00 = (prev ^ (prev >> 1)) & 1
