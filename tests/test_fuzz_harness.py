@@ -273,6 +273,16 @@ def run_campaign(module: str, campaign: str, *, examples: int, timeout_s: float 
         if inflight is None:
             raise RuntimeError(f"fuzz worker {module}.{campaign} failed outside a case (rc {proc.returncode}):\n{err[-3000:]}")
         kind = "hang" if stalled else f"crash (rc {proc.returncode})"
+        try:  # keep the input that killed the worker (the next case would overwrite it)
+            src = Path(inflight.get("path", ""))
+            if src.is_file():
+                outdir.mkdir(parents=True, exist_ok=True)
+                data = src.read_bytes()
+                dest = outdir / f"crash-{inflight.get('tag') or 'case'}-{hashlib.sha1(data).hexdigest()[:10]}-{src.name}"
+                dest.write_bytes(data)
+                inflight["path"] = str(dest)
+        except OSError:
+            pass
         total["cases"] += 1
         ck = f"{inflight.get('tag') or 'case'}:FINDING"
         total["counts"][ck] = total["counts"].get(ck, 0) + 1
