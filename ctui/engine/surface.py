@@ -8,10 +8,12 @@
   so the enclosed volume equals the mask's voxel volume (to about 0.1 %). Thick
   slices can be refined by shape-based interpolation (signed distances interpolated
   between slices).
-* :func:`label_surfaces`: every object of a label map; one scan of the label map
-  (``scipy.ndimage.find_objects``) gives every object's bounding box, then each object is
-  meshed inside its own box only, so the cost is the sum of the objects' boxes, not one
-  pass over the whole volume per label.
+* :func:`label_surfaces`: every object of a label map. Terraced (``smooth=False``):
+  one pass of a multi-label discrete marching cubes over the label map gives every
+  object's closed surface (:mod:`ctui.engine.multilabel`). Smooth: the signed distance
+  is per object, so one scan (``scipy.ndimage.find_objects``) gives every object's
+  bounding box and each object is meshed inside its own box only: the cost is the
+  sum of the objects' boxes, not one pass over the whole volume per label.
 
 Geometry follows :mod:`ctui.engine.volume`: spacing (dz, dy, dx) mm, origin (x, y, z)
 of voxel (0, 0, 0)'s centre, direction columns = x, y, z index axes;
@@ -269,16 +271,18 @@ def label_surfaces(labels: np.ndarray, *, spacing: Sequence[float] = (1.0, 1.0, 
         0 background, 1..255 objects.
     spacing, origin, direction : geometry as in :func:`isosurface`.
     smooth : bool
-        Smoothed signed-distance surfaces (volume kept equal to the voxel volume) or
-        plain marching cubes of each object's mask.
+        True: smoothed signed-distance surfaces (volume kept equal to the voxel
+        volume), one object at a time inside its bounding box (the distance field is
+        per object). False: terraced discrete marching cubes of every object in one
+        pass over the label map (:mod:`ctui.engine.multilabel`).
     objects : sequence of int, optional
         Only these object ids.
 
     Returns
     -------
     dict {object id: Mesh}
-        Objects with no voxel are absent. One scan of the label map finds every
-        object's bounding box; each object is then meshed inside its box only.
+        Objects with no voxel are absent. Smooth: one scan of the label map finds
+        every object's bounding box; each object is then meshed inside its box only.
     """
     from scipy.ndimage import find_objects
 
@@ -287,10 +291,19 @@ def label_surfaces(labels: np.ndarray, *, spacing: Sequence[float] = (1.0, 1.0, 
         raise ValueError(f"label_surfaces needs a 3D label map, got shape {lab.shape}")
     if not np.issubdtype(lab.dtype, np.integer):
         lab = lab.astype(np.int32)
-    boxes = find_objects(lab)
     aff = affine_from(spacing, origin, direction)
     out: dict[int, Mesh] = {}
     wanted = None if objects is None else {int(o) for o in objects}
+    if not smooth:
+        # terraced surfaces of every object from one scan of the label map
+        from .meshtools import vertex_normals
+        from .multilabel import multilabel_marching_cubes
+
+        for k, (v, f) in sorted(multilabel_marching_cubes(lab, affine=aff, objects=objects).items()):
+            out[k] = Mesh(vertices=v, faces=f, normals=vertex_normals(v, f), object_id=k,
+                          meta={"method": "mask-binary-multilabel", "level": 0.5})
+        return out
+    boxes = find_objects(lab)
     for i, box in enumerate(boxes):
         k = i + 1
         if box is None or (wanted is not None and k not in wanted):
