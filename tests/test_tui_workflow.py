@@ -190,3 +190,44 @@ async def test_render_3d_shows_rendered_pixels(tmp_path):
         with Image.open(gif) as g:
             assert g.n_frames == 36
         assert not app.errors, app.errors
+
+
+async def test_export_all_objects_in_one_mesh_file(tmp_path):
+    """e -> 'Meshes of all objects': both kidneys (painted from the phantom's truth
+    masks) in one STL, each closed, total volume the sum of the analytic volumes."""
+    pytest.importorskip("ctui.engine.meshio")
+    from ctui.engine.meshio import load_mesh
+    from ctui.engine.meshtools import components
+
+    truth = load_truth()
+    app = CtuiApp()
+    async with app.run_test(size=(160, 50)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        total = 0.0
+        for name in ("kidney_left", "kidney_right"):
+            o = next(o for o in truth["objects"] if o["name"] == name)
+            z, y, x = o["seed_zyx"]
+            oid = s.seg.add_object(name)
+            img = s.volume.data
+            lo, hi = o["hu"] - 80, o["hu"] + 80
+            s.seg.paint((img >= lo) & (img <= hi) & _component(img, (z, y, x), lo, hi), oid)
+            total += o["volume_ml"]
+        out = tmp_path / "both.stl"
+        await pilot.press("e")
+        await choose(pilot, "meshall-stl")
+        await answer_prompt(pilot, str(out))
+        await wait_for(pilot, lambda: out.exists(), what="the STL file")
+        mesh = load_mesh(out)
+        parts = components(mesh)
+        assert len(parts) == 2
+        assert abs(mesh.volume_mm3() / 1000.0 - total) / total < 0.03
+        assert not app.errors, app.errors
+
+
+def _component(img, seed_zyx, lo, hi):
+    """The 6-connected component of lo <= img <= hi holding the seed voxel."""
+    from scipy import ndimage
+
+    lab, _ = ndimage.label((img >= lo) & (img <= hi))
+    return lab == lab[tuple(seed_zyx)]

@@ -14,6 +14,9 @@ KINDS = [
     ("mesh-stl", "Mesh of the current object: STL", ".stl"),
     ("mesh-ply", "Mesh of the current object: PLY", ".ply"),
     ("mesh-obj", "Mesh of the current object: OBJ", ".obj"),
+    ("meshall-stl", "Meshes of all objects in one file: STL", ".stl"),
+    ("meshall-ply", "Meshes of all objects in one file: PLY", ".ply"),
+    ("meshall-obj", "Meshes of all objects in one file: OBJ", ".obj"),
     ("labels-nii", "Label map: NIfTI (.nii.gz)", ".nii.gz"),
     ("labels-nrrd", "Label map: NRRD (.seg.nrrd, 3D Slicer segmentation)", ".seg.nrrd"),
     ("mric", "Contours: MRIC", ".mric"),
@@ -23,7 +26,9 @@ KINDS = [
 
 def default_name(session, suffix: str, kind: str) -> str:
     stem = Path(session.source_path or "ctui").name.replace(" ", "_") or "ctui"
-    if kind.startswith("mesh"):
+    if kind.startswith("meshall"):
+        stem += "-objects"
+    elif kind.startswith("mesh"):
         stem += f"-object{session.current}"
     elif kind == "image":
         stem += f"-slice{session.z + 1}"
@@ -40,6 +45,19 @@ def export_mesh(session, path: str, object_id: int):
     mesh.object_id = int(object_id)
     engine("meshio").save_mesh(path, mesh)
     return mesh
+
+
+def export_all_meshes(session, path: str):
+    """Smoothed surfaces of every object (each closed on its own) written as one mesh
+    file; returns (Mesh, number of objects)."""
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    v = session.volume
+    meshes = engine("surface").label_surfaces(labels, spacing=v.spacing, origin=v.origin, direction=v.direction)
+    mesh = engine("meshtools").merge([meshes[k] for k in sorted(meshes)])
+    engine("meshio").save_mesh(path, mesh)
+    return mesh, len(meshes)
 
 
 def export_labels(session, path: str):
@@ -77,6 +95,9 @@ def export_image(rgb: np.ndarray, path: str):
 def run_export(ws, kind: str, path: str) -> str:
     """Do one export (called in a worker thread); returns a message."""
     s = ws.s
+    if kind.startswith("meshall"):
+        mesh, n = export_all_meshes(s, path)
+        return f"Wrote {path}: {n} objects, {len(mesh.faces)} triangles, {mesh.volume_mm3() / 1000:.2f} ml"
     if kind.startswith("mesh"):
         mesh = export_mesh(s, path, s.current)
         return f"Wrote {path}: {len(mesh.faces)} triangles, {mesh.volume_mm3() / 1000:.2f} ml"
