@@ -136,3 +136,77 @@ def test_weld_and_normals():
     n = vertex_normals(c.vertices, c.faces)
     ctr = c.vertices.mean(0)
     assert (np.sum((c.vertices - ctr) * n, axis=1) > 0).all()
+
+
+def _edge_touching_cubes() -> Mesh:
+    """Two unit-10 cubes that share only the edge x = 10, y = 10 (welded): a
+    non-manifold edge with four faces, and two non-manifold vertices."""
+    return weld(merge([cube(), cube(offset=(10.0, 10.0, 0.0))]))
+
+
+def test_report_volume_of_a_closed_surface_with_a_non_manifold_edge():
+    m = _edge_touching_cubes()
+    rep = mesh_report(m)
+    assert rep["non_manifold_edges"] == 1 and rep["boundary_edges"] == 0 and not rep["watertight"]
+    # still a closed surface: it encloses both cubes
+    assert rep["volume_ml"] == pytest.approx(2.0)
+
+
+def test_split_non_manifold_cuts_touching_solids_apart():
+    from ctui.engine.meshtools import split_non_manifold
+
+    m = _edge_touching_cubes()
+    s = split_non_manifold(m)
+    rep = mesh_report(s)
+    assert rep["watertight"] and rep["non_manifold_edges"] == 0 and rep["winding_consistent"]
+    assert rep["components"] == 2 and rep["volume_ml"] == pytest.approx(2.0)
+    assert rep["euler"] == 4  # two spheres
+    assert s.n_vertices == m.n_vertices + 2  # the shared edge's two ends, one copy each
+    assert np.array_equal(s.faces.shape, m.faces.shape)
+    # nothing to cut: the mesh is returned with the same vertex count
+    c = split_non_manifold(cube())
+    assert c.n_vertices == 8 and mesh_report(c)["watertight"]
+
+
+def test_drop_opposite_twins_removes_fins_only():
+    from ctui.engine.meshtools import drop_opposite_twins
+
+    c = cube()
+    fin = np.array([[0, 3, 5], [0, 5, 3]])  # a zero-thickness fin inside the cube
+    m = Mesh(c.vertices, np.vstack([c.faces, fin]).astype(np.int32))
+    out = drop_opposite_twins(m)
+    assert out.n_faces == 12 and mesh_report(out)["watertight"]
+    same = Mesh(c.vertices, np.vstack([c.faces, fin[:1], fin[:1]]).astype(np.int32))
+    assert drop_opposite_twins(same).n_faces == 14  # same-winding duplicates are not a fin
+
+
+def test_decimated_lobster_keeps_its_volume_and_cuts_most_non_manifold_edges():
+    """The lobster (../shared/data) at 100, decimated 10x: quadric collapses make thin
+    walls meet along edges; the report's volume stays the enclosed volume (it was
+    reported as almost nothing when such components counted as open), no hole
+    appears, and the cut leaves far fewer non-manifold edges than the raw decimator."""
+    import fast_simplification
+
+    from conftest import shared
+
+    from ctui.engine.meshtools import edge_counts
+    from ctui.engine.surface import isosurface
+
+    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
+    if not path.is_file():
+        pytest.skip(f"{path} missing")
+    data = np.fromfile(path, np.uint8).reshape(56, 324, 301)
+    m = isosurface(data, 100, spacing=(1.4, 1.0, 1.0))
+    rep0 = mesh_report(m)
+    target = m.n_faces // 10
+    d = decimate(m, target)
+    rep = mesh_report(d)
+    assert rep["boundary_edges"] == 0
+    assert rep["closed_components"] == rep["components"]
+    assert rep["volume_ml"] == pytest.approx(rep0["volume_ml"], rel=0.03)
+    big = components(m)[0]
+    v, f = fast_simplification.simplify(big.vertices.astype(np.float32), big.faces.astype(np.int32),
+                                        target_reduction=0.9, agg=7)
+    raw_nonman = int(np.count_nonzero(edge_counts(f, len(v))[1] > 2))
+    assert raw_nonman > 50  # the raw decimator does make sheets meet here
+    assert rep["non_manifold_edges"] * 4 < raw_nonman

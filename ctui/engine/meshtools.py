@@ -11,6 +11,7 @@ faces (m, 3)); they never modify their input.
 * :func:`decimate`: quadric decimation to a target triangle count (fast-simplification).
 * :func:`components`, :func:`keep_largest`, :func:`drop_small`.
 * :func:`repair_orientation`: consistent winding per component, outward by signed volume.
+* :func:`split_non_manifold`: cut sheets that touch along edges or at vertices apart.
 * :func:`weld`, :func:`vertex_normals`, :func:`merge`.
 """
 
@@ -108,7 +109,9 @@ def mesh_report(mesh: Mesh) -> dict:
         euler : int, V - E + F (2 per closed sphere-like component)
         components, closed_components : int
         winding_consistent : bool, neighbouring faces wind the same way
-        volume_ml : float, enclosed volume of the closed components (Gauss theorem), mL
+        volume_ml : float, enclosed volume (Gauss theorem, mL) of the closed components:
+            those where every edge has an even number of faces (no hole; a component
+            whose sheets touch along a non-manifold edge still encloses a volume)
         area_mm2 : float, total area
     """
     nv, nf = mesh.n_vertices, mesh.n_faces
@@ -118,8 +121,9 @@ def mesh_report(mesh: Mesh) -> dict:
     ncomp, flab = face_components(mesh)
     vol = 0.0
     closed = 0
+    odd = int(np.count_nonzero(counts % 2 == 1))
     if ncomp == 1:
-        if boundary == 0 and nonman == 0 and nf:
+        if odd == 0 and nf:
             closed = 1
             vol = mesh.volume_mm3()
     elif ncomp > 1:
@@ -130,7 +134,7 @@ def mesh_report(mesh: Mesh) -> dict:
         key = e[:, 0] * np.int64(max(nv, 1)) + e[:, 1]
         elab = np.concatenate([flab, flab, flab])
         _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-        bad_edge = cnt[inv] != 2
+        bad_edge = cnt[inv] % 2 == 1
         bad_comp = np.zeros(ncomp, bool)
         bad_comp[elab[bad_edge]] = True
         for c in range(ncomp):
@@ -225,7 +229,9 @@ def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7,
     """Quadric-error decimation to about ``target_triangles`` triangles.
 
     Uses fast-simplification (Fast Quadric Mesh Simplification); a closed input stays
-    closed. Returns the input's copy when it already has fewer triangles.
+    closed, and edges where collapses made two sheets meet are cut apart again
+    (:func:`split_non_manifold`), so a watertight input gives a watertight output.
+    Returns the input's copy when it already has fewer triangles.
     """
     import fast_simplification
 
@@ -251,10 +257,141 @@ def decimate(mesh: Mesh, target_triangles: int, *, aggressiveness: int = 7,
     v, f = fast_simplification.simplify(np.asarray(big.vertices, np.float32), np.asarray(big.faces, np.int32),
                                         target_reduction=reduction, agg=aggressiveness)
     dec = Mesh(np.asarray(v, np.float32), np.asarray(f, np.int32))
+    if np.count_nonzero(edge_counts(dec.faces, dec.n_vertices)[1] > 2):
+        # edge collapses can make two sheets meet along an edge (thin walls): cut them
+        # apart again so the result stays watertight and 2-manifold (printable)
+        dec = split_non_manifold(drop_opposite_twins(dec))
     merged = merge([dec] + ([keep_small] if keep_small is not None else []))
     out = _copy(mesh, vertices=merged.vertices, faces=merged.faces,
                 normals=vertex_normals(merged.vertices, merged.faces))
     out.meta["decimated"] = {"from": mesh.n_faces, "to": int(len(f))}
+    return out
+
+
+def drop_opposite_twins(mesh: Mesh) -> Mesh:
+    """Remove pairs of faces on the same three vertices with opposite winding (a
+    zero-thickness fin: the two cancel in every surface integral, so the volume is
+    unchanged)."""
+    f = np.asarray(mesh.faces, np.int64)
+    if len(f) < 2:
+        return _copy(mesh)
+    fs = np.sort(f, axis=1)
+    _, inv, cnt = np.unique(fs, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    dup = cnt[inv] == 2
+    if not dup.any():
+        return _copy(mesh)
+    # winding parity: even when (min, next) follows the cyclic order of the sorted triple
+    r = np.argmin(f, axis=1)
+    nxt = f[np.arange(len(f)), (r + 1) % 3]
+    parity = nxt == fs[:, 1]
+    idx = np.flatnonzero(dup)
+    order = idx[np.argsort(inv[idx], kind="stable")]
+    a, b = order[0::2], order[1::2]
+    opp = parity[a] != parity[b]
+    keep = np.ones(len(f), bool)
+    keep[a[opp]] = False
+    keep[b[opp]] = False
+    return _copy(mesh, faces=f[keep].astype(np.int32))
+
+
+def split_non_manifold(mesh: Mesh) -> Mesh:
+    """Make a closed, consistently wound surface 2-manifold by cutting it where sheets
+    touch, without moving anything.
+
+    Every directed edge (a, b) of a face is paired with an opposite edge (b, a) of
+    another face: one to one on ordinary edges; on an edge shared by 2k faces the
+    faces are sorted by angle around the edge and each is paired with the neighbour
+    across the solid's inside wedge (so two solids that touch along an edge come
+    apart there). Face corners joined by the pairing form one vertex each: a vertex
+    where several fans meet gets one copy per fan. The result has no non-manifold
+    edge or vertex; positions, faces and the enclosed volume are unchanged (copies
+    coincide). Edges that cannot be paired (odd counts, sheets that do not alternate)
+    keep all their faces joined, as in the input.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(mesh.faces, np.int64)
+    v = np.asarray(mesh.vertices, np.float64)
+    nf, nv = len(f), len(v)
+    if nf == 0:
+        return _copy(mesh)
+    # half-edges h = 3 * face + i: from f[face, i] to f[face, (i + 1) % 3]
+    src = f.ravel()
+    dst = f[:, [1, 2, 0]].ravel()
+    lo, hi = np.minimum(src, dst), np.maximum(src, dst)
+    key = lo * np.int64(nv) + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    counts = np.diff(np.r_[starts, len(ks)])
+    mate = np.full(3 * nf, -1, np.int64)
+    # ordinary edges: two half-edges in opposite directions
+    two = starts[counts == 2]
+    h1, h2 = order[two], order[two + 1]
+    mate[h1] = h2  # (same direction twice: a flipped face; still joined, as before)
+    mate[h2] = h1
+    extra_rows: list[np.ndarray] = []  # corner pairs to join on edges left unresolved
+    # edges shared by more than two faces: pair across the inside wedges
+    for st, c in zip(starts[counts > 2], counts[counts > 2]):
+        hs = order[st: st + c]
+        a, b = lo[hs[0]], hi[hs[0]]
+        e = v[b] - v[a]
+        e /= np.linalg.norm(e) + 1e-300
+        fw = src[hs] == a  # uses a -> b
+        if c % 2 or fw.sum() * 2 != c:
+            extra_rows.append(hs)
+            continue
+        third = f[hs // 3].sum(axis=1) - a - b
+        u = v[third] - v[a]
+        u -= np.outer(u @ e, e)
+        ref = u[0] / (np.linalg.norm(u[0]) + 1e-300)
+        ang = np.arctan2(np.cross(ref, u) @ e, u @ ref)
+        srt = np.argsort(ang)
+        hs, fw, u = hs[srt], fw[srt], u[srt]
+        if not np.all(fw[::2] != fw[1::2]):  # sheets must alternate around the edge
+            extra_rows.append(hs)
+            continue
+        # face normal of the first face around the edge; t: direction of increasing angle
+        fa = f[hs[0] // 3]
+        n0 = np.cross(v[fa[1]] - v[fa[0]], v[fa[2]] - v[fa[0]])
+        t0 = np.cross(e, u[0])
+        shift = 0 if n0 @ t0 < 0 else 1  # wedge (0, 1) inside: pair (0,1),(2,3)...; else (1,2),...,(c-1,0)
+        for j in range(shift, c + shift, 2):
+            p, q = hs[j % c], hs[(j + 1) % c]
+            mate[p], mate[q] = q, p
+    # corners: node 3 * face + i is vertex f[face, i] in that face; a half-edge pair
+    # (h: a -> b in face F, g: b -> a in face G) joins corner a of F with corner a of G
+    # and corner b of F with corner b of G
+    h = np.flatnonzero(mate >= 0)
+    g = mate[h]
+    fh, ih = h // 3, h % 3
+    fg, ig = g // 3, g % 3
+    same = src[h] == src[g]       # a flipped neighbour: its src is our src
+    ca_f = 3 * fh + ih            # corner of src (a) in F
+    cb_f = 3 * fh + (ih + 1) % 3  # corner of dst (b) in F
+    ca_g = np.where(same, 3 * fg + ig, 3 * fg + (ig + 1) % 3)  # a is the dst of g (or its src)
+    cb_g = np.where(same, 3 * fg + (ig + 1) % 3, 3 * fg + ig)
+    rows = [ca_f, cb_f]
+    cols = [ca_g, cb_g]
+    for hs in extra_rows:  # unresolved edge: all its faces stay joined at both ends
+        for end in (0, 1):
+            corner = np.where(src[hs] == (lo[hs[0]] if end == 0 else hi[hs[0]]), 3 * (hs // 3) + hs % 3,
+                              3 * (hs // 3) + (hs % 3 + 1) % 3)
+            rows.append(corner[:-1])
+            cols.append(corner[1:])
+    rows = np.concatenate(rows)
+    cols = np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(3 * nf, 3 * nf))
+    ncomp, lab = connected_components(graph, directed=False)
+    new_vertex_of = lab  # one output vertex per group of corners
+    orig = np.empty(ncomp, np.int64)
+    orig[lab] = f.ravel()
+    faces = new_vertex_of.reshape(nf, 3).astype(np.int32)
+    verts = np.asarray(mesh.vertices)[orig]
+    normals = None if mesh.normals is None else np.asarray(mesh.normals)[orig]
+    out = _copy(mesh, vertices=verts, faces=faces, normals=normals)
     return out
 
 
