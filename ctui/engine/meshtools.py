@@ -301,12 +301,12 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
 
     Every directed edge (a, b) of a face is paired with an opposite edge (b, a) of
     another face: one to one on ordinary edges; on an edge shared by 2k faces the
-    faces are sorted by angle around the edge and each is paired with the neighbour
-    across the solid's inside wedge (so two solids that touch along an edge come
-    apart there). Face corners joined by the pairing form one vertex each: a vertex
+    faces are sorted by angle around the edge and paired across the solid's inside
+    wedges, without crossing pairs (so two solids that touch along an edge come
+    apart there, and sheets that pass through each other are matched as nested). Face corners joined by the pairing form one vertex each: a vertex
     where several fans meet gets one copy per fan. The result has no non-manifold
     edge or vertex; positions, faces and the enclosed volume are unchanged (copies
-    coincide). Edges that cannot be paired (odd counts, sheets that do not alternate)
+    coincide). Edges that cannot be paired (as many a -> b as b -> a uses needed)
     keep all their faces joined, as in the input.
     """
     from scipy.sparse import coo_matrix
@@ -350,17 +350,23 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
         ang = np.arctan2(np.cross(ref, u) @ e, u @ ref)
         srt = np.argsort(ang)
         hs, fw, u = hs[srt], fw[srt], u[srt]
-        if not np.all(fw[::2] != fw[1::2]):  # sheets must alternate around the edge
-            extra_rows.append(hs)
-            continue
-        # face normal of the first face around the edge; t: direction of increasing angle
-        fa = f[hs[0] // 3]
-        n0 = np.cross(v[fa[1]] - v[fa[0]], v[fa[2]] - v[fa[0]])
-        t0 = np.cross(e, u[0])
-        shift = 0 if n0 @ t0 < 0 else 1  # wedge (0, 1) inside: pair (0,1),(2,3)...; else (1,2),...,(c-1,0)
-        for j in range(shift, c + shift, 2):
-            p, q = hs[j % c], hs[(j + 1) % c]
-            mate[p], mate[q] = q, p
+        # around the edge (angle increasing by the right-hand rule about a -> b), a
+        # face using b -> a has the solid's inside in the wedge after it, a face using
+        # a -> b in the wedge before it: match each b -> a face with the a -> b face
+        # that closes its wedge, as brackets "(" = b -> a, ")" = a -> b (non-crossing
+        # pairs; on an ordinary 2k-sheet edge these are the neighbours across the
+        # inside wedges)
+        step = np.where(fw, -1, 1)
+        start = (int(np.argmin(np.cumsum(step))) + 1) % c  # a rotation with no negative prefix
+        stack: list[int] = []
+        for j in range(c):
+            k = (start + j) % c
+            if not fw[k]:
+                stack.append(k)
+            else:
+                o = stack.pop()
+                mate[hs[o]], mate[hs[k]] = hs[k], hs[o]
+
     # corners: node 3 * face + i is vertex f[face, i] in that face; a half-edge pair
     # (h: a -> b in face F, g: b -> a in face G) joins corner a of F with corner a of G
     # and corner b of F with corner b of G
