@@ -42,6 +42,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--csv", metavar="OUT", help="write the section table as CSV")
     p.add_argument("--plot", metavar="PNG", help="write a PNG plot of section area against arc length")
     p.add_argument("--no-mesh", action="store_true", help="skip the mesh volume (faster)")
+    p.add_argument("--partial-volume", action="store_true",
+                   help="project input: measure sections, and a third volume, on the object's partial-volume "
+                   "fraction from the series' grey levels (sub-voxel; for small vessels and rods)")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     p.set_defaults(func=run)
 
@@ -68,7 +71,8 @@ def _kind(path: str) -> str:
 
 
 def _load_labels(path: str):
-    """(labels, spacing, origin, direction) from a project or a label file."""
+    """(labels, spacing, origin, direction, notes, image or None) from a project (image: its
+    source series when found) or a label file."""
     import os
 
     import numpy as np
@@ -78,7 +82,7 @@ def _load_labels(path: str):
         from ctui.engine.labelio import load_labels
 
         labels, geom = load_labels(path)
-        return labels, geom.spacing, geom.origin, geom.direction, []
+        return labels, geom.spacing, geom.origin, geom.direction, [], None
     from ctui.engine.project import load_project
 
     project = load_project(path)
@@ -95,12 +99,12 @@ def _load_labels(path: str):
         vol = load(src, **opts)
         if vol.data.shape != labels.shape:
             raise _err(f"{path}: labels {labels.shape} do not match the source series {vol.data.shape}")
-        return labels, vol.spacing, vol.origin, vol.direction, notes
+        return labels, vol.spacing, vol.origin, vol.direction, notes, vol.data
     sp = meta.get("spacing_zyx_mm")
     if sp is None:
         raise _err(f"{path}: the source series {src!r} is missing and the project records no voxel spacing")
     notes.append(f"source series {src} not found: geometry from the project's metadata")
-    return labels, tuple(sp), tuple(meta.get("origin_xyz_mm", (0.0, 0.0, 0.0))), meta.get("direction"), notes
+    return labels, tuple(sp), tuple(meta.get("origin_xyz_mm", (0.0, 0.0, 0.0))), meta.get("direction"), notes, None
 
 
 def _pick_object(labels, requested, path: str) -> int:
@@ -160,11 +164,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         from ctui.engine.measure import measure_object
 
-        labels, spacing, origin, direction, notes = _load_labels(args.input)
+        labels, spacing, origin, direction, notes, image = _load_labels(args.input)
+        if args.partial_volume and image is None:
+            raise _err(f"{args.input}: --partial-volume needs a project whose source series can be loaded")
         oid = _pick_object(labels, args.object, args.input)
         res = measure_object(labels, oid, spacing=spacing, origin=origin, direction=direction, path=args.path or None,
                              path_voxels=args.path_voxels, step_mm=args.step, between=tuple(between) if between else None,
-                             mesh=not args.no_mesh, area=args.area, average_mm=args.average)
+                             mesh=not args.no_mesh, area=args.area, average_mm=args.average,
+                             image=image if args.partial_volume else None)
+        pv = res.pop("partial_volume", None)
+        if pv is not None:
+            res["partial_volume"] = {"object_value": pv["fg"], "surroundings_value": pv["bg"]}
         rows = res.pop("rows")
         res.pop("stats")
         res.pop("path_mm")
@@ -199,6 +209,8 @@ def run(args: argparse.Namespace) -> int:
         parts.append(f"voxel volume {vm['voxels']:.3f} ml")
     if vm["mesh"] is not None:
         parts.append(f"mesh volume {vm['mesh']:.3f} ml")
+    if vm.get("partial_volume") is not None:
+        parts.append(f"partial-volume {vm['partial_volume']:.3f} ml")
     if report["volume_difference_percent"] is not None:
         parts.append(f"difference {report['volume_difference_percent']:+.2f}%")
     if report["area_mm2"] is not None:

@@ -40,6 +40,7 @@ class MeasureScreen(GuardMixin, Screen):
     """
     BINDINGS = [
         Binding("c", "sections", "Sections of selected"),
+        Binding("g", "toggle_grey", "Sections: mask / grey levels"),
         Binding("s", "save", "Save CSV+PNG"),
         Binding("escape,M", "close", "Back"),
     ]
@@ -50,6 +51,7 @@ class MeasureScreen(GuardMixin, Screen):
         self.stats: dict[int, dict] = {}
         self.sections: list[dict] | None = None
         self.sections_obj: int | None = None
+        self.grey = False  # sections on the partial-volume fraction from the grey levels
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -63,7 +65,7 @@ class MeasureScreen(GuardMixin, Screen):
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)
-        t.add_columns("obj", "name", "voxels", "vol vox ml", "vol mesh ml", "diff %", "area mm²", "closed", "axes mm", "slices")
+        t.add_columns("obj", "name", "voxels", "vol vox ml", "vol mesh ml", "vol PV ml", "diff %", "area mm²", "closed", "axes mm", "slices")
         t.focus()
         self.measure()
 
@@ -88,6 +90,11 @@ class MeasureScreen(GuardMixin, Screen):
                 self.app.call_from_thread(self.app.notify, f"Object {oid}: {exc}", severity="error")
                 continue
             st.pop("mesh", None)
+            try:  # partial-volume volume from the grey levels (needs contrast with the surroundings)
+                pv = meas.partial_volume_fraction(v.data, labels == oid)
+                st["volume_pv_ml"] = pv["volume_voxels"] * float(np.prod(v.spacing)) / 1000.0
+            except Exception:
+                st["volume_pv_ml"] = None
             self.app.call_from_thread(self._add_row, oid, st)
         self.app.call_from_thread(self._status, "c: sections along the centreline of the selected object; s saves")
         tub = [oid for oid in ids if oid in self.stats and is_tubular(self.stats[oid])]
@@ -107,7 +114,7 @@ class MeasureScreen(GuardMixin, Screen):
 
         c = object_color(oid)
         self.query_one(DataTable).add_row(
-            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"),
+            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"), f("volume_pv_ml"),
             f("volume_difference_percent", "{:+.2f}"), f("area_mm2", "{:.0f}"), str(st.get("mesh_closed", "-")), axes,
             f"{rng[0] + 1}..{rng[1] + 1}" if rng else "-", key=str(oid))
         warn = list(st.get("warnings") or [])
@@ -124,6 +131,13 @@ class MeasureScreen(GuardMixin, Screen):
             oid = min(self.stats)
         self.sections_worker(oid)
 
+    def action_toggle_grey(self) -> None:
+        self.grey = not self.grey
+        how = "the grey levels (partial volume)" if self.grey else "the object's mask"
+        self._status(f"Sections from {how}")
+        if self.sections_obj is not None:
+            self.sections_worker(self.sections_obj)
+
     @work(thread=True, exclusive=True, group="sections")
     def sections_worker(self, oid: int) -> None:
         self._sections_of(oid)
@@ -135,8 +149,13 @@ class MeasureScreen(GuardMixin, Screen):
         try:
             mask = s.labels() == oid
             path = engine("centreline").centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
-            rows = engine("sections").sections_along_path(mask, path, spacing=v.spacing, origin=v.origin,
-                                                          direction=v.direction, step_mm=1.0)
+            if self.grey:
+                rows = engine("measure").measure_object(mask.view(np.uint8), 1, spacing=v.spacing, origin=v.origin,
+                                                        direction=v.direction, path=path, step_mm=1.0, mesh=False,
+                                                        image=v.data)["rows"]
+            else:
+                rows = engine("sections").sections_along_path(mask, path, spacing=v.spacing, origin=v.origin,
+                                                              direction=v.direction, step_mm=1.0)
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Sections of object {oid} failed: {exc}", severity="error")
             return
@@ -152,7 +171,8 @@ class MeasureScreen(GuardMixin, Screen):
         a = np.array(area, float)
         ok = a[np.isfinite(a)]
         length = float(sm[-1]) if sm else 0.0
-        lines = [f"[b]Sections of object {oid}[/b]", f"path {length:.1f} mm, {len(rows)} sections", "",
+        src = "grey levels (partial volume)" if self.grey else "mask"
+        lines = [f"[b]Sections of object {oid}[/b] from the {src}", f"path {length:.1f} mm, {len(rows)} sections", "",
                  f"area {lim[2]:.0f}..{lim[3]:.0f} mm² (y axis)", f"arc 0..{length:.0f} mm (x axis)"]
         if ok.size:
             lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
@@ -164,7 +184,7 @@ class MeasureScreen(GuardMixin, Screen):
                     lines.append(" " + ", ".join(f"{k} {val:.1f}" for k, val in st.items() if isinstance(val, (int, float))))
         except Exception:
             pass
-        lines += ["", "[dim]c sections of selected row, s save CSV + PNG, Esc back[/dim]"]
+        lines += ["", "[dim]c sections of selected row, g mask / grey levels, s save CSV + PNG, Esc back[/dim]"]
         self.query_one("#ms-info", Static).update("\n".join(lines))
         self._status(f"Sections of object {oid}: {len(rows)} along {length:.0f} mm")
 
