@@ -364,6 +364,32 @@ def test_metaimage_local_and_compressed(tmp_path):
     np.testing.assert_array_equal(load(tmp_path / "b.mhd").data, data)
 
 
+def test_metaimage_per_slice_files_list_and_pattern(tmp_path):
+    """MetaIO's multi-file forms: LIST (in the listed order, not name order) and a
+    numbered pattern; a listed file that is missing is skipped with a reason."""
+    data = (np.arange(4 * 5 * 6).reshape(4, 5, 6) * 7).astype(np.uint16)
+    hdr = ("ObjectType = Image\nNDims = 3\nDimSize = 6 5 4\nElementType = MET_USHORT\n"
+           "ElementSpacing = 0.5 0.6 2.5\n")
+    names = ["z_top.raw", "a_mid.raw", "m_low.raw", "b_last.raw"]  # name order differs from slice order
+    for k, n in enumerate(names):
+        (tmp_path / n).write_bytes(data[k].tobytes())
+    (tmp_path / "list.mhd").write_text(hdr + "ElementDataFile = LIST 2D\n" + "\n".join(names) + "\n")
+    vol = load(tmp_path / "list.mhd")
+    np.testing.assert_array_equal(vol.data, data)
+    assert vol.spacing == (2.5, 0.6, 0.5)
+    for k in range(4):
+        (tmp_path / f"sl{k + 1:03d}.raw").write_bytes(data[k].tobytes())
+    (tmp_path / "pat.mhd").write_text(hdr + "ElementDataFile = sl%03d.raw 1 4 1\n")
+    np.testing.assert_array_equal(load(tmp_path / "pat.mhd").data, data)
+    (tmp_path / "a_mid.raw").unlink()
+    vol = load(tmp_path / "list.mhd")
+    np.testing.assert_array_equal(vol.data, data[[0, 2, 3]])
+    assert any(s["file"] == "a_mid.raw" for s in vol.skipped)
+    (tmp_path / "bad.mhd").write_text(hdr + "ElementDataFile = sl%03d%d.raw 1 4\n")
+    with pytest.raises(CtuiError, match="pattern"):
+        load(tmp_path / "bad.mhd")
+
+
 # ----------------------------------------------------------------- memory, crop, downsample
 def test_memory_check_offers_crop_and_downsample(monkeypatch, ref):
     with pytest.raises(CtuiError) as e:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import zlib
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -270,6 +271,7 @@ def load_raw(
     source_kind: str = "raw",
     zlib_compressed: bool = False,
     warnings: list[str] | None = None,
+    keep_order: bool = False,
 ) -> Volume:
     """Headerless raw data: one file holding a (z, y, x) volume, or per-slice files.
 
@@ -277,6 +279,7 @@ def load_raw(
     the file size. Otherwise every file is one (y, x) slice (natural name order); files
     of another size are skipped with a reason. ``offset``: header bytes to skip
     (default: none, or the surplus at the start of a single file, with a warning).
+    ``keep_order``: per-slice files in the order given (a MetaImage LIST), not sorted.
     """
     shp = parse_shape(shape, path)
     if shp is None:
@@ -341,7 +344,7 @@ def load_raw(
         slice_bytes = ny * nx * dt.itemsize
         off = int(offset or 0)
         good_files = []
-        for p in sorted(files, key=lambda p: natural_key(rel(p, base))):
+        for p in (list(files) if keep_order else sorted(files, key=lambda p: natural_key(rel(p, base)))):
             try:
                 size = p.stat().st_size
             except OSError as exc:
@@ -462,6 +465,51 @@ def read_mhd_header(path: Path) -> tuple[dict[str, str], int]:
     return hdr, pos
 
 
+_PATTERN_FIELD = re.compile(r"%0?\d*d")
+_MAX_SLICE_FILES = 100_000
+
+
+def _mhd_slice_files(path: Path, datafile: str, header_end: int, nz: int) -> list[Path]:
+    """The per-slice data files of a MetaImage header, in slice order.
+
+    ``ElementDataFile = LIST [2D]`` is followed by one file name per line;
+    ``ElementDataFile = name%03d.raw first last step`` numbers them (MetaIO's two
+    multi-file forms). Names are relative to the header's folder; at most ``nz``
+    (the header's slice count) are taken.
+    """
+    if nz > _MAX_SLICE_FILES:
+        raise LoadError(f"MetaImage header asks for {nz} slice files (at most {_MAX_SLICE_FILES})", path=path)
+    if datafile.upper().startswith("LIST"):
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            fh.seek(header_end)
+            tail = fh.read(max(0, min(size - header_end, nz * 4096 + 65536)))
+        names = [ln.decode("latin-1").strip() for ln in tail.splitlines()]
+        names = [n for n in names if n][:nz]
+    else:
+        parts = datafile.split()
+        if len(parts) not in (3, 4) or len(_PATTERN_FIELD.findall(parts[0])) != 1 or parts[0].count("%") != 1:
+            raise CtuiError(f"MetaImage file pattern {datafile!r}: expected 'name%03d.raw first last [step]'",
+                            path=path)
+        try:
+            first, last = int(parts[1]), int(parts[2])
+            step = int(parts[3]) if len(parts) == 4 else 1
+        except ValueError:
+            raise CtuiError(f"MetaImage file pattern {datafile!r}: first/last/step must be integers", path=path) from None
+        if step == 0 or (last - first) / step < 0:
+            raise CtuiError(f"MetaImage file pattern {datafile!r}: empty range", path=path)
+        count = min((last - first) // step + 1, nz)
+        names = [parts[0] % (first + k * step) for k in range(count)]
+    if not names:
+        raise LoadError("MetaImage header lists no slice files", path=path)
+    files = []
+    for n in names:
+        if "\x00" in n:
+            raise LoadError(f"slice file name {n!r} holds a NUL byte", path=path)
+        files.append(path.parent / n)
+    return files
+
+
 def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, downsample: Any = None,
              progress: Any = None, memory_limit: int | None = None, spacing: Any = None) -> Volume:
     hdr, header_end = read_mhd_header(path)
@@ -511,7 +559,17 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     if datafile.upper() == "LOCAL":
         data_path, offset = path, header_end
     elif datafile.upper().startswith("LIST") or "%" in datafile:
-        raise CtuiError("MetaImage with per-slice data files (LIST / pattern) is not supported", path=path)
+        if compressed:
+            raise CtuiError("compressed per-slice MetaImage data (LIST / pattern) is not supported", path=path)
+        files = _mhd_slice_files(path, datafile, header_end, nz)
+        sp = parse_spacing(spacing, path) if spacing is not None else (sp_x[2], sp_x[1], sp_x[0])
+        return load_raw(
+            path, files, shape=(nz, ny, nx), dtype=dt, spacing=sp, offset=hsize if hsize > 0 else 0,
+            base=path.parent, skipped=skipped, crop=crop, downsample=downsample, progress=progress,
+            memory_limit=memory_limit, modality=modality, origin=org, direction=direction,
+            source_kind="MetaImage slices", keep_order=True,
+            warnings=warnings if given or spacing is not None else [_default_spacing_warning("the MetaImage header")],
+        )
     else:
         try:
             data_path = (path.parent / datafile).resolve()
