@@ -81,6 +81,28 @@ def test_project_objects_both_methods(tmp_path, capsys, sample):
     assert rc == 2 and "no object 9" in se
 
 
+def test_project_terraced_all_objects_in_one_pass(tmp_path, capsys, sample):
+    """--terraced: the label map's plain marching cubes, both kidneys from one pass;
+    each closed, volumes near the voxel volumes (terraced surfaces cut the corners)."""
+    from ctui.engine.meshtools import components
+    from ctui.engine.project import Project, save_project
+
+    path, volume, truth = sample
+    lab = kidney_labels(volume, truth)
+    proj = tmp_path / "kidneys.ctui"
+    save_project(proj, Project(source_path=str(path), labels=lab))
+    out = tmp_path / "terraced.stl"
+    rc, so, se = run(capsys, proj, "--terraced", "--out", out, "--json")
+    assert rc == 0, se
+    rep = json.loads(so)
+    assert rep["watertight"] and rep["components"] == 2
+    vox_ml = np.count_nonzero(lab) * np.prod(volume.spacing) / 1000.0
+    assert rep["volume_ml"] == pytest.approx(vox_ml, rel=0.02)
+    assert len(components(load_mesh(out))) == 2
+    rc, so, se = run(capsys, proj, "--terraced", "--method", "contours", "--out", out)
+    assert rc == 2 and "--terraced" in se
+
+
 def test_mric_input(tmp_path, capsys):
     from ctui.engine.borders import borders_for_mric
     from ctui.engine.mric import write_mric

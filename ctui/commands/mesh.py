@@ -38,6 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--smooth", type=int, default=0, metavar="ITER", help="Taubin smoothing iterations (volume-preserving)")
     p.add_argument("--decimate", type=int, metavar="N", help="reduce to about N triangles")
     p.add_argument("--tiling", choices=("dp", "greedy"), default="dp", help="contour tiling: minimum-area DP or greedy")
+    p.add_argument("--terraced", action="store_true",
+                   help="project / label file: plain marching cubes of the label map, every object in one pass "
+                   "(voxel staircase kept) instead of smoothed signed-distance surfaces")
     p.add_argument("--ascii", action="store_true", help="ASCII STL/PLY instead of binary")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     add_load_options(p)
@@ -160,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
     elif kind in ("project", "labels"):
         if args.iso is not None:
             raise _err(f"{src}: --iso applies to a series; a project's objects are meshed from their labels")
+        if args.terraced and method == "contours":
+            raise _err("--terraced applies to marching cubes, not to --method contours")
         labels, spacing, origin, direction = _project_labels(src, args)
         ids = _objects(labels, args.object, src)
         info["objects"] = ids
@@ -176,7 +181,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             from ctui.engine.surface import label_surfaces
 
-            surf = label_surfaces(labels, spacing=spacing, origin=origin, direction=direction, smooth=True, objects=ids)
+            surf = label_surfaces(labels, spacing=spacing, origin=origin, direction=direction,
+                                  smooth=not args.terraced, objects=ids)
             parts = [surf[k] for k in ids if k in surf]
         mesh = meshtools.merge(parts, object_id=ids[0] if len(ids) == 1 else 0, meta={"method": method})
     else:
