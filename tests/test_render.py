@@ -573,3 +573,29 @@ def test_cli_flythrough_inside_a_tube(renderer, tmp_path):
     bg = np.array([18, 18, 23])
     assert (np.abs(fr - bg).sum(axis=2) > 12).mean() > 0.7   # walls all around the view
     assert main(["render", str(stl), "--out", str(out), "--flythrough", "auto"]) == 2  # auto needs a project
+
+
+def test_cli_flythrough_auto_on_a_one_object_project(renderer, tmp_path):
+    """--flythrough auto on a project with one object follows its centreline (no
+    --object needed): frames seen from inside show walls all around."""
+    from PIL import Image
+
+    from ctui.cli import main
+    from ctui.engine.project import Project, save_project
+    from ctui.engine.volume import Volume
+
+    lab = np.zeros((60, 30, 30), np.uint8)
+    z, y, x = np.mgrid[:60, :30, :30]
+    lab[((x - 15) ** 2 + (y - 15) ** 2 <= 36) & (z > 4) & (z < 55)] = 1
+    proj = tmp_path / "tube.ctui"
+    save_project(proj, Project(source_path=None, labels=lab,
+                               meta={"spacing_zyx_mm": [1.0, 1.0, 1.0], "origin_xyz_mm": [0.0, 0.0, 0.0]}))
+    out = tmp_path / "fly.gif"
+    rc = main(["render", str(proj), "--out", str(out), "--flythrough", "auto", "--frames", "3", "--size", "64x64"])
+    assert rc == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 3
+        im.seek(1)
+        fr = np.asarray(im.convert("RGB")).astype(int)
+    bg = np.array([18, 18, 23])
+    assert (np.abs(fr - bg).sum(axis=2) > 12).mean() > 0.7

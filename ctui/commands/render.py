@@ -304,14 +304,19 @@ def _fly_path(spec: str, args, kind: str, src):
 
     if spec.strip().lower() == "auto":
         geo = getattr(args, "_project_geometry", None)
-        if kind != "project" or geo is None or not args.object or len(args.object) != 1:
+        objects = list(args.object or [])
+        if kind == "project" and geo is not None and not objects:
+            present = [int(v) for v in np.unique(geo[0]) if v]
+            if len(present) == 1:  # the project's only object
+                objects = present
+        if kind != "project" or geo is None or len(objects) != 1:
             raise CtuiError("--flythrough auto needs a .ctui project and one --object (a tubular object)", path=src)
         labels, spacing, origin, direction = geo
         from ctui.engine.centreline import centreline
 
-        path = centreline(labels == args.object[0], spacing=spacing, origin=origin, direction=direction)
+        path = centreline(labels == objects[0], spacing=spacing, origin=origin, direction=direction)
         if path is None or len(path) < 2:
-            raise CtuiError(f"no centreline found for object {args.object[0]}", path=src)
+            raise CtuiError(f"no centreline found for object {objects[0]}", path=src)
         return np.asarray(path, float)
     try:
         pts = np.array([[float(v) for v in p.split(",")] for p in spec.split(";") if p.strip()])
