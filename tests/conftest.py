@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,3 +36,11 @@ def shared(name: str) -> Path:
 @pytest.fixture(scope="session")
 def sample_dir() -> Path:
     return SAMPLE_DATA
+
+
+def lobster() -> np.ndarray:
+    """The volvis lobster from ../shared/data as (56, 324, 301) uint8, or skip."""
+    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
+    if not path.is_file():
+        pytest.skip(f"{path} missing")
+    return np.fromfile(path, np.uint8).reshape(56, 324, 301)

@@ -187,15 +187,12 @@ def test_decimated_lobster_keeps_its_volume_and_cuts_most_non_manifold_edges():
     appears, and the cut leaves far fewer non-manifold edges than the raw decimator."""
     import fast_simplification
 
-    from conftest import shared
+    from conftest import lobster
 
     from ctui.engine.meshtools import edge_counts
     from ctui.engine.surface import isosurface
 
-    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
-    if not path.is_file():
-        pytest.skip(f"{path} missing")
-    data = np.fromfile(path, np.uint8).reshape(56, 324, 301)
+    data = lobster()
     m = isosurface(data, 100, spacing=(1.4, 1.0, 1.0))
     rep0 = mesh_report(m)
     target = m.n_faces // 10

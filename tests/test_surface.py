@@ -150,12 +150,9 @@ def test_phantom_kidneys_both_methods(phantom, name):
 
 
 def test_lobster_components_all_closed():
-    from conftest import shared
+    from conftest import lobster
 
-    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
-    if not path.is_file():
-        pytest.skip(f"{path} missing")
-    data = np.fromfile(path, np.uint8).reshape(56, 324, 301)
+    data = lobster()
     m = isosurface(data, 100, spacing=(1.4, 1.0, 1.0))
     rep = mesh_report(m)
     assert rep["triangles"] > 100_000

@@ -207,11 +207,7 @@ async def test_export_all_objects_in_one_mesh_file(tmp_path):
         total = 0.0
         for name in ("kidney_left", "kidney_right"):
             o = next(o for o in truth["objects"] if o["name"] == name)
-            z, y, x = o["seed_zyx"]
-            oid = s.seg.add_object(name)
-            img = s.volume.data
-            lo, hi = o["hu"] - 80, o["hu"] + 80
-            s.seg.paint((img >= lo) & (img <= hi) & _component(img, (z, y, x), lo, hi), oid)
+            _paint_truth_object(s, o, s.seg.add_object(name))
             total += o["volume_ml"]
         out = tmp_path / "both.stl"
         await pilot.press("e")
@@ -225,12 +221,15 @@ async def test_export_all_objects_in_one_mesh_file(tmp_path):
         assert not app.errors, app.errors
 
 
-def _component(img, seed_zyx, lo, hi):
-    """The 6-connected component of lo <= img <= hi holding the seed voxel."""
+def _paint_truth_object(session, obj, object_id):
+    """Paint a phantom object as a user's threshold fill would find it: the
+    6-connected component of the truth file's HU range holding its seed voxel."""
     from scipy import ndimage
 
+    img = session.volume.data
+    lo, hi = obj["hu_range"]
     lab, _ = ndimage.label((img >= lo) & (img <= hi))
-    return lab == lab[tuple(seed_zyx)]
+    session.seg.paint(lab == lab[tuple(obj["seed_zyx"])], object_id)
 
 
 async def test_measure_screen_volumes_and_grey_level_sections(tmp_path):
@@ -243,9 +242,7 @@ async def test_measure_screen_volumes_and_grey_level_sections(tmp_path):
     async with app.run_test(size=(160, 50)) as pilot:
         await wait_workspace(pilot, app)
         s = app.session
-        lo, hi = tube["hu_range"]
-        img = s.volume.data
-        s.seg.paint((img >= lo) & (img <= hi) & _component(img, tube["seed_zyx"], lo, hi), s.current)
+        _paint_truth_object(s, tube, s.current)
         await pilot.press("M")
         scr = app.screen
         await wait_for(pilot, lambda: scr.sections is not None and 1 in scr.stats, what="the measurements", timeout=180)

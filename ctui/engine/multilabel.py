@@ -87,6 +87,14 @@ def _reserve(verts, vlab, need):
     return verts, vlab
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _set_vertex(verts, vlab, nv, x, y, z, lv):
+    verts[nv, 0] = x
+    verts[nv, 1] = y
+    verts[nv, 2] = z
+    vlab[nv] = lv
+
+
 @njit(cache=True, nogil=True)
 def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
     """Vertices of the x- and y-edges of voxel plane z; ids into buf (ny, nx, 2, 2)
@@ -101,17 +109,11 @@ def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
                 if la == lb:
                     continue
                 if la != 0:
-                    verts[nv, 0] = x + 0.5
-                    verts[nv, 1] = y
-                    verts[nv, 2] = z
-                    vlab[nv] = la
+                    _set_vertex(verts, vlab, nv, x + 0.5, y, z, la)
                     buf[y, x, 0, 0] = nv
                     nv += 1
                 if lb != 0:
-                    verts[nv, 0] = x + 0.5
-                    verts[nv, 1] = y
-                    verts[nv, 2] = z
-                    vlab[nv] = lb
+                    _set_vertex(verts, vlab, nv, x + 0.5, y, z, lb)
                     buf[y, x, 0, 1] = nv
                     nv += 1
         if y + 1 < ny and not _same_rows(uni, val, z, y, z, y + 1):  # y-edges between rows y, y+1
@@ -121,17 +123,11 @@ def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
                 if la == lb:
                     continue
                 if la != 0:
-                    verts[nv, 0] = x
-                    verts[nv, 1] = y + 0.5
-                    verts[nv, 2] = z
-                    vlab[nv] = la
+                    _set_vertex(verts, vlab, nv, x, y + 0.5, z, la)
                     buf[y, x, 1, 0] = nv
                     nv += 1
                 if lb != 0:
-                    verts[nv, 0] = x
-                    verts[nv, 1] = y + 0.5
-                    verts[nv, 2] = z
-                    vlab[nv] = lb
+                    _set_vertex(verts, vlab, nv, x, y + 0.5, z, lb)
                     buf[y, x, 1, 1] = nv
                     nv += 1
     return verts, vlab, nv
@@ -151,17 +147,11 @@ def _z_vertices(lab, uni, val, z, zbuf, verts, vlab, nv):
             if la == lb:
                 continue
             if la != 0:
-                verts[nv, 0] = x
-                verts[nv, 1] = y
-                verts[nv, 2] = z + 0.5
-                vlab[nv] = la
+                _set_vertex(verts, vlab, nv, x, y, z + 0.5, la)
                 zbuf[y, x, 0] = nv
                 nv += 1
             if lb != 0:
-                verts[nv, 0] = x
-                verts[nv, 1] = y
-                verts[nv, 2] = z + 0.5
-                vlab[nv] = lb
+                _set_vertex(verts, vlab, nv, x, y, z + 0.5, lb)
                 zbuf[y, x, 1] = nv
                 nv += 1
     return verts, vlab, nv
