@@ -21,7 +21,7 @@ pytestmark = pytest.mark.slow
 pty = pytest.importorskip("pty")
 
 
-def _run(mode: str, tmp_path, seconds: float = 20.0, stop: bytes | None = None) -> bytes:
+def _run(mode: str, tmp_path, seconds: float = 90.0, stop: bytes | None = None) -> bytes:
     import fcntl
     import termios
 
