@@ -97,3 +97,35 @@ def test_cli_partial_volume_on_a_project(tmp_path, capsys, phantom):
     assert main(["measure", str(lf), "--partial-volume"]) == 2
     err = capsys.readouterr().err
     assert "--partial-volume needs a project" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("sp", [(1.0, 1.0, 1.0), (3.0, 1.0, 1.0), (1.5, 0.5, 0.5)], ids=["iso", "1:3", "3:1"])
+def test_sphere_volume_from_grey_levels_within_half_percent_at_any_placement(sp):
+    """A CT-like sphere (radius 10 voxels along its shortest axis, occupancy from 4^3
+    supersampling, 250 HU in 40 HU tissue, 8 HU noise) at 8 random sub-voxel
+    placements: the thresholded mask's voxel count scatters by up to about 1 %
+    (lattice counting), the partial-volume volume stays within 0.5 %."""
+    rng = np.random.default_rng(11)
+    r = 10.0 * max(sp)
+    ext = r + 4 * max(sp)
+    shape = [int(2 * ext / s) + 1 for s in sp]
+    off = (np.arange(4) + 0.5) / 4 - 0.5
+    worst_pv = 0.0
+    for _ in range(8):
+        c = np.array([n * s / 2 for n, s in zip(shape, sp)]) + rng.uniform(-0.5, 0.5, 3) * np.array(sp)
+        occ = np.zeros(shape, np.float32)
+        for a in off:
+            for b in off:
+                for e in off:
+                    zz, yy, xx = np.meshgrid(*[(np.arange(n) + o) * s - cc for n, s, o, cc in
+                                               zip(shape, sp, (a, b, e), c)], indexing="ij", sparse=True)
+                    occ += (zz ** 2 + yy ** 2 + xx ** 2 <= r * r)
+        occ /= 64.0
+        img = 40.0 + 210.0 * occ + rng.normal(0.0, 8.0, occ.shape)
+        mask = img > (40.0 + 250.0) / 2
+        truth = 4.0 / 3.0 * np.pi * r ** 3
+        pv = partial_volume_fraction(img, mask)
+        err = pv["volume_voxels"] * float(np.prod(sp)) / truth - 1
+        worst_pv = max(worst_pv, abs(err))
+    print(f"worst partial-volume error {100 * worst_pv:.3f} %")
+    assert worst_pv < 0.005, worst_pv
