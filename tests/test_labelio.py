@@ -128,7 +128,7 @@ def test_seg_nrrd_segments(tmp_path, oblique):
 
 @pytest.mark.parametrize("ext", EXTS)
 def test_itk_reads_same_geometry(tmp_path, oblique, ext):
-    sitk = pytest.importorskip("SimpleITK", reason="SimpleITK (bench extra) not installed")
+    sitk = pytest.importorskip("SimpleITK", reason="SimpleITK (test extra) not installed")
     labels, vol = oblique
     p = save_labels(tmp_path / f"lab.{ext}", labels, vol)
     img = sitk.ReadImage(str(p))
