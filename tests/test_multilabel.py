@@ -74,3 +74,16 @@ def test_label_surfaces_terraced_uses_one_pass_and_objects_filter():
         c = m.vertices.mean(axis=0)
         assert np.mean(np.sum((m.vertices - c) * m.normals, axis=1) > 0) > 0.95
     assert multilabel_marching_cubes(np.zeros((4, 4, 4), np.uint8)) == {}
+
+
+def test_any_integer_ids_keep_their_ids():
+    lab = _labels().astype(np.int64)
+    ref = multilabel_marching_cubes(lab)
+    odd = np.where(lab == 1, -7, np.where(lab == 2, 1_000_000, lab))
+    out = multilabel_marching_cubes(odd)
+    assert sorted(out) == sorted([-7, 1_000_000] + [k for k in ref if k not in (1, 2)])
+    assert np.array_equal(out[-7][1], ref[1][1]) and np.array_equal(out[1_000_000][0], ref[2][0])
+    only = multilabel_marching_cubes(odd, objects=[-7])
+    assert list(only) == [-7]
+    with pytest.raises(ValueError, match="whole numbers"):
+        multilabel_marching_cubes(lab.astype(np.float32) + 0.5)

@@ -312,8 +312,9 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
 
     Parameters
     ----------
-    labels : ndarray (nz, ny, nx) of uint8 / uint16 / int
-        0 background, other values objects.
+    labels : ndarray (nz, ny, nx) of integers (or whole-valued floats)
+        0 background, other values objects (any ids: negative or large ones are
+        renumbered for the kernel and reported under their own ids).
     affine : (4, 4), optional
         Maps homogeneous voxel indices (x, y, z, 1) to mm (identity: voxel units).
     objects : sequence of int, optional
@@ -331,9 +332,26 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
     lab = np.asarray(labels)
     if lab.ndim != 3:
         raise ValueError(f"multilabel_marching_cubes needs a 3D label map, got shape {lab.shape}")
-    if lab.dtype not in (np.uint8, np.uint16, np.int32):
+    ids_back = None
+    if lab.dtype not in (np.uint8, np.uint16):
+        if not np.issubdtype(lab.dtype, np.integer) and not np.issubdtype(lab.dtype, np.bool_):
+            if lab.size and not np.array_equal(lab, np.round(lab)):
+                raise ValueError("a label map holds whole numbers")
         if lab.size and (lab.min() < 0 or lab.max() > 65535):
-            lab = lab.astype(np.int32)
+            # other ids (negative, huge): numbered 1..n for the kernel, mapped back after
+            ids_back, inv = np.unique(lab, return_inverse=True)
+            zero = np.searchsorted(ids_back, 0)
+            has_zero = zero < len(ids_back) and ids_back[zero] == 0
+            if len(ids_back) - has_zero > 65535:
+                raise ValueError("more than 65535 objects in a label map")
+            order = np.arange(len(ids_back))
+            compact = np.where(order < zero, order + 1, order + (0 if has_zero else 1))
+            if has_zero:
+                compact[zero] = 0
+            lab = compact[inv.reshape(lab.shape)].astype(np.uint16)
+            back = np.zeros(int(compact.max()) + 1, dtype=np.int64)
+            back[compact] = ids_back
+            ids_back = back
         else:
             lab = lab.astype(np.uint16)
     nz_any = lab.any(axis=2)  # (nz, ny): rows holding any object
@@ -355,6 +373,9 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
     if np.linalg.det(aff[:3, :3]) < 0:  # mirrored: keep the faces counter-clockwise from outside
         tris = np.ascontiguousarray(tris[:, ::-1])
     wanted = None if objects is None else {int(o) for o in objects}
+    if ids_back is not None and wanted is not None:  # the caller's ids -> the kernel's
+        fwd = {int(v): k for k, v in enumerate(ids_back) if k}
+        wanted = {fwd[o] for o in wanted if o in fwd}
     out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     nlab = int(max(vlab.max(initial=0), tlab.max(initial=0)))
     # every vertex belongs to exactly one object: group vertices and triangles by
@@ -366,8 +387,9 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
     for k in range(1, nlab + 1):
         if tcount[k] == 0 or (wanted is not None and k not in wanted):
             continue
-        out[k] = (xyz[vstart[k]: vstart[k] + vcount[k]],
-                  np.ascontiguousarray(faces[tstart[k]: tstart[k] + tcount[k]]))
+        key = k if ids_back is None else int(ids_back[k])
+        out[key] = (xyz[vstart[k]: vstart[k] + vcount[k]],
+                    np.ascontiguousarray(faces[tstart[k]: tstart[k] + tcount[k]]))
     return out
 
 
