@@ -260,3 +260,46 @@ async def test_measure_screen_volumes_and_grey_level_sections(tmp_path):
         assert med == pytest.approx(thin["cross_section_mm2"], rel=0.01)
         assert s_mm[-1] > 0.9 * tube["axis"]["length_mm"]
         assert not app.errors, app.errors
+
+
+async def test_3d_fly_through_the_current_object(tmp_path):
+    """f in the 3D screen flies along the current object's centreline (the phantom's
+    rod): frames from inside show the wall all around; f again stops; F saves a GIF."""
+    render = pytest.importorskip("ctui.engine.render")
+    if not render.egl_available():
+        pytest.skip("no EGL context on this machine (install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri)")
+    from PIL import Image
+
+    tube = next(o for o in load_truth()["objects"] if o["name"] == "tube")
+    app = CtuiApp()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        _paint_truth_object(s, tube, s.current)
+        await pilot.press("r")
+        v3 = app.screen
+        await wait_for(pilot, lambda: v3.last_image is not None, timeout=60, what="the first 3D image")
+        outside = v3.last_image.copy()
+        await pilot.press("f")
+        await wait_for(pilot, lambda: v3.fly_frames_shown == v3.FLY_FRAMES and not v3._flying, timeout=180,
+                       what="the whole fly-through")
+        img = v3.last_image.astype(int)  # the last frame: inside, near the far end
+        bg = outside[0, 0].astype(int)  # the background colour of the outside view
+        assert (np.abs(img - bg).sum(axis=2) > 12).mean() > 0.8  # walls all around the view
+        # f starts again (a long flight: small frames render in milliseconds), f stops it
+        v3.FLY_FRAMES = 5000
+        await pilot.press("f")
+        await wait_for(pilot, lambda: v3.fly_frames_shown >= 2, timeout=60, what="the second flight")
+        await pilot.press("f")
+        await pilot.pause(0.5)
+        stopped_at = v3.fly_frames_shown
+        await pilot.pause(0.5)
+        assert not v3._flying and v3.fly_frames_shown == stopped_at < v3.FLY_FRAMES
+        v3.FLY_FRAMES = 60
+        gif = tmp_path / "fly.gif"
+        await pilot.press("F")
+        await answer_prompt(pilot, str(gif))
+        await wait_for(pilot, lambda: gif.exists(), timeout=180, what="the fly-through GIF")
+        with Image.open(gif) as g:
+            assert g.n_frames == 60
+        assert not app.errors, app.errors

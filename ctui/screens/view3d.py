@@ -73,6 +73,8 @@ class View3DScreen(GuardMixin, Screen):
         Binding("p", "slice_plane", "Slice plane", show=False),
         Binding("s", "save", "Save PNG"),
         Binding("t", "turntable", "Turntable"),
+        Binding("f", "fly", "Fly through object"),
+        Binding("F", "fly_save", "Save fly-through GIF", show=False),
         Binding("escape,r", "close", "Back"),
     ]
 
@@ -89,6 +91,8 @@ class View3DScreen(GuardMixin, Screen):
         self.last_image = None
         self.render_times: list[float] = []
         self.shown_requests: list[int] = []
+        self.fly_frames_shown = 0
+        self._flying = False
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="v3-body"):
@@ -131,7 +135,7 @@ class View3DScreen(GuardMixin, Screen):
                     vol = float("nan")
                 lines.append(f" {oid}: {len(m.faces)} tris, {vol:.1f} ml")
         lines += ["", "[dim]arrows orbit 15°", "+/- zoom, shift+arrows light", "m mode, c method, S shadows, p slice",
-                  "s PNG, t turntable, Esc back[/dim]"]
+                  "s PNG, t turntable", "f fly through (f stops)", "F fly-through GIF", "Esc back[/dim]"]
         self.query_one("#v3-info", Static).update("\n".join(lines))
 
     # ------------------------------------------------------------------ meshes
@@ -317,6 +321,96 @@ class View3DScreen(GuardMixin, Screen):
             render.save_turntable(path, scene, 36, (384, 384))
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Turntable not saved: {exc}", severity="error")
+            return
+        self.app.call_from_thread(self.app.notify, f"Saved {path}")
+        self.app.call_from_thread(self._status, f"Saved {path}")
+
+    # ------------------------------------------------------------------ fly-through
+    FLY_FRAMES = 60
+
+    def _fly_path(self):
+        """Centreline (m, 3) mm of the workspace's current object, or raise CtuiError."""
+        labels = self.s.labels()
+        oid = int(self.s.current)
+        if labels is None or not (labels == oid).any():
+            raise CtuiError(f"object {oid} is empty: fill and propagate it first")
+        v = self.s.volume
+        path = engine("centreline").centreline(labels == oid, spacing=v.spacing, origin=v.origin,
+                                               direction=v.direction)
+        if path is None or len(path) < 2:
+            raise CtuiError(f"no centreline through object {oid}")
+        return path
+
+    def action_fly(self) -> None:
+        """Endoscopic fly-through along the current object's centreline, frame by frame
+        in the panel; f again (or any other view change) stops it."""
+        if self.scene is None:
+            return
+        self._req += 1
+        if self._flying:
+            self._flying = False
+            self._status("Fly-through stopped")
+            return
+        self._flying = True
+        self.fly_frames_shown = 0
+        scene = self.scene.snapshot()
+        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
+        scene.set_volume(None)
+        scene.options.slice_plane = None
+        self._fly_worker(scene, self.query_one(ImageView).target_pixels(), self._req)
+
+    @work(thread=True, exclusive=True, group="render")
+    def _fly_worker(self, scene, size, req: int) -> None:
+        render = engine("render")
+        try:
+            self.app.call_from_thread(self._status, "Centreline of the current object ...")
+            path = self._fly_path()
+            cams = render.flythrough_cameras(path, self.FLY_FRAMES)
+            for i, cam in enumerate(cams):
+                if req != self._req:
+                    return
+                t0 = time.perf_counter()
+                img = render.get_renderer().submit(render.flythrough_scene(scene, cam), size).result()
+                self.app.call_from_thread(self._show_fly, img, req, i + 1, len(cams), time.perf_counter() - t0)
+        except Exception as exc:
+            self.app.call_from_thread(self._render_failed, str(exc))
+        finally:
+            if req == self._req:
+                self._flying = False
+
+    def _show_fly(self, img, req: int, i: int, n: int, dt: float) -> None:
+        if req != self._req:
+            return
+        self.last_image = img
+        self.fly_frames_shown = i
+        self.query_one(ImageView).set_image(img, token=("fly", req, i))
+        self._status(f"fly-through frame {i}/{n} ({dt * 1000:.0f} ms); f stops, F saves a GIF")
+
+    def action_fly_save(self) -> None:
+        from .dialogs import PromptScreen
+
+        if self.scene is None:
+            return
+
+        def done(path: str | None) -> None:
+            if path:
+                self._fly_save(path.strip())
+
+        self.app.push_screen(PromptScreen(f"Fly-through animation ({self.FLY_FRAMES} frames, GIF)",
+                                          "ctui-flythrough.gif"), done)
+
+    @work(thread=True, group="save")
+    def _fly_save(self, path: str) -> None:
+        render = engine("render")
+        scene = self.scene.snapshot()
+        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
+        scene.set_volume(None)
+        scene.options.slice_plane = None
+        self.app.call_from_thread(self._status, f"Writing fly-through {path} ...")
+        try:
+            render.save_flythrough(path, scene, self._fly_path(), self.FLY_FRAMES, (384, 384))
+        except Exception as exc:
+            self.app.call_from_thread(self.app.notify, f"Fly-through not saved: {exc}", severity="error")
             return
         self.app.call_from_thread(self.app.notify, f"Saved {path}")
         self.app.call_from_thread(self._status, f"Saved {path}")

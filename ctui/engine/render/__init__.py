@@ -26,8 +26,8 @@ user moves the camera and 1.0 for the still frame.
 
 from .camera import CameraSetup, setup_camera
 from .context import EGL_PACKAGES, EGLUnavailable, Renderer, egl_available, get_renderer
-from .outputs import (encode_png, flythrough_cameras, flythrough_frames, save_animation, save_flythrough,
-                      save_png, save_turntable, turntable_frames)
+from .outputs import (encode_png, flythrough_cameras, flythrough_frames, flythrough_scene, save_animation,
+                      save_flythrough, save_png, save_turntable, turntable_frames)
 from .scene import (ANTIALIAS, MODES, Camera, Light, Material, RenderOptions, Scene, SceneMesh, SceneVolume,
                     SlicePlane)
 from .transfer import PRESETS, preset_names
@@ -35,7 +35,7 @@ from .transfer import PRESETS, preset_names
 __all__ = [
     "ANTIALIAS", "MODES", "PRESETS", "EGL_PACKAGES", "Camera", "CameraSetup", "EGLUnavailable", "Light",
     "Material", "Renderer", "RenderOptions", "Scene", "SceneMesh", "SceneVolume", "SlicePlane",
-    "egl_available", "encode_png", "flythrough_cameras", "flythrough_frames", "get_renderer", "preset_names",
+    "egl_available", "encode_png", "flythrough_cameras", "flythrough_frames", "flythrough_scene", "get_renderer", "preset_names",
     "render", "save_animation", "save_flythrough", "save_png", "save_turntable", "setup_camera",
 ]
 

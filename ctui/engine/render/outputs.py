@@ -88,8 +88,9 @@ def save_turntable(path: str | Path, scene: Scene, n: int = 36, size: tuple[int,
     return save_animation(path, turntable_frames(scene, n, size, renderer=renderer), fps=fps)
 
 
-def resample_path(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Resample a polyline (m, 3) mm to ``n`` points evenly spaced by arc length;
+def resample_path(points: np.ndarray, n: int, *, end_margin_mm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Resample a polyline (m, 3) mm to ``n`` points evenly spaced by arc length,
+    leaving out ``end_margin_mm`` at each end (at most a quarter of the length);
     returns (positions (n, 3), unit tangents (n, 3)) (tangents from a lightly smoothed path)."""
     p = np.asarray(points, float).reshape(-1, 3)
     if len(p) < 2:
@@ -100,7 +101,8 @@ def resample_path(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
     if s[-1] <= 0:
         raise CtuiError("a fly-through path needs at least 2 distinct points")
-    u = np.linspace(0.0, s[-1], int(n))
+    m = min(max(float(end_margin_mm), 0.0), 0.25 * s[-1])
+    u = np.linspace(m, s[-1] - m, int(n))
     pos = np.stack([np.interp(u, s, p[:, k]) for k in range(3)], axis=1)
     # tangents from a denser, smoothed copy of the path (Gaussian, ~2% of its length)
     dense_u = np.linspace(0.0, s[-1], max(4 * int(n), 64))
@@ -118,7 +120,9 @@ def flythrough_cameras(path_mm: np.ndarray, n_frames: int, *, fov_deg: float = 7
                        look_ahead_mm: float = 10.0) -> list[Camera]:
     """Perspective cameras inside along ``path_mm`` (m, 3), each looking along the path
     tangent; the up vector is parallel-transported so the view does not spin."""
-    pos, tan = resample_path(path_mm, n_frames)
+    # a centreline runs to the object's end caps: a camera there would look out of the
+    # object at nothing, so the flight stops one look-ahead short of each end
+    pos, tan = resample_path(path_mm, n_frames, end_margin_mm=look_ahead_mm)
     up = np.array([0.0, 0.0, 1.0])
     if abs(np.dot(up, tan[0])) > 0.9:
         up = np.array([0.0, -1.0, 0.0])
@@ -130,6 +134,19 @@ def flythrough_cameras(path_mm: np.ndarray, n_frames: int, *, fov_deg: float = 7
         cams.append(Camera(projection="perspective", fov_deg=fov_deg, eye=tuple(p),
                            look_at=tuple(p + t * look_ahead_mm), up=tuple(up)))
     return cams
+
+
+def flythrough_scene(scene: Scene, camera: Camera, *, endoscope_light: bool = True) -> Scene:
+    """A snapshot of ``scene`` seen by one fly-through ``camera``; ``endoscope_light``:
+    light mostly from the camera (head light 0.8, the movable light at 30 %, no
+    shadows), as an endoscope's own lamp."""
+    s = scene.snapshot()
+    s.camera = camera
+    if endoscope_light:
+        s.options.headlight = max(s.options.headlight, 0.8)
+        s.light.intensity *= 0.3
+        s.options.shadows = False
+    return s
 
 
 def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, size: tuple[int, int] = (512, 512),
@@ -144,13 +161,7 @@ def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, siz
     r = renderer or get_renderer()
     futs = []
     for cam in flythrough_cameras(path_mm, n_frames, fov_deg=fov_deg):
-        s = scene.snapshot()
-        s.camera = cam
-        if endoscope_light:
-            s.options.headlight = max(s.options.headlight, 0.8)
-            s.light.intensity *= 0.3
-            s.options.shadows = False
-        futs.append(r.submit(s, size))
+        futs.append(r.submit(flythrough_scene(scene, cam, endoscope_light=endoscope_light), size))
     for f in futs:
         yield f.result()
 
