@@ -341,6 +341,15 @@ class View3DScreen(GuardMixin, Screen):
             raise CtuiError(f"no centreline through object {oid}")
         return path
 
+    def _fly_scene(self):
+        """The current scene for a flight inside the surfaces: no volume, no slice plane
+        (volume modes fall back to surfaces)."""
+        scene = self.scene.snapshot()
+        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
+        scene.set_volume(None)
+        scene.options.slice_plane = None
+        return scene
+
     def action_fly(self) -> None:
         """Endoscopic fly-through along the current object's centreline, frame by frame
         in the panel; f again (or any other view change) stops it."""
@@ -353,10 +362,7 @@ class View3DScreen(GuardMixin, Screen):
             return
         self._flying = True
         self.fly_frames_shown = 0
-        scene = self.scene.snapshot()
-        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
-        scene.set_volume(None)
-        scene.options.slice_plane = None
+        scene = self._fly_scene()
         self._fly_worker(scene, self.query_one(ImageView).target_pixels(), self._req)
 
     @work(thread=True, exclusive=True, group="render")
@@ -402,10 +408,7 @@ class View3DScreen(GuardMixin, Screen):
     @work(thread=True, group="save")
     def _fly_save(self, path: str) -> None:
         render = engine("render")
-        scene = self.scene.snapshot()
-        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
-        scene.set_volume(None)
-        scene.options.slice_plane = None
+        scene = self._fly_scene()
         self.app.call_from_thread(self._status, f"Writing fly-through {path} ...")
         try:
             render.save_flythrough(path, scene, self._fly_path(), self.FLY_FRAMES, (384, 384))
