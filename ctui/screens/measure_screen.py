@@ -16,6 +16,7 @@ from textual.widgets import DataTable, Footer, Label, Static
 
 
 from ctui.engine.colors import object_color
+from ctui.engine.errors import CtuiError
 
 from .guard import GuardMixin
 from .imageview import ImageView
@@ -93,7 +94,7 @@ class MeasureScreen(GuardMixin, Screen):
             try:  # partial-volume volume from the grey levels (needs contrast with the surroundings)
                 pv = meas.partial_volume_fraction(v.data, labels == oid)
                 st["volume_pv_ml"] = pv["volume_voxels"] * float(np.prod(v.spacing)) / 1000.0
-            except Exception:
+            except CtuiError:  # no contrast with the surroundings: no grey-level estimate
                 st["volume_pv_ml"] = None
             self.app.call_from_thread(self._add_row, oid, st)
         self.app.call_from_thread(self._status, "c: sections along the centreline of the selected object; s saves")
