@@ -36,7 +36,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from .marching import _EDGES, _CORNER_OFFSETS, NTRI, TRI_TABLE
+from .marching import _CORNER_OFFSETS, _EDGES, NTRI, TRI_TABLE
 
 # per table edge: axis (0 x, 1 y, 2 z) and the offsets (dx, dy, dz) of its lower corner
 _EDGE_AXIS = np.array([0] * 4 + [1] * 4 + [2] * 4, dtype=np.int64)
@@ -58,23 +58,10 @@ def _grow_i(a, n):
     return b
 
 
-@njit(cache=True, nogil=True)
-def _grow_t(a, n):
-    b = np.empty((max(2 * a.shape[0], n), 3), a.dtype)
-    b[: a.shape[0]] = a
-    return b
-
-
-def _row_flags(lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(nz, ny) flags of the voxel rows that are all background (numpy's vectorized
-    ``any`` is faster here than a compiled scan), and their value (0)."""
-    uni = ~lab.any(axis=2)
-    return uni, np.zeros(uni.shape, lab.dtype)
-
-
 @njit(cache=True, nogil=True, inline="always")
-def _same_rows(uni, val, z0, y0, z1, y1):
-    return uni[z0, y0] and uni[z1, y1] and val[z0, y0] == val[z1, y1]
+def _both_empty(empty, z0, y0, z1, y1):
+    """Both voxel rows are all background: no edge between them is crossed."""
+    return empty[z0, y0] and empty[z1, y1]
 
 
 @njit(cache=True, nogil=True)
@@ -96,13 +83,13 @@ def _set_vertex(verts, vlab, nv, x, y, z, lv):
 
 
 @njit(cache=True, nogil=True)
-def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
+def _plane_vertices(lab, empty, z, buf, verts, vlab, nv):
     """Vertices of the x- and y-edges of voxel plane z; ids into buf (ny, nx, 2, 2)
     (only the entries of crossed edges are written, and only those are read)."""
     ny, nx = lab.shape[1], lab.shape[2]
     verts, vlab = _reserve(verts, vlab, nv + 4 * ny * nx)
     for y in range(ny):
-        if not uni[z, y]:  # x-edges of row y
+        if not empty[z, y]:  # x-edges of row y
             for x in range(nx - 1):
                 la = lab[z, y, x]
                 lb = lab[z, y, x + 1]
@@ -116,7 +103,7 @@ def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
                     _set_vertex(verts, vlab, nv, x + 0.5, y, z, lb)
                     buf[y, x, 0, 1] = nv
                     nv += 1
-        if y + 1 < ny and not _same_rows(uni, val, z, y, z, y + 1):  # y-edges between rows y, y+1
+        if y + 1 < ny and not _both_empty(empty, z, y, z, y + 1):  # y-edges between rows y, y+1
             for x in range(nx):
                 la = lab[z, y, x]
                 lb = lab[z, y + 1, x]
@@ -134,12 +121,12 @@ def _plane_vertices(lab, uni, val, z, buf, verts, vlab, nv):
 
 
 @njit(cache=True, nogil=True)
-def _z_vertices(lab, uni, val, z, zbuf, verts, vlab, nv):
+def _z_vertices(lab, empty, z, zbuf, verts, vlab, nv):
     """Vertices of the z-edges between voxel planes z and z+1; ids into zbuf (ny, nx, 2)."""
     ny, nx = lab.shape[1], lab.shape[2]
     verts, vlab = _reserve(verts, vlab, nv + 2 * ny * nx)
     for y in range(ny):
-        if _same_rows(uni, val, z, y, z + 1, y):
+        if _both_empty(empty, z, y, z + 1, y):
             continue
         for x in range(nx):
             la = lab[z, y, x]
@@ -158,7 +145,7 @@ def _z_vertices(lab, uni, val, z, zbuf, verts, vlab, nv):
 
 
 @njit(cache=True, nogil=True)
-def _kernel(lab, uni, val, z_start, z_stop, ntri_t, table, edge_axis, edge_low, edge_a, corner_off):
+def _kernel(lab, empty, z_start, z_stop, ntri_t, table, edge_axis, edge_low, edge_a):
     """Cell layers z_start <= z < z_stop; vertices of voxel planes z_start..z_stop.
 
     Returns verts (n, 3) index (x, y, z), vertex labels, tris, triangle labels and the
@@ -176,18 +163,18 @@ def _kernel(lab, uni, val, z_start, z_stop, ntri_t, table, edge_axis, edge_low, 
     zbuf = np.empty((ny, nx, 2), np.int32)
     vals = np.empty(8, lab.dtype)
     labs = np.empty(8, lab.dtype)
-    verts, vlab, nv = _plane_vertices(lab, uni, val, z_start, bufs[z_start & 1], verts, vlab, nv)
+    verts, vlab, nv = _plane_vertices(lab, empty, z_start, bufs[z_start & 1], verts, vlab, nv)
     first_end = nv
     last_start = nv
     last_end = nv
     for z in range(z_start, z_stop):
         last_start = nv
-        verts, vlab, nv = _plane_vertices(lab, uni, val, z + 1, bufs[(z + 1) & 1], verts, vlab, nv)
+        verts, vlab, nv = _plane_vertices(lab, empty, z + 1, bufs[(z + 1) & 1], verts, vlab, nv)
         last_end = nv
-        verts, vlab, nv = _z_vertices(lab, uni, val, z, zbuf, verts, vlab, nv)
+        verts, vlab, nv = _z_vertices(lab, empty, z, zbuf, verts, vlab, nv)
         for y in range(ny - 1):
-            if (_same_rows(uni, val, z, y, z, y + 1) and _same_rows(uni, val, z, y, z + 1, y)
-                    and _same_rows(uni, val, z, y, z + 1, y + 1)):
+            if (_both_empty(empty, z, y, z, y + 1) and _both_empty(empty, z, y, z + 1, y)
+                    and _both_empty(empty, z, y, z + 1, y + 1)):
                 continue
             # the cell's corners c = dy + 2*dz + 4*dx: its left face (x) is corners 0-3,
             # its right face (x + 1) corners 4-7; a face whose four voxels are equal and
@@ -238,7 +225,7 @@ def _kernel(lab, uni, val, z_start, z_stop, ntri_t, table, edge_axis, edge_low, 
                     if m == 0:
                         continue
                     if nt + m > tris.shape[0]:
-                        tris = _grow_t(tris, nt + m)
+                        tris = _grow_f(tris, nt + m)
                         tlab = _grow_i(tlab, nt + m)
                     for t in range(m):
                         for j in range(3):
@@ -256,7 +243,7 @@ def _kernel(lab, uni, val, z_start, z_stop, ntri_t, table, edge_axis, edge_low, 
     return verts[:nv], vlab[:nv], tris[:nt], tlab[:nt], first_end, last_start, last_end
 
 
-def _run_chunks(crop: np.ndarray, uni: np.ndarray, val: np.ndarray, threads: int):
+def _run_chunks(crop: np.ndarray, empty: np.ndarray, threads: int):
     """Run the kernel on z chunks in threads (numba releases the GIL) and weld the
     planes the chunks share: each chunk makes the vertices of its first and last voxel
     planes in the same scan order, so chunk k+1's first-plane vertices are chunk k's
@@ -264,44 +251,40 @@ def _run_chunks(crop: np.ndarray, uni: np.ndarray, val: np.ndarray, threads: int
     nzc = crop.shape[0] - 1  # cell layers
     n = max(1, min(int(threads), nzc // 8 or 1))
     # balance the chunks by work: the rows holding objects, not the slice count
-    work = np.cumsum((~uni[:-1]).sum(axis=1) + (~uni[1:]).sum(axis=1) + 1)
+    work = np.cumsum((~empty[:-1]).sum(axis=1) + (~empty[1:]).sum(axis=1) + 1)
     bounds = np.concatenate([[0], np.searchsorted(work, work[-1] * np.arange(1, n) / n) + 1, [nzc]])
     bounds = np.unique(np.clip(bounds, 0, nzc))
     n = len(bounds) - 1
-    args = (NTRI, TRI_TABLE, _EDGE_AXIS, _EDGE_LOW, _EDGE_A, _CORNER_OFFSETS)
+    args = (NTRI, TRI_TABLE, _EDGE_AXIS, _EDGE_LOW, _EDGE_A)
     if n == 1:
-        parts = [_kernel(crop, uni, val, 0, nzc, *args)]
+        parts = [_kernel(crop, empty, 0, nzc, *args)]
     else:
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(n) as ex:
-            parts = list(ex.map(lambda k: _kernel(crop, uni, val, int(bounds[k]), int(bounds[k + 1]), *args),
+            parts = list(ex.map(lambda k: _kernel(crop, empty, int(bounds[k]), int(bounds[k + 1]), *args),
                                 range(n)))
     verts, vlabs, tris, tlabs = [], [], [], []
     base = 0
     prev_last = None  # (start, end) in global ids of the previous chunk's last plane
     for v, vl, t, tl, first_end, last_start, last_end in parts:
-        if prev_last is None:  # first chunk: its ids are the global ids
-            t2 = t
-            kept = len(v)
-            keep = slice(0, len(v))
-            last_g = last_start
-        else:  # its first plane is the previous chunk's last plane
+        # chunk ids -> global ids: its own vertices follow the ones kept so far; those of
+        # its first plane (all but the first chunk's) are the previous chunk's last plane
+        dup = 0 if prev_last is None else first_end
+        offset = base - dup
+        t2 = t + np.int32(offset)
+        if dup:
             ps, pe = prev_last
-            if pe - ps != first_end:
+            if pe - ps != dup:
                 raise RuntimeError("multilabel marching cubes: chunk seam mismatch")
-            kept = len(v) - first_end
-            keep = slice(first_end, len(v))
-            t2 = t + np.int32(base - first_end)
-            seam = t < first_end
+            seam = t < dup
             t2[seam] = t[seam] + np.int32(ps)
-            last_g = (ps + last_start) if last_start < first_end else base + last_start - first_end
-        verts.append(v[keep])
-        vlabs.append(vl[keep])
+        verts.append(v[dup:])
+        vlabs.append(vl[dup:])
         tris.append(t2)
         tlabs.append(tl)
-        prev_last = (last_g, last_g + (last_end - last_start))
-        base += kept
+        prev_last = (last_start + offset, last_end + offset)
+        base += len(v) - dup
     return np.concatenate(verts), np.concatenate(vlabs), np.concatenate(tris), np.concatenate(tlabs)
 
 
@@ -339,22 +322,18 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
                 raise ValueError("a label map holds whole numbers")
         if lab.size and (lab.min() < 0 or lab.max() > 65535):
             # other ids (negative, huge): numbered 1..n for the kernel, mapped back after
-            ids_back, inv = np.unique(lab, return_inverse=True)
-            zero = np.searchsorted(ids_back, 0)
-            has_zero = zero < len(ids_back) and ids_back[zero] == 0
-            if len(ids_back) - has_zero > 65535:
+            ids = np.unique(lab)
+            ids = ids[ids != 0]
+            if len(ids) > 65535:
                 raise ValueError("more than 65535 objects in a label map")
-            order = np.arange(len(ids_back))
-            compact = np.where(order < zero, order + 1, order + (0 if has_zero else 1))
-            if has_zero:
-                compact[zero] = 0
-            lab = compact[inv.reshape(lab.shape)].astype(np.uint16)
-            back = np.zeros(int(compact.max()) + 1, dtype=np.int64)
-            back[compact] = ids_back
-            ids_back = back
+            inside = lab != 0
+            compact = np.zeros(lab.shape, np.uint16)
+            compact[inside] = np.searchsorted(ids, lab[inside]) + 1
+            lab = compact
+            ids_back = np.r_[0, ids].astype(np.int64)  # kernel id -> the caller's id
         else:
             lab = lab.astype(np.uint16)
-    nz_any = lab.any(axis=2)  # (nz, ny): rows holding any object
+    nz_any = lab.any(axis=2)  # (nz, ny): rows holding any object (numpy's vectorized any)
     if not nz_any.any():
         return {}
     zs = np.flatnonzero(nz_any.any(axis=1))
@@ -362,8 +341,10 @@ def multilabel_marching_cubes(labels: np.ndarray, *, affine: np.ndarray | None =
     xs = np.flatnonzero(lab[zs[0]: zs[-1] + 1, ys[0]: ys[-1] + 1].any(axis=(0, 1)))
     z0, z1, y0, y1, x0, x1 = zs[0], zs[-1] + 1, ys[0], ys[-1] + 1, xs[0], xs[-1] + 1
     crop = np.pad(lab[z0:z1, y0:y1, x0:x1], 1)  # one voxel of background on every side
-    uni, val = _row_flags(crop)
-    verts, vlab, tris, tlab = _run_chunks(crop, uni, val, threads or os.cpu_count() or 1)
+    # voxel rows all background, (nz, ny) of the padded crop: the crop's x range holds
+    # every object voxel of its rows, so the full rows' flags serve
+    empty = ~np.pad(nz_any[z0:z1, y0:y1], 1)
+    verts, vlab, tris, tlab = _run_chunks(crop, empty, threads or os.cpu_count() or 1)
     # crop index -> volume index -> mm
     shift = np.eye(4)
     shift[:3, 3] = (x0 - 1, y0 - 1, z0 - 1)
