@@ -303,8 +303,9 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
     another face: one to one on ordinary edges; on an edge shared by 2k faces the
     faces are sorted by angle around the edge and paired across the solid's inside
     wedges, without crossing pairs (so two solids that touch along an edge come
-    apart there, and sheets that pass through each other are matched as nested). Face corners joined by the pairing form one vertex each: a vertex
-    where several fans meet gets one copy per fan. The result has no non-manifold
+    apart there, and sheets that pass through each other are matched as nested).
+    Face corners joined by the pairing form one vertex each: a vertex where several
+    fans meet gets one copy per fan. The result has no non-manifold
     edge or vertex; positions, faces and the enclosed volume are unchanged (copies
     coincide). Edges that cannot be paired (as many a -> b as b -> a uses needed)
     keep all their faces joined, as in the input.
@@ -349,7 +350,7 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
         ref = u[0] / (np.linalg.norm(u[0]) + 1e-300)
         ang = np.arctan2(np.cross(ref, u) @ e, u @ ref)
         srt = np.argsort(ang)
-        hs, fw, u = hs[srt], fw[srt], u[srt]
+        hs, fw = hs[srt], fw[srt]
         # around the edge (angle increasing by the right-hand rule about a -> b), a
         # face using b -> a has the solid's inside in the wedge after it, a face using
         # a -> b in the wedge before it: match each b -> a face with the a -> b face
@@ -367,38 +368,31 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
                 o = stack.pop()
                 mate[hs[o]], mate[hs[k]] = hs[k], hs[o]
 
-    # corners: node 3 * face + i is vertex f[face, i] in that face; a half-edge pair
-    # (h: a -> b in face F, g: b -> a in face G) joins corner a of F with corner a of G
-    # and corner b of F with corner b of G
+    # corners: node 3 * face + i is vertex f[face, i] in that face (half-edge h starts
+    # at corner h); a pair (h: a -> b in face F, g: b -> a in face G, or a -> b when G
+    # is flipped) joins corner a of F with corner a of G and corner b with corner b
     h = np.flatnonzero(mate >= 0)
     g = mate[h]
-    fh, ih = h // 3, h % 3
-    fg, ig = g // 3, g % 3
-    same = src[h] == src[g]       # a flipped neighbour: its src is our src
-    ca_f = 3 * fh + ih            # corner of src (a) in F
-    cb_f = 3 * fh + (ih + 1) % 3  # corner of dst (b) in F
-    ca_g = np.where(same, 3 * fg + ig, 3 * fg + (ig + 1) % 3)  # a is the dst of g (or its src)
-    cb_g = np.where(same, 3 * fg + (ig + 1) % 3, 3 * fg + ig)
-    rows = [ca_f, cb_f]
-    cols = [ca_g, cb_g]
+    def corner(hs: np.ndarray, vertex) -> np.ndarray:
+        """Corner (node) of ``vertex`` in the face of each half-edge ``hs``."""
+        return np.where(src[hs] == vertex, hs, 3 * (hs // 3) + (hs % 3 + 1) % 3)
+
+    rows = [corner(h, src[h]), corner(h, dst[h])]
+    cols = [corner(g, src[h]), corner(g, dst[h])]
     for hs in extra_rows:  # unresolved edge: all its faces stay joined at both ends
-        for end in (0, 1):
-            corner = np.where(src[hs] == (lo[hs[0]] if end == 0 else hi[hs[0]]), 3 * (hs // 3) + hs % 3,
-                              3 * (hs // 3) + (hs % 3 + 1) % 3)
-            rows.append(corner[:-1])
-            cols.append(corner[1:])
+        for vertex in (lo[hs[0]], hi[hs[0]]):
+            c = corner(hs, vertex)
+            rows.append(c[:-1])
+            cols.append(c[1:])
     rows = np.concatenate(rows)
     cols = np.concatenate(cols)
     graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(3 * nf, 3 * nf))
-    ncomp, lab = connected_components(graph, directed=False)
-    new_vertex_of = lab  # one output vertex per group of corners
+    ncomp, vertex_of_corner = connected_components(graph, directed=False)  # one vertex per group
     orig = np.empty(ncomp, np.int64)
-    orig[lab] = f.ravel()
-    faces = new_vertex_of.reshape(nf, 3).astype(np.int32)
-    verts = np.asarray(mesh.vertices)[orig]
+    orig[vertex_of_corner] = f.ravel()
     normals = None if mesh.normals is None else np.asarray(mesh.normals)[orig]
-    out = _copy(mesh, vertices=verts, faces=faces, normals=normals)
-    return out
+    return _copy(mesh, vertices=np.asarray(mesh.vertices)[orig],
+                 faces=vertex_of_corner.reshape(nf, 3).astype(np.int32), normals=normals)
 
 
 def keep_largest(mesh: Mesh, n: int = 1) -> Mesh:
