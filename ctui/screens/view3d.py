@@ -273,17 +273,21 @@ class View3DScreen(GuardMixin, Screen):
         self._info()
         self.request_render()
 
-    def action_save(self) -> None:
+    def _ask_path(self, title: str, default: str, then) -> None:
+        """Prompt for an output path, then call ``then(path)`` (nothing on cancel)."""
         from .dialogs import PromptScreen
 
         if self.scene is None:
             return
 
         def done(path: str | None) -> None:
-            if path:
-                self._save_png(path.strip())
+            if path and path.strip():
+                then(path.strip())
 
-        self.app.push_screen(PromptScreen("Save the 3D view as PNG", "ctui-3d.png"), done)
+        self.app.push_screen(PromptScreen(title, default), done)
+
+    def action_save(self) -> None:
+        self._ask_path("Save the 3D view as PNG", "ctui-3d.png", self._save_png)
 
     @work(thread=True, group="save")
     def _save_png(self, path: str) -> None:
@@ -300,16 +304,7 @@ class View3DScreen(GuardMixin, Screen):
         self.app.call_from_thread(self.app.notify, f"Saved {path}")
 
     def action_turntable(self) -> None:
-        from .dialogs import PromptScreen
-
-        if self.scene is None:
-            return
-
-        def done(path: str | None) -> None:
-            if path:
-                self._turntable(path.strip())
-
-        self.app.push_screen(PromptScreen("Turntable animation (36 frames, GIF)", "ctui-turntable.gif"), done)
+        self._ask_path("Turntable animation (36 frames, GIF)", "ctui-turntable.gif", self._turntable)
 
     @work(thread=True, group="save")
     def _turntable(self, path: str) -> None:
@@ -393,17 +388,8 @@ class View3DScreen(GuardMixin, Screen):
         self._status(f"fly-through frame {i}/{n} ({dt * 1000:.0f} ms); f stops, F saves a GIF")
 
     def action_fly_save(self) -> None:
-        from .dialogs import PromptScreen
-
-        if self.scene is None:
-            return
-
-        def done(path: str | None) -> None:
-            if path:
-                self._fly_save(path.strip())
-
-        self.app.push_screen(PromptScreen(f"Fly-through animation ({self.FLY_FRAMES} frames, GIF)",
-                                          "ctui-flythrough.gif"), done)
+        self._ask_path(f"Fly-through animation ({self.FLY_FRAMES} frames, GIF)", "ctui-flythrough.gif",
+                       self._fly_save)
 
     @work(thread=True, group="save")
     def _fly_save(self, path: str) -> None:
