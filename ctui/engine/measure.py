@@ -362,6 +362,17 @@ def partial_volume_fraction(image: np.ndarray, mask: np.ndarray, *, inside_erode
             "volume_voxels": float(frac.sum(dtype=np.float64))}
 
 
+def partial_volume_field(pv: dict[str, Any], *, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0),
+                         direction=None):
+    """The section tools' smooth field (:func:`ctui.engine.sections.object_field`) of a
+    :func:`partial_volume_fraction` result, placed where its crop lies in the volume."""
+    from .sections import object_field
+
+    crop_origin = index_to_mm(np.array([pv["offset_zyx"]], np.float64), spacing=spacing, origin=origin,
+                              direction=direction)[0]
+    return object_field(pv["fraction"], spacing=spacing, origin=crop_origin, direction=direction)
+
+
 def measure_object(
     labels: np.ndarray,
     object_id: int,
@@ -457,10 +468,7 @@ def measure_object(
     else:
         path = np.asarray(path, dtype=np.float64)
     if image is not None:
-        pv = out["partial_volume"]
-        crop_origin = index_to_mm(np.array([pv["offset_zyx"]], np.float64), spacing=spacing, origin=origin,
-                                  direction=direction)[0]
-        field = object_field(pv["fraction"], spacing=spacing, origin=crop_origin, direction=direction)
+        field = partial_volume_field(out["partial_volume"], spacing=spacing, origin=origin, direction=direction)
     else:
         field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
     rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)

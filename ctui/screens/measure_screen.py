@@ -53,6 +53,7 @@ class MeasureScreen(GuardMixin, Screen):
         self.sections: list[dict] | None = None
         self.sections_obj: int | None = None
         self.grey = False  # sections on the partial-volume fraction from the grey levels
+        self.pv: dict[int, dict | None] = {}  # per object: partial_volume_fraction result
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -95,7 +96,9 @@ class MeasureScreen(GuardMixin, Screen):
                 pv = meas.partial_volume_fraction(v.data, labels == oid)
                 st["volume_pv_ml"] = pv["volume_voxels"] * float(np.prod(v.spacing)) / 1000.0
             except CtuiError:  # no contrast with the surroundings: no grey-level estimate
+                pv = None
                 st["volume_pv_ml"] = None
+            self.pv[oid] = pv
             self.app.call_from_thread(self._add_row, oid, st)
         self.app.call_from_thread(self._status, "c: sections along the centreline of the selected object; s saves")
         tub = [oid for oid in ids if oid in self.stats and is_tubular(self.stats[oid])]
@@ -150,13 +153,13 @@ class MeasureScreen(GuardMixin, Screen):
         try:
             mask = s.labels() == oid
             path = engine("centreline").centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
-            if self.grey:
-                rows = engine("measure").measure_object(mask.view(np.uint8), 1, spacing=v.spacing, origin=v.origin,
-                                                        direction=v.direction, path=path, step_mm=1.0, mesh=False,
-                                                        image=v.data)["rows"]
-            else:
-                rows = engine("sections").sections_along_path(mask, path, spacing=v.spacing, origin=v.origin,
-                                                              direction=v.direction, step_mm=1.0)
+            field = None
+            if self.grey:  # the fraction measured for the table (or now, if it is not there yet)
+                pv = self.pv.get(oid) or engine("measure").partial_volume_fraction(v.data, mask)
+                field = engine("measure").partial_volume_field(pv, spacing=v.spacing, origin=v.origin,
+                                                               direction=v.direction)
+            rows = engine("sections").sections_along_path(mask, path, field=field, spacing=v.spacing,
+                                                          origin=v.origin, direction=v.direction, step_mm=1.0)
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Sections of object {oid} failed: {exc}", severity="error")
             return
