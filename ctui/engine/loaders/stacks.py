@@ -555,21 +555,14 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     datafile = hdr["ElementDataFile"]
     compressed = hdr.get("CompressedData", "False").lower() == "true"
     modality = {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT")
-    warnings: list[str] = []
+    files = None  # per-slice data files (LIST / pattern), else one data file
     if datafile.upper() == "LOCAL":
         data_path, offset = path, header_end
     elif datafile.upper().startswith("LIST") or "%" in datafile:
         if compressed:
             raise CtuiError("compressed per-slice MetaImage data (LIST / pattern) is not supported", path=path)
         files = _mhd_slice_files(path, datafile, header_end, nz)
-        sp = parse_spacing(spacing, path) if spacing is not None else (sp_x[2], sp_x[1], sp_x[0])
-        return load_raw(
-            path, files, shape=(nz, ny, nx), dtype=dt, spacing=sp, offset=hsize if hsize > 0 else 0,
-            base=path.parent, skipped=skipped, crop=crop, downsample=downsample, progress=progress,
-            memory_limit=memory_limit, modality=modality, origin=org, direction=direction,
-            source_kind="MetaImage slices", keep_order=True,
-            warnings=warnings if given or spacing is not None else [_default_spacing_warning("the MetaImage header")],
-        )
+        data_path, offset = path, (hsize if hsize > 0 else 0)
     else:
         try:
             data_path = (path.parent / datafile).resolve()
@@ -586,7 +579,7 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
         else:
             offset = 0
     slice_bytes = nx * ny * dt.itemsize
-    if not compressed and offset is not None:
+    if files is None and not compressed and offset is not None:
         size = data_path.stat().st_size
         if size - offset < nz * slice_bytes:
             raise LoadError(f"{data_path.name} has {size - offset} bytes of data, {nz * slice_bytes} expected for "
@@ -594,11 +587,12 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     sp = parse_spacing(spacing, path) if spacing is not None else (sp_x[2], sp_x[1], sp_x[0])
     return load_raw(
         data_path,
-        None,
+        files,
         shape=(nz, ny, nx),
         dtype=dt,
         spacing=sp,
         offset=offset,
+        base=path.parent if files is not None else None,
         skipped=skipped,
         crop=crop,
         downsample=downsample,
@@ -607,7 +601,8 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
         modality=modality,
         origin=org,
         direction=direction,
-        source_kind="MetaImage",
+        keep_order=files is not None,
+        source_kind="MetaImage" if files is None else "MetaImage slices",
         zlib_compressed=compressed,
-        warnings=warnings if given or spacing is not None else [_default_spacing_warning("the MetaImage header")],
+        warnings=[] if given or spacing is not None else [_default_spacing_warning("the MetaImage header")],
     )
