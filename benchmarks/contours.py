@@ -84,8 +84,8 @@ def main() -> int:
     ap.add_argument("--points", type=int, default=512)
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
-    from ctui.engine.contour_connect import connect_contours
-    from ctui.engine.meshtools import mesh_report
+    from ctui.engine.mesh.contour_connect import connect_contours
+    from ctui.engine.mesh.meshtools import mesh_report
 
     spacing = (1.0, 0.7, 0.7)
     cases = (("wobbly tube", stack(args.slices, args.points, tilt=False)),

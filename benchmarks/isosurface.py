@@ -75,7 +75,7 @@ if method == "vtk":
 elif method == "skimage":
     from skimage.measure import marching_cubes as smc
 else:
-    from ctui.engine.surface import isosurface
+    from ctui.engine.mesh.surface import isosurface
 vol = np.load(path)
 vol = np.ascontiguousarray(vol)
 def rss():

@@ -5,7 +5,7 @@
 Generates the series once under benchmarks/_cache/ (gitignored; uint16 storage, 12
 bits stored, intercept -1024, shuffled file names), then in ONE run times
 
-* ctui: ``ctui.engine.loaders.load(folder)`` (header scan, grouping, sorting along the
+* ctui: ``ctui.engine.io.series.load(folder)`` (header scan, grouping, sorting along the
   normal, parallel decode, rescale to int16 HU);
 * SimpleITK: ``ImageSeriesReader.GetGDCMSeriesFileNames(folder)`` (GDCM's header scan
   and sort) + ``Execute()`` + ``GetArrayViewFromImage``;
@@ -36,8 +36,8 @@ def make_series(nz: int) -> Path:
     """A CT-like 512x512 series of nz slices (body ellipse, bone ring, noise)."""
     import numpy as np
 
-    from ctui.engine.phantom import write_series
-    from ctui.engine.volume import Volume
+    from ctui.engine.io.phantom import write_series
+    from ctui.engine.core.volume import Volume
 
     out = CACHE / f"ct_{nz}x512x512"
     if out.is_dir() and len(list(out.glob("*.dcm"))) == nz:
@@ -59,7 +59,7 @@ def make_series(nz: int) -> Path:
 
 
 def load_ctui(path: Path):
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     return load(path).data
 
@@ -95,7 +95,7 @@ def child(which: str, path: Path, trace: bool) -> None:
     if which == "ctui":
         import pydicom  # noqa: F401
 
-        from ctui.engine.loaders import load  # noqa: F401
+        from ctui.engine.io.series import load  # noqa: F401
     else:
         import SimpleITK  # noqa: F401
     base = _hwm()

@@ -5,7 +5,7 @@ Run: ``python3 benchmarks/multilabel.py [--shape 300,512,512] [--objects 10] [--
 A uint8 label map with ``--objects`` ellipsoids (two of them touching, one touching the
 volume border) is built once; then, in one run:
 
-* ctui one pass: :func:`ctui.engine.multilabel.multilabel_marching_cubes` (every object
+* ctui one pass: :func:`ctui.engine.mesh.multilabel.multilabel_marching_cubes` (every object
   from one scan of the label map);
 * ctui per label: plain (terraced) marching cubes of each object's mask inside its
   bounding box (what ``label_surfaces(smooth=False)`` did before the one-pass kernel);
@@ -88,8 +88,8 @@ def main() -> None:
 
     from scipy.ndimage import find_objects
 
-    from ctui.engine.marching import marching_cubes
-    from ctui.engine.multilabel import multilabel_marching_cubes
+    from ctui.engine.mesh.marching import marching_cubes
+    from ctui.engine.mesh.multilabel import multilabel_marching_cubes
 
     def one_pass():
         return multilabel_marching_cubes(lab)

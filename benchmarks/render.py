@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def bumpy_sphere(n_lat: int = 501, n_lon: int = 1000, radius: float = 80.0):
     """UV sphere with ~2*(n_lat-1)*n_lon triangles and a bumpy surface (mm)."""
-    from ctui.engine.meshdata import Mesh
+    from ctui.engine.core.meshdata import Mesh
 
     th = np.linspace(0, np.pi, n_lat)
     ph = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)

@@ -30,8 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ctui.engine.centreline import arc_length, resample_path  # noqa: E402
-from ctui.engine.sections import (  # noqa: E402
+from ctui.engine.measure.centreline import arc_length, resample_path  # noqa: E402
+from ctui.engine.measure.sections import (  # noqa: E402
     object_field,
     path_points,
     rotation_minimising_frames,

@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 
 def make_volume(nz: int = 24, n: int = 512):
     """A 512x512 CT-like series: body ellipse, organs, noise (HU)."""
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.volume import Volume
 
     rng = np.random.default_rng(0)
     yy, xx = np.mgrid[0:n, 0:n].astype(np.float32)
@@ -117,7 +117,7 @@ async def bench_textual_image(vol, size, n: int) -> list[float]:
     from textual.binding import Binding
     from textual_image.widget import HalfcellImage
 
-    from ctui.engine.windows import apply_window
+    from ctui.engine.core.windows import apply_window
 
     class Peer(App):
         CSS = "HalfcellImage { width: 1fr; height: 1fr; }"

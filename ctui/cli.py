@@ -1,11 +1,11 @@
 """ctui command line.
 
 ``ctui`` with no argument opens the TUI on the bundled sample series; ``ctui PATH`` or
-``ctui open PATH`` opens any input :func:`ctui.engine.loaders.load` accepts.
+``ctui open PATH`` opens any input :func:`ctui.engine.io.series.load` accepts.
 
 Each subcommand lives in ``ctui/commands/<name>.py`` with ``register(subparsers)``
 and ``run(args) -> int``; those modules import nothing heavy at top level, so
-``ctui --help`` stays fast. User errors (:class:`ctui.engine.errors.CtuiError`) are
+``ctui --help`` stays fast. User errors (:class:`ctui.engine.core.errors.CtuiError`) are
 printed as one line on stderr with exit status 2.
 """
 
@@ -15,7 +15,7 @@ import argparse
 import importlib
 import sys
 
-from . import __version__
+from ctui import __version__
 
 OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
 COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure")
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from .engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     try:
         rc = args.func(args)

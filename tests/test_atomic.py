@@ -4,8 +4,8 @@ import os
 
 import pytest
 
-from ctui.engine.atomic import atomic_write, write_bytes
-from ctui.engine.errors import CtuiError
+from ctui.engine.core.atomic import atomic_write, write_bytes
+from ctui.engine.core.errors import CtuiError
 
 
 def test_atomic_write_replaces_whole_file(tmp_path):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.borders import Border, border_mm, borders_for_mric, object_borders, signed_area, slice_borders
-from ctui.engine.volume import Volume
+from ctui.engine.core.borders import Border, border_mm, borders_for_mric, object_borders, signed_area, slice_borders
+from ctui.engine.core.volume import Volume
 
 
 def test_square_with_hole_orientation_and_area():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.centreline import (
+from ctui.engine.measure.centreline import (
     arc_length,
     centreline,
     index_to_mm,
@@ -15,7 +15,7 @@ from ctui.engine.centreline import (
     path_length,
     resample_path,
 )
-from ctui.engine.errors import CtuiError
+from ctui.engine.core.errors import CtuiError
 
 
 def _tube(shape, sp, c, a, r, half):

@@ -5,20 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.contour_connect import (
+from ctui.engine.mesh.contour_connect import (
     connect_contours,
     connect_mric,
     offset_pixel_boundary,
     tile_dp,
     tile_greedy,
 )
-from ctui.engine.meshtools import mesh_report
+from ctui.engine.mesh.meshtools import mesh_report
 
 SPACING = (2.5, 0.7, 0.7)
 
 
 def borders(mask):
-    from ctui.engine.borders import object_borders
+    from ctui.engine.core.borders import object_borders
 
     return object_borders(np.asarray(mask, np.uint8), 1)
 
@@ -49,7 +49,7 @@ def test_ellipsoids_volume_and_closed(axes, method):
 def test_offset_gives_pixel_count_area():
     yy, xx = np.mgrid[:80, :80]
     disk = (xx - 40.3) ** 2 + (yy - 39.6) ** 2 <= 25.0**2
-    from ctui.engine.borders import slice_borders
+    from ctui.engine.core.borders import slice_borders
 
     b = slice_borders(disk)[0]
     centre_area = abs(b.signed_area)
@@ -144,8 +144,8 @@ def test_tilings_cover_both_loops_once():
 
 
 def test_mric_file(tmp_path):
-    from ctui.engine.borders import borders_for_mric
-    from ctui.engine.mric import write_mric
+    from ctui.engine.core.borders import borders_for_mric
+    from ctui.engine.io.mric import write_mric
 
     mask, _ = ellipsoid((20.0, 15.0, 25.0), shape=(26, 80, 80))
     lab = mask.astype(np.uint8)

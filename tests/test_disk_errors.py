@@ -23,18 +23,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctui.engine.errors import CtuiError
+from ctui.engine.core.errors import CtuiError
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _writers():
     """name -> (file name, save(path, big: bool, data), load(path) -> marker, data factory)."""
-    from ctui.engine.atomic import write_text
-    from ctui.engine.labelio import load_labels, save_labels
-    from ctui.engine.mric import read_mric, write_mric
-    from ctui.engine.project import Project, load_project, save_project
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.atomic import write_text
+    from ctui.engine.io.labels import load_labels, save_labels
+    from ctui.engine.io.mric import read_mric, write_mric
+    from ctui.engine.io.project import Project, load_project, save_project
+    from ctui.engine.core.volume import Volume
 
     rng = np.random.default_rng(0)
 
@@ -80,8 +80,8 @@ def _writers():
     except ImportError:
         pass
     try:
-        from ctui.engine.meshdata import Mesh
-        from ctui.engine.meshio import load_mesh, save_mesh
+        from ctui.engine.core.meshdata import Mesh
+        from ctui.engine.io.meshes import load_mesh, save_mesh
 
         def mesh(big):
             import trimesh

@@ -5,16 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.drift import (analyze_drift, apply_corrections, correct_segmentation, corrected_volume,
+from ctui.engine.segment.drift import (analyze_drift, apply_corrections, correct_segmentation, corrected_volume,
                                corrections_from_report, invert_corrections, plot_drift, slice_centroids, smooth_fit)
-from ctui.engine.pipeline import Pipeline
-from ctui.engine.propagate import PropagationSettings, propagate_object
-from ctui.engine.selection import Segmentation
+from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+from ctui.engine.segment.selection import Segmentation
 
 
 @pytest.fixture(scope="module")
 def phantom_seg():
-    from ctui.engine.phantom import make_phantom
+    from ctui.engine.io.phantom import make_phantom
 
     vol, truth = make_phantom()
     seg = Segmentation(vol.shape)
@@ -95,7 +95,7 @@ def test_plot_png(tmp_path, phantom_seg):
 def test_correct_segmentation_is_one_slab_sized_undo_step(phantom_seg):
     vol, truth, seg = phantom_seg
     labels = seg.labels.copy()
-    from ctui.engine.selection import Segmentation
+    from ctui.engine.segment.selection import Segmentation
 
     work = Segmentation(labels.shape, labels=labels)
     corr = corrections_from_report(analyze_drift(labels, vol))

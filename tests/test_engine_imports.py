@@ -14,7 +14,9 @@ import ctui.engine
 
 def test_engine_modules_exist():
     names = [m.name for m in pkgutil.iter_modules(ctui.engine.__path__)]
-    assert "volume" in names and "atomic" in names
+    assert {"core", "io", "segment", "mesh", "measure", "render"} <= set(names)
+    core = [m.name for m in pkgutil.iter_modules([str(Path(ctui.engine.__path__[0]) / "core")])]
+    assert "volume" in core and "atomic" in core and "geometry" in core
 
 
 def test_engine_imports_no_ui_packages():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from ctui.engine import filters as F
+from ctui.engine.segment import filters as F
 
 
 def _scene() -> np.ndarray:

@@ -12,12 +12,12 @@ from test_fuzz_harness import CORPUS, assert_clean, run_campaign
 
 
 def warm_up() -> None:
-    import ctui.engine.labelio  # noqa: F401
-    import ctui.engine.mric  # noqa: F401
-    import ctui.engine.project  # noqa: F401
+    import ctui.engine.io.labels  # noqa: F401
+    import ctui.engine.io.mric  # noqa: F401
+    import ctui.engine.io.project  # noqa: F401
 
     try:
-        import ctui.engine.loaders  # noqa: F401
+        import ctui.engine.io.series  # noqa: F401
     except ImportError:
         pass
     import nibabel  # noqa: F401
@@ -26,19 +26,19 @@ def warm_up() -> None:
 
 
 def _readers():
-    from ctui.engine.labelio import load_labels
-    from ctui.engine.mric import read_mric
-    from ctui.engine.project import load_project
+    from ctui.engine.io.labels import load_labels
+    from ctui.engine.io.mric import read_mric
+    from ctui.engine.io.project import load_project
 
     r = {"mric": read_mric, "labels": load_labels, "project": load_project}
     try:
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
 
         r.update(dicom=load, mhd=load, stacks=load)
     except ImportError:
         pass
     try:
-        from ctui.engine.meshio import load_mesh
+        from ctui.engine.io.meshes import load_mesh
 
         r["mesh"] = load_mesh
     except ImportError:

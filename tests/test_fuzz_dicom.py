@@ -1,4 +1,4 @@
-"""Fuzz DICOM loading (ctui.engine.loaders.load) with hostile files.
+"""Fuzz DICOM loading (ctui.engine.io.series.load) with hostile files.
 
 Seeds: a small valid 3-slice CT series written by pydicom (explicit VR little endian,
 16x16 int16). Cases: one file of the series truncated at many offsets, bit-flipped,
@@ -23,7 +23,7 @@ import numpy as np
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
 
 try:
-    import ctui.engine.loaders  # noqa: F401
+    import ctui.engine.io.series  # noqa: F401
 
     HAVE_LOADERS = True
 except ImportError:  # pragma: no cover
@@ -34,7 +34,7 @@ def warm_up() -> None:
     import hypothesis  # noqa: F401
     import pydicom  # noqa: F401
 
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     # run the real code path once so lazy imports happen before the memory cap
     d = Path(os.environ.get("TMPDIR", "/tmp")) / f"ctui-fuzz-warm-{os.getpid()}"
@@ -166,7 +166,7 @@ def _with_element(i: int, tag: int, vr, value) -> bytes | None:
 
 
 def campaign(ctx) -> None:
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     seed = dicom_bytes(make_slice(1))
     series = ctx.tmp("case/series/im0.dcm").parent
@@ -302,6 +302,6 @@ def test_fuzz_dicom():
     import pytest
 
     if not HAVE_LOADERS:
-        pytest.skip("ctui.engine.loaders not available yet")
+        pytest.skip("ctui.engine.io.series not available yet")
     res = run_campaign("test_fuzz_dicom", "campaign", examples=fuzz_examples(400))
     assert_clean("dicom", res, min_cases=2500)

@@ -1,7 +1,7 @@
 """Fuzz harness shared by the tests/test_fuzz_*.py files (and a test of the harness).
 
 The rule every reader must follow on hostile input: return normally (the input was
-valid after all) or raise a :class:`~ctui.engine.errors.CtuiError` with ONE line
+valid after all) or raise a :class:`~ctui.engine.core.errors.CtuiError` with ONE line
 naming the file; never another exception, never a hang, never an allocation the
 input cannot justify.
 
@@ -37,7 +37,6 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable
 
-import pytest
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -88,7 +87,7 @@ class Ctx:
 
         Returns the outcome: "ok", "error" (a proper CtuiError) or "FINDING:...".
         """
-        from ctui.engine.errors import CtuiError
+        from ctui.engine.core.errors import CtuiError
 
         self.n += 1
         if isinstance(data, (bytes, bytearray)):
@@ -442,7 +441,7 @@ def _buggy(path: Path) -> None:
 
 
 def _polite(path: Path) -> None:
-    from ctui.engine.errors import FormatError
+    from ctui.engine.core.errors import FormatError
 
     raise FormatError(f"{path}: not valid")
 

@@ -1,4 +1,4 @@
-"""Fuzz the label-map reader (ctui.engine.labelio.load_labels): .nii, .nii.gz, .nrrd,
+"""Fuzz the label-map reader (ctui.engine.io.labels.load_labels): .nii, .nii.gz, .nrrd,
 .seg.nrrd: truncations, flips, random/hypothesis mutations, and structured header
 mutations (NIfTI dim/datatype/vox_offset/pixdim/affine fields, NRRD header fields)."""
 
@@ -20,12 +20,12 @@ def warm_up() -> None:
     import nrrd  # noqa: F401
     import scipy.ndimage  # noqa: F401
 
-    import ctui.engine.labelio  # noqa: F401
+    import ctui.engine.io.labels  # noqa: F401
 
 
 def seeds(ctx) -> dict[str, bytes]:
-    from ctui.engine.labelio import save_labels
-    from ctui.engine.volume import Volume
+    from ctui.engine.io.labels import save_labels
+    from ctui.engine.core.volume import Volume
 
     labels = np.zeros((3, 4, 5), np.uint8)
     labels[1, 1:3, 1:4] = 2
@@ -87,7 +87,7 @@ def _nrrd_variant(seed: bytes, field: str, value: str) -> bytes:
 
 
 def campaign(ctx) -> None:
-    from ctui.engine.labelio import load_labels
+    from ctui.engine.io.labels import load_labels
 
     s = seeds(ctx)
     for ext, seed in s.items():

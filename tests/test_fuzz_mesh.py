@@ -1,4 +1,4 @@
-"""Fuzz mesh inputs (ctui.engine.meshio.load_mesh, used by `ctui render` and `ctui
+"""Fuzz mesh inputs (ctui.engine.io.meshes.load_mesh, used by `ctui render` and `ctui
 measure`): binary/ASCII STL, PLY (binary and ASCII), OBJ: truncations, flips, huge
 counts, random/hypothesis mutations and structured header/face edits. A mesh that
 loads must be usable: finite vertices and face indices within range."""
@@ -12,7 +12,7 @@ import numpy as np
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
 
 try:
-    import ctui.engine.meshio  # noqa: F401
+    import ctui.engine.io.meshes  # noqa: F401
 
     HAVE_MESHIO = True
 except ImportError:  # pragma: no cover
@@ -36,7 +36,7 @@ def warm_up() -> None:
 
 
 def checked_load(p):
-    from ctui.engine.meshio import load_mesh
+    from ctui.engine.io.meshes import load_mesh
 
     m = load_mesh(p)
     v, f = np.asarray(m.vertices), np.asarray(m.faces)
@@ -55,8 +55,8 @@ def seeds() -> dict[str, bytes]:
 
     import trimesh
 
-    from ctui.engine.meshdata import Mesh
-    from ctui.engine.meshio import save_mesh
+    from ctui.engine.core.meshdata import Mesh
+    from ctui.engine.io.meshes import save_mesh
 
     s = trimesh.creation.icosphere(subdivisions=0, radius=5.0)
     mesh = Mesh(vertices=np.asarray(s.vertices, np.float64), faces=np.asarray(s.faces))
@@ -118,6 +118,6 @@ def test_fuzz_mesh():
     import pytest
 
     if not HAVE_MESHIO:
-        pytest.skip("ctui.engine.meshio not available yet")
+        pytest.skip("ctui.engine.io.meshes not available yet")
     res = run_campaign("test_fuzz_mesh", "campaign", examples=fuzz_examples(150))
     assert_clean("mesh", res, min_cases=2500)

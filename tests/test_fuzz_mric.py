@@ -9,12 +9,12 @@ from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standar
 
 
 def warm_up() -> None:
-    import ctui.engine.mric  # noqa: F401
+    import ctui.engine.io.mric  # noqa: F401
     import hypothesis  # noqa: F401
 
 
 def seed_file(tmp) -> bytes:
-    from ctui.engine.mric import write_mric
+    from ctui.engine.io.mric import write_mric
 
     slices = [
         [[np.array([[0, 0], [3, 1], [2, 2]])], [np.array([[4, 4]]), np.array([[1, 1], [2, 1], [5, 3]])]],
@@ -27,7 +27,7 @@ def seed_file(tmp) -> bytes:
 
 
 def campaign(ctx) -> None:
-    from ctui.engine.mric import read_mric
+    from ctui.engine.io.mric import read_mric
 
     seed = seed_file(ctx.tmp("seed.mric"))
     standard_campaign(ctx, read_mric, seed, name="x.mric", tag="mric")

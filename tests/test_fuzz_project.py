@@ -11,12 +11,12 @@ from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standar
 
 
 def warm_up() -> None:
-    import ctui.engine.project  # noqa: F401
+    import ctui.engine.io.project  # noqa: F401
     import hypothesis  # noqa: F401
 
 
 def seed_project():
-    from ctui.engine.project import Project
+    from ctui.engine.io.project import Project
 
     labels = np.zeros((3, 4, 5), np.uint8)
     labels[1, 1:3, 1:4] = 2
@@ -43,7 +43,7 @@ def _zip(members: dict) -> bytes:
 
 
 def campaign(ctx) -> None:
-    from ctui.engine.project import encode_project, load_project
+    from ctui.engine.io.project import encode_project, load_project
 
     proj = seed_project()
     seed = encode_project(proj)

@@ -1,4 +1,4 @@
-"""Fuzz the non-DICOM loaders behind ctui.engine.loaders.load: image stacks (PNG
+"""Fuzz the non-DICOM loaders behind ctui.engine.io.series.load: image stacks (PNG
 folder, single images, multi-page TIFF, BMP), raw volumes (shape/dtype vs file size),
 MetaImage (.mhd + .raw, .mha: structured header mutations such as huge DimSize,
 bad ElementType, ElementDataFile pointing at /dev/zero or itself) and NIfTI/NRRD
@@ -16,7 +16,7 @@ import numpy as np
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
 
 try:
-    import ctui.engine.loaders  # noqa: F401
+    import ctui.engine.io.series  # noqa: F401
 
     HAVE_LOADERS = True
 except ImportError:  # pragma: no cover
@@ -31,7 +31,7 @@ def warm_up() -> None:
     import nrrd  # noqa: F401
     from PIL import Image  # noqa: F401
 
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     d = Path(tempfile.mkdtemp(prefix="ctui-fuzz-warm-"))
     for name, data in seeds().items():
@@ -122,7 +122,7 @@ def _mhd_variant(seed: bytes, field: str, value: str) -> bytes:
 
 
 def campaign(ctx) -> None:
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     s = seeds()
     n = ctx.examples
@@ -207,6 +207,6 @@ def test_fuzz_stacks_raw_mhd():
     import pytest
 
     if not HAVE_LOADERS:
-        pytest.skip("ctui.engine.loaders not available yet")
+        pytest.skip("ctui.engine.io.series not available yet")
     res = run_campaign("test_fuzz_stacks", "campaign", examples=fuzz_examples(60))
     assert_clean("stacks/raw/mhd/nifti/nrrd", res, min_cases=2000)

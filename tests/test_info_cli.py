@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from conftest import ROOT, shared
-from ctui.engine.phantom import SAMPLE_DIR, load_truth
+from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
 
 
 def ctui(*args, cwd=ROOT):

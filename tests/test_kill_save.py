@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 
 out = Path(sys.argv[1]); rounds = int(sys.argv[2]); random.seed(int(sys.argv[3]))
-from ctui.engine.project import Project, save_project, load_project, autosave, autosave_path
-from ctui.engine.mric import write_mric, read_mric
-from ctui.engine.labelio import save_labels, load_labels
-from ctui.engine.volume import Volume
-from ctui.engine.atomic import write_text
+from ctui.engine.io.project import Project, save_project, load_project, autosave, autosave_path
+from ctui.engine.io.mric import write_mric, read_mric
+from ctui.engine.io.labels import save_labels, load_labels
+from ctui.engine.core.volume import Volume
+from ctui.engine.core.atomic import write_text
 
 SHAPE = (24, 96, 96)
 rng = np.random.default_rng(0)
@@ -97,7 +97,7 @@ def j_load():
 W["json"] = (j_save, j_load)
 
 try:
-    from ctui.engine.sections import write_sections_csv
+    from ctui.engine.measure.sections import write_sections_csv
     def c_save(v):
         write_sections_csv(out / "s.csv", [{"s_mm": float(v), "area_mm2": float(i)} for i in range(5000)], keys=("s_mm", "area_mm2"))
     def c_load():
@@ -109,8 +109,8 @@ except ImportError:
     pass
 
 try:
-    from ctui.engine.meshio import save_mesh, load_mesh
-    from ctui.engine.meshdata import Mesh
+    from ctui.engine.io.meshes import save_mesh, load_mesh
+    from ctui.engine.core.meshdata import Mesh
     import trimesh
     base = trimesh.creation.icosphere(subdivisions=4)
     for ext in ("stl", "ply", "obj"):

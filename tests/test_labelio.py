@@ -10,9 +10,9 @@ import os
 import numpy as np
 import pytest
 
-from ctui.engine.errors import FormatError
-from ctui.engine.labelio import load_labels, save_labels
-from ctui.engine.volume import Volume
+from ctui.engine.core.errors import FormatError
+from ctui.engine.io.labels import load_labels, save_labels
+from ctui.engine.core.volume import Volume
 
 EXTS = ["nii", "nii.gz", "nrrd", "seg.nrrd"]
 
@@ -106,7 +106,7 @@ def test_nrrd_own_convention(tmp_path, oblique, ext):
 def test_seg_nrrd_segments(tmp_path, oblique):
     import nrrd
 
-    from ctui.engine.colors import object_color_float
+    from ctui.engine.core.colors import object_color_float
 
     labels, vol = oblique
     p = save_labels(tmp_path / "lab.seg.nrrd", labels, vol, names={2: "Kidney"})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import shared
-from ctui.engine.loaders import load, scan
+from ctui.engine.io.series import load, scan
 
 pytestmark = pytest.mark.shared_data
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import shared
-from ctui.engine.loaders import load, scan
+from ctui.engine.io.series import load, scan
 
 
 @pytest.fixture
@@ -62,8 +62,8 @@ def test_nrrd(tmp_path, data, encoding, space):
 
 def test_labelio_geometry_round_trip(tmp_path):
     """Label maps written by FMT's labelio load back with the same geometry."""
-    labelio = pytest.importorskip("ctui.engine.labelio")
-    from ctui.engine.volume import Volume
+    labelio = pytest.importorskip("ctui.engine.io.labels")
+    from ctui.engine.core.volume import Volume
 
     d = np.eye(3)[:, [1, 0, 2]] * [1, -1, 1]  # rotated in-plane
     vol = Volume(data=np.zeros((3, 4, 5), np.int16), spacing=(2.0, 0.7, 0.8), origin=(5.0, -3.0, 12.0), direction=d, modality="CT")

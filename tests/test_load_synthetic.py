@@ -11,9 +11,9 @@ import numpy as np
 import pydicom
 import pytest
 
-from ctui.engine.errors import CtuiError, LoadError
-from ctui.engine.loaders import estimate, load, scan
-from ctui.engine.phantom import SAMPLE_DIR, make_phantom, write_series
+from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.io.series import estimate, load, scan
+from ctui.engine.io.phantom import SAMPLE_DIR, make_phantom, write_series
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +37,7 @@ def _file_for_slice(d, k):
 
 
 def _small_volume(nz=12, ny=40, nx=48, seed=0):
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.volume import Volume
 
     rng = np.random.default_rng(seed)
     data = rng.integers(-1000, 1500, size=(nz, ny, nx)).astype(np.int16)
@@ -179,7 +179,7 @@ def test_compressed_rle_and_missing_codec(tmp_path, monkeypatch, ref):
         ds.save_as(d / f"{k}.dcm", enforce_file_format=True)
     vol = load(d)
     np.testing.assert_array_equal(vol.data, ref.data[30:33])
-    from ctui.engine.loaders import dicom
+    from ctui.engine.io.series import dicom
 
     monkeypatch.setattr(dicom, "_codec_missing", lambda syntax: True)
     with pytest.raises(LoadError, match=r"pip install 'ctui\[codecs\]'") as e:
@@ -247,7 +247,7 @@ def test_enhanced_multiframe_per_frame_positions(tmp_path):
 
 
 def test_gantry_tilt_corrected(tmp_path):
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.volume import Volume
 
     # a vertical rod: with tilt, each slice's content and position move in y together
     nz, ny, nx = 10, 60, 50
@@ -418,7 +418,7 @@ def test_crop_and_downsample_dicom(ref):
 
 
 def test_peak_memory_within_final_array_plus_10_percent(tmp_path):
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.volume import Volume
 
     rng = np.random.default_rng(3)
     data = rng.integers(-1024, 2000, size=(24, 512, 512)).astype(np.int16)

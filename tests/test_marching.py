@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.marching import NTRI, TRI_TABLE, marching_cubes, marching_squares
-from ctui.engine.meshdata import Mesh
-from ctui.engine.meshtools import mesh_report
+from ctui.engine.mesh.marching import NTRI, TRI_TABLE, marching_cubes, marching_squares
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh.meshtools import mesh_report
 
 
 def _grid_3x3() -> np.ndarray:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from ctui.engine.measure import (
+from ctui.engine.measure.stats import (
     label_stats,
     measure_object,
     mesh_components,
@@ -17,7 +17,7 @@ from ctui.engine.measure import (
     principal_axes,
     stats_json,
 )
-from ctui.engine.meshdata import Mesh
+from ctui.engine.core.meshdata import Mesh
 
 
 def _ellipsoid(sp, semi, centre_jitter=(0.17, -0.23, 0.31), rot=None):
@@ -73,7 +73,7 @@ def test_mesh_stats_per_component_and_open_mesh_warning():
 
 def _has_mask_surface() -> bool:
     try:
-        from ctui.engine.surface import mask_surface  # noqa: F401
+        from ctui.engine.mesh.surface import mask_surface  # noqa: F401
     except ImportError:
         return False
     return True
@@ -100,7 +100,7 @@ def test_object_stats_volumes_against_analytic(sp, semi):
     assert np.allclose(lo, c - semi, atol=max(sp)) and np.allclose(hi, c + semi, atol=max(sp))
     assert sorted(st["principal_axes_mm"]) == pytest.approx(sorted(2 * np.asarray(semi)), rel=0.02)
     if not _has_mask_surface():
-        pytest.skip("ctui.engine.surface.mask_surface (MESH) not available yet: voxel figures checked only")
+        pytest.skip("ctui.engine.mesh.surface.mask_surface (MESH) not available yet: voxel figures checked only")
     assert st["mesh_closed"]
     assert st["volume_mesh_mm3"] == pytest.approx(v_true, rel=0.005)
     assert abs(st["volume_difference_percent"]) < 1.0
@@ -140,7 +140,7 @@ def test_object_stats_geometry_and_json():
     doc = stats_json(st[1])
     json.dumps(doc)
     assert doc["volume_mesh_ml"] is None and doc["voxels"] == int(m.sum())
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     with pytest.raises(CtuiError):
         object_stats(labels, 7, spacing=(1, 1, 1))

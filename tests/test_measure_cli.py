@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ctui.cli import main
-from ctui.engine.volume import Volume
+from ctui.engine.core.volume import Volume
 
 SP = (0.5, 0.5, 0.5)
 
@@ -34,7 +34,7 @@ def _run(capsys, *argv):
 
 @pytest.fixture()
 def label_file(tmp_path):
-    from ctui.engine.labelio import save_labels
+    from ctui.engine.io.labels import save_labels
 
     labels, vol = _tube_labels()
     p = tmp_path / "seg.nii.gz"
@@ -87,7 +87,7 @@ def test_measure_auto_path_text_output(label_file, capsys):
 
 
 def test_measure_project_input(tmp_path, capsys):
-    from ctui.engine.project import Project, save_project
+    from ctui.engine.io.project import Project, save_project
 
     labels, vol = _tube_labels()
     proj = Project(source_path=str(tmp_path / "missing_series"), labels=labels,
@@ -102,7 +102,7 @@ def test_measure_project_input(tmp_path, capsys):
 
 
 def test_measure_mesh_input(tmp_path, capsys):
-    meshio = pytest.importorskip("ctui.engine.meshio", reason="MESH's meshio not available yet")
+    meshio = pytest.importorskip("ctui.engine.io.meshes", reason="MESH's meshio not available yet")
     import trimesh
 
     p = tmp_path / "box.stl"

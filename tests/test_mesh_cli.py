@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from ctui.cli import main
-from ctui.engine.meshio import load_mesh
-from ctui.engine.meshtools import mesh_report
+from ctui.engine.io.meshes import load_mesh
+from ctui.engine.mesh.meshtools import mesh_report
 
 KEYS = {"triangles", "vertices", "watertight", "volume_ml", "area_mm2"}
 
 
 @pytest.fixture(scope="module")
 def sample():
-    from ctui.engine.loaders import load
-    from ctui.engine.phantom import load_truth, sample_path
+    from ctui.engine.io.series import load
+    from ctui.engine.io.phantom import load_truth, sample_path
 
     path = sample_path()
     return path, load(path), load_truth(path)
@@ -55,7 +55,7 @@ def test_series_iso_json(tmp_path, capsys, sample):
 
 
 def test_project_objects_both_methods(tmp_path, capsys, sample):
-    from ctui.engine.project import Project, save_project
+    from ctui.engine.io.project import Project, save_project
 
     path, volume, truth = sample
     proj = tmp_path / "kidneys.ctui"
@@ -84,8 +84,8 @@ def test_project_objects_both_methods(tmp_path, capsys, sample):
 def test_project_terraced_all_objects_in_one_pass(tmp_path, capsys, sample):
     """--terraced: the label map's plain marching cubes, both kidneys from one pass;
     each closed, volumes near the voxel volumes (terraced surfaces cut the corners)."""
-    from ctui.engine.meshtools import components
-    from ctui.engine.project import Project, save_project
+    from ctui.engine.mesh.meshtools import components
+    from ctui.engine.io.project import Project, save_project
 
     path, volume, truth = sample
     lab = kidney_labels(volume, truth)
@@ -104,8 +104,8 @@ def test_project_terraced_all_objects_in_one_pass(tmp_path, capsys, sample):
 
 
 def test_mric_input(tmp_path, capsys):
-    from ctui.engine.borders import borders_for_mric
-    from ctui.engine.mric import write_mric
+    from ctui.engine.core.borders import borders_for_mric
+    from ctui.engine.io.mric import write_mric
 
     z, y, x = np.mgrid[:20, :60, :60]
     m = ((x - 30) ** 2 + (y - 29) ** 2) * 1.0 + ((z - 10) * 2.5) ** 2 <= 22**2

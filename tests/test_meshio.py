@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.errors import CtuiError, FormatError
-from ctui.engine.meshio import load_mesh, save_mesh
-from ctui.engine.meshtools import mesh_report
-from ctui.engine.surface import mask_surface
+from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.io.meshes import load_mesh, save_mesh
+from ctui.engine.mesh.meshtools import mesh_report
+from ctui.engine.mesh.surface import mask_surface
 
 
 @pytest.fixture(scope="module")

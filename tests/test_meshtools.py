@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.meshdata import Mesh
-from ctui.engine.meshtools import (
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh.meshtools import (
     components,
     decimate,
     drop_small,
@@ -35,7 +35,7 @@ def cube(size=10.0, offset=(0.0, 0.0, 0.0)) -> Mesh:
 
 
 def sphere(r=20.0, noise=0.0, seed=0) -> Mesh:
-    from ctui.engine.surface import isosurface
+    from ctui.engine.mesh.surface import isosurface
 
     z, y, x = np.mgrid[:50, :50, :50].astype(np.float32)
     d = np.sqrt((x - 24.5) ** 2 + (y - 24.3) ** 2 + (z - 24.7) ** 2)
@@ -153,7 +153,7 @@ def test_report_volume_of_a_closed_surface_with_a_non_manifold_edge():
 
 
 def test_split_non_manifold_cuts_touching_solids_apart():
-    from ctui.engine.meshtools import split_non_manifold
+    from ctui.engine.mesh.meshtools import split_non_manifold
 
     m = _edge_touching_cubes()
     s = split_non_manifold(m)
@@ -169,7 +169,7 @@ def test_split_non_manifold_cuts_touching_solids_apart():
 
 
 def test_drop_opposite_twins_removes_fins_only():
-    from ctui.engine.meshtools import drop_opposite_twins
+    from ctui.engine.mesh.meshtools import drop_opposite_twins
 
     c = cube()
     fin = np.array([[0, 3, 5], [0, 5, 3]])  # a zero-thickness fin inside the cube
@@ -189,8 +189,8 @@ def test_decimated_lobster_keeps_its_volume_and_cuts_most_non_manifold_edges():
 
     from conftest import lobster
 
-    from ctui.engine.meshtools import edge_counts
-    from ctui.engine.surface import isosurface
+    from ctui.engine.mesh.meshtools import edge_counts
+    from ctui.engine.mesh.surface import isosurface
 
     data = lobster()
     m = isosurface(data, 100, spacing=(1.4, 1.0, 1.0))

@@ -9,8 +9,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from ctui.engine.errors import FormatError
-from ctui.engine.mric import SIGNATURE, read_mric, write_mric
+from ctui.engine.core.errors import FormatError
+from ctui.engine.io.mric import SIGNATURE, read_mric, write_mric
 
 
 def _spec_bytes(width, height, axis, image, slices) -> bytes:

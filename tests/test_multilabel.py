@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.meshdata import Mesh
-from ctui.engine.meshtools import mesh_report
-from ctui.engine.multilabel import multilabel_marching_cubes
-from ctui.engine.surface import affine_from, label_surfaces, mask_surface
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh.meshtools import mesh_report
+from ctui.engine.mesh.multilabel import multilabel_marching_cubes
+from ctui.engine.mesh.surface import affine_from, label_surfaces, mask_surface
 
 SPACING = (2.0, 0.8, 0.6)  # (dz, dy, dx) mm
 

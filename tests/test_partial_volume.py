@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from ctui.engine.errors import CtuiError
-from ctui.engine.measure import measure_object, partial_volume_fraction
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.measure.stats import measure_object, partial_volume_fraction
 
 
 @pytest.fixture(scope="module")
 def phantom():
-    from ctui.engine.loaders import load
-    from ctui.engine.phantom import SAMPLE_DIR, load_truth
+    from ctui.engine.io.series import load
+    from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
 
     return load(SAMPLE_DIR), load_truth()
 
@@ -75,7 +75,7 @@ def test_no_contrast_is_a_clear_error():
 
 def test_cli_partial_volume_on_a_project(tmp_path, capsys, phantom):
     from ctui.cli import main
-    from ctui.engine.phantom import SAMPLE_DIR
+    from ctui.engine.io.phantom import SAMPLE_DIR
 
     vol, truth = phantom
     kid = next(o for o in truth["objects"] if o["name"] == "kidney_left")
@@ -90,7 +90,7 @@ def test_cli_partial_volume_on_a_project(tmp_path, capsys, phantom):
     assert rep["volume_ml"]["partial_volume"] == pytest.approx(kid["volume_ml"], rel=0.005)
     assert rep["partial_volume"]["object_value"] == pytest.approx(kid["hu"], abs=5)
     # a label file has no grey levels: one clear line, exit 2
-    from ctui.engine.labelio import save_labels
+    from ctui.engine.io.labels import save_labels
 
     lf = tmp_path / "k.nii.gz"
     save_labels(lf, (vol.data > 150).astype(np.uint8), vol)

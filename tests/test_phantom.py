@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from ctui.engine.phantom import SAMPLE_DIR, load_truth, make_phantom, write_demo
+from ctui.engine.io.phantom import SAMPLE_DIR, load_truth, make_phantom, write_demo
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_bundled_sample(phantom):
 def test_sample_round_trip_sorted_despite_shuffled_names(phantom):
     import pydicom
 
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     vol, _ = phantom
     # names are shuffled: name order is not slice order

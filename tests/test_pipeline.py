@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from ctui.engine.colors import OBJECT_COLORS
-from ctui.engine.pipeline import Pipeline, Step, overlay, parse_filter_spec
-from ctui.engine.volume import Volume
+from ctui.engine.core.colors import OBJECT_COLORS
+from ctui.engine.segment.pipeline import Pipeline, Step, overlay, parse_filter_spec
+from ctui.engine.core.volume import Volume
 
 
 def _volume(nz: int = 6, n: int = 96) -> Volume:
@@ -41,7 +41,7 @@ def test_stages_give_intermediate_and_final_views():
     vol = _volume()
     p = _pipeline()
     v = p.run_slice(vol, 1)
-    from ctui.engine import filters as F
+    from ctui.engine.segment import filters as F
 
     orig = vol.data[1].astype(np.float32)
     np.testing.assert_array_equal(v.original, orig)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctui.engine.privacy import find_strings, scrub
+from ctui.engine.core.privacy import find_strings, scrub
 
 ROOT = Path(__file__).resolve().parents[1]
 SECRETS = {
@@ -111,7 +111,7 @@ def test_volume_metadata_logs_and_warnings_clean(series, caplog):
     import logging
     import warnings
 
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     caplog.set_level(logging.DEBUG)
     with warnings.catch_warnings(record=True) as caught:
@@ -171,9 +171,9 @@ def test_every_command_and_export_is_clean(series, tmp_path):
         if r.returncode != 0 and not expected_fail:
             failures.append(f"ctui {' '.join(args)} -> {r.returncode}: {r.stderr.strip()[-300:]}")
     # engine-level exports and autosave of the project the CLI wrote
-    from ctui.engine.labelio import save_labels
-    from ctui.engine.loaders import load
-    from ctui.engine.project import autosave, load_project, save_project
+    from ctui.engine.io.labels import save_labels
+    from ctui.engine.io.series import load
+    from ctui.engine.io.project import autosave, load_project, save_project
 
     if (out / "p.ctui").exists():
         proj = load_project(out / "p.ctui")

@@ -13,8 +13,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from ctui.engine.errors import FormatError
-from ctui.engine.project import (
+from ctui.engine.core.errors import FormatError
+from ctui.engine.io.project import (
     Project,
     autosave,
     autosave_path,

@@ -8,23 +8,23 @@ import cv2
 import numpy as np
 import pytest
 
-from ctui.engine.pipeline import Pipeline
-from ctui.engine.propagate import PropagationSettings, iter_propagation, propagate, propagate_object
-from ctui.engine.selection import Segmentation
-from ctui.engine.volume import Volume
+from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.segment.propagate import PropagationSettings, iter_propagation, propagate, propagate_object
+from ctui.engine.segment.selection import Segmentation
+from ctui.engine.core.volume import Volume
 
 
 def _load_or_skip(path):
     try:
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
     except ImportError as exc:
-        pytest.skip(f"ctui.engine.loaders.load not available yet ({exc})")
+        pytest.skip(f"ctui.engine.io.series.load not available yet ({exc})")
     return load(path)
 
 
 @pytest.fixture(scope="module")
 def phantom():
-    from ctui.engine.phantom import make_phantom
+    from ctui.engine.io.phantom import make_phantom
 
     return make_phantom()
 
@@ -55,7 +55,7 @@ def test_phantom_kidneys_volume_within_2_percent(phantom, mode):
 
 
 def test_bundled_phantom_series_through_loader(sample_dir):
-    from ctui.engine.phantom import SAMPLE_DIR, load_truth
+    from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
 
     vol = _load_or_skip(SAMPLE_DIR)
     truth = load_truth()
@@ -210,7 +210,7 @@ def test_head_phantom_round_insert_one_object_per_slice():
 def test_fill3d_matches_scipy_label(connectivity):
     from scipy import ndimage
 
-    from ctui.engine.propagate import fill3d
+    from ctui.engine.segment.propagate import fill3d
 
     rng = np.random.default_rng(7)
     inr = rng.random((12, 40, 40)) < 0.55

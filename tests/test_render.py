@@ -8,13 +8,12 @@ import subprocess
 import sys
 import textwrap
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ctui.engine.meshdata import Mesh
+from ctui.engine.core.meshdata import Mesh
 from ctui.engine.render import (Camera, EGLUnavailable, Light, Material, Scene, SceneMesh, SceneVolume, SlicePlane,
                                 get_renderer, save_flythrough, save_png, save_turntable, setup_camera)
 from ctui.engine.render.gl import vertex_normals
@@ -126,7 +125,7 @@ def test_side_facing_light_is_brighter(renderer, side):
 
 
 def test_two_objects_show_their_colours(renderer):
-    from ctui.engine.colors import object_color
+    from ctui.engine.core.colors import object_color
 
     scene = Scene.from_meshes([icosphere(10.0, (-15, 0, 0), object_id=1), icosphere(10.0, (15, 0, 0), object_id=2)])
     scene.options.background = BG
@@ -477,10 +476,10 @@ def test_cli_project_renders_its_objects_in_their_colours(renderer, tmp_path):
     import cv2
 
     from ctui.cli import main
-    from ctui.engine.colors import object_color
-    from ctui.engine.loaders import load
-    from ctui.engine.phantom import sample_path
-    from ctui.engine.project import Project, save_project
+    from ctui.engine.core.colors import object_color
+    from ctui.engine.io.series import load
+    from ctui.engine.io.phantom import sample_path
+    from ctui.engine.io.project import Project, save_project
 
     src = sample_path()
     vol = load(src)
@@ -506,7 +505,7 @@ def test_cli_volume_modes_on_the_sample_series(renderer, tmp_path):
     import cv2
 
     from ctui.cli import main
-    from ctui.engine.phantom import sample_path
+    from ctui.engine.io.phantom import sample_path
 
     src = sample_path()
     for mode in ("dvr", "mip"):
@@ -581,8 +580,7 @@ def test_cli_flythrough_auto_on_a_one_object_project(renderer, tmp_path):
     from PIL import Image
 
     from ctui.cli import main
-    from ctui.engine.project import Project, save_project
-    from ctui.engine.volume import Volume
+    from ctui.engine.io.project import Project, save_project
 
     lab = np.zeros((60, 30, 30), np.uint8)
     z, y, x = np.mgrid[:60, :30, :30]

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pytest
 
-from ctui.engine.centreline import centreline
-from ctui.engine.sections import (
+from ctui.engine.measure.centreline import centreline
+from ctui.engine.measure.sections import (
     feret_diameters,
     find_steps,
     object_field,
@@ -243,7 +243,7 @@ def test_volume_between_excludes_parallel_neighbour():
 
 
 def test_volume_between_bad_positions():
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     mask = np.zeros((20, 20, 40), bool)
     mask[5:15, 5:15, 5:35] = True
@@ -278,7 +278,7 @@ def test_outputs_csv_json_plot(tmp_path):
     red = (im[..., 0] > 180) & (im[..., 1] < 90) & (im[..., 2] < 90)
     blue = (im[..., 2] > 150) & (im[..., 0] < 80)
     assert red.sum() > 50 and blue.sum() > 50
-    from ctui.engine.sections import sections_plot_image
+    from ctui.engine.measure.sections import sections_plot_image
 
     arr = sections_plot_image(rows, references=[math.pi * 4], size_px=(640, 320), quantity="eq_diameter_mm")
     assert arr.shape == (320, 640, 3) and arr.dtype == np.uint8
@@ -313,8 +313,8 @@ def test_bundled_phantom_tube_sections_match_truth():
     found where the truth puts them, and the automatic centreline runs along the axis."""
     from scipy import ndimage as ndi
 
-    phantom = pytest.importorskip("ctui.engine.phantom")
-    loaders = pytest.importorskip("ctui.engine.loaders")
+    phantom = pytest.importorskip("ctui.engine.io.phantom")
+    loaders = pytest.importorskip("ctui.engine.io.series")
     if not (phantom.SAMPLE_DIR / phantom.TRUTH_NAME).exists():
         pytest.skip(f"bundled sample {phantom.SAMPLE_DIR} missing")
     vol = loaders.load(phantom.SAMPLE_DIR)

@@ -12,15 +12,15 @@ from ctui.cli import main
 
 @pytest.fixture(scope="module")
 def truth():
-    pytest.importorskip("ctui.engine.loaders")
-    from ctui.engine.phantom import load_truth
+    pytest.importorskip("ctui.engine.io.series")
+    from ctui.engine.io.phantom import load_truth
 
     return load_truth()
 
 
 @pytest.fixture(scope="module")
 def sample():
-    from ctui.engine.phantom import SAMPLE_DIR
+    from ctui.engine.io.phantom import SAMPLE_DIR
 
     return str(SAMPLE_DIR)
 
@@ -61,9 +61,9 @@ def test_segment_writes_project_mask_mric(capsys, truth, sample, tmp_path):
                         "--filter", "opening:size=3,shape=ellipse", "--project", proj, "--mask", mask, "--mric", mric)
     assert rc == 0, err
     assert "object 1:" in out and "ml" in out
-    from ctui.engine.labelio import load_labels
-    from ctui.engine.mric import read_mric
-    from ctui.engine.project import load_project
+    from ctui.engine.io.labels import load_labels
+    from ctui.engine.io.mric import read_mric
+    from ctui.engine.io.project import load_project
 
     p = load_project(proj)
     labels, geom = load_labels(mask)
@@ -97,7 +97,7 @@ def test_drift_from_project_and_seeds(capsys, truth, sample, tmp_path):
                         "--project", out_proj)
     assert rc == 0, err
     assert "flagged slices" in out
-    from ctui.engine.project import load_project
+    from ctui.engine.io.project import load_project
 
     assert [c["slice"] for c in load_project(out_proj).drift["corrections"]] == truth["drift"]["slices"]
 

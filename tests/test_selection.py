@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.selection import Segmentation, fill_range, threshold_fill
+from ctui.engine.segment.selection import Segmentation, fill_range, threshold_fill
 
 
 def _diagonal() -> np.ndarray:

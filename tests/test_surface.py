@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.meshtools import mesh_report
-from ctui.engine.surface import isosurface, label_surfaces, mask_surface
+from ctui.engine.mesh.meshtools import mesh_report
+from ctui.engine.mesh.surface import isosurface, label_surfaces, mask_surface
 
 SPACING = (2.5, 0.7, 0.7)  # (dz, dy, dx) mm
 
@@ -117,7 +117,7 @@ def test_empty_mask_gives_empty_mesh():
 
 @pytest.fixture(scope="module")
 def phantom():
-    from ctui.engine.phantom import make_phantom
+    from ctui.engine.io.phantom import make_phantom
 
     return make_phantom()
 
@@ -135,8 +135,8 @@ def kidney_mask(volume, truth, name):
 
 @pytest.mark.parametrize("name", ["kidney_left", "kidney_right"])
 def test_phantom_kidneys_both_methods(phantom, name):
-    from ctui.engine.borders import object_borders
-    from ctui.engine.contour_connect import connect_contours
+    from ctui.engine.core.borders import object_borders
+    from ctui.engine.mesh.contour_connect import connect_contours
 
     volume, truth = phantom
     mask, analytic_ml = kidney_mask(volume, truth, name)

@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from ctui.engine.phantom import SAMPLE_DIR, load_truth
+from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.imageview import ImageView
@@ -141,7 +141,7 @@ async def test_two_objects_tab_undo_and_exports(tmp_path):
         await choose(pilot, "mric")
         await answer_prompt(pilot, str(mric))
         await wait_for(pilot, lambda: mric.exists(), what="the MRIC file")
-        from ctui.engine.mric import read_mric
+        from ctui.engine.io.mric import read_mric
 
         m = read_mric(mric)
         assert (m.width, m.height) == s.shape[:0:-1]
@@ -220,7 +220,7 @@ async def test_autosave_writes_when_dirty(tmp_path):
         app._autosave_tick()
         auto = tmp_path / "autosave"
         await wait_for(pilot, lambda: auto.exists() and any(auto.iterdir()), what="the autosave")
-        from ctui.engine.project import load_project
+        from ctui.engine.io.project import load_project
 
         p = load_project(next(auto.iterdir()))
         assert np.array_equal(p.labels, app.session.seg.labels)

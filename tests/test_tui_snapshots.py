@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.phantom import load_truth, make_phantom
+from ctui.engine.io.phantom import load_truth, make_phantom
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session

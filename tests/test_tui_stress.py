@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctui.engine.phantom import SAMPLE_DIR, load_truth
+from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp, LoadingScreen
 from ctui.screens.testing import answer_prompt, goto_voxel, wait_for, wait_workspace
@@ -173,7 +173,7 @@ async def test_render_requested_while_another_runs():
 
 
 async def test_quit_during_propagation(monkeypatch):
-    from ctui.engine.volume import Volume
+    from ctui.engine.core.volume import Volume
     from ctui.screens.session import Session
 
     # a long tube through many slices, slow enough that propagation is still running
@@ -185,7 +185,7 @@ async def test_quit_during_propagation(monkeypatch):
     vol = Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT")
     sess = Session(vol, source_path="synthetic")
     # make every slice of the propagation slow (20 ms), so it is surely running when q comes
-    from ctui.engine.pipeline import Pipeline
+    from ctui.engine.segment.pipeline import Pipeline
 
     orig = Pipeline.final_region
 
@@ -289,7 +289,7 @@ async def test_series_too_big_for_memory_offers_downsampling():
 
 
 async def test_edits_wait_while_propagation_runs(monkeypatch):
-    from ctui.engine.pipeline import Pipeline
+    from ctui.engine.segment.pipeline import Pipeline
 
     orig = Pipeline.final_region
 

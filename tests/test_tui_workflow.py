@@ -4,12 +4,11 @@ export STL and a project, resume the project."""
 
 from __future__ import annotations
 
-import importlib
 
 import numpy as np
 import pytest
 
-from ctui.engine.phantom import load_truth
+from ctui.engine.io.phantom import load_truth
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.testing import answer_prompt, choose, goto_voxel, wait_for, wait_workspace
@@ -27,13 +26,6 @@ def _halfblock(monkeypatch, tmp_path):
 def _kidney():
     t = load_truth()
     return next(o for o in t["objects"] if o["name"] == "kidney_left")
-
-
-def _has(module: str, attr: str) -> bool:
-    try:
-        return hasattr(importlib.import_module(f"ctui.engine.{module}"), attr)
-    except ImportError:
-        return False
 
 
 async def test_open_filter_select_propagate_export_project(tmp_path):
@@ -87,23 +79,22 @@ async def test_open_filter_select_propagate_export_project(tmp_path):
         assert int((s.seg.labels == s.current).sum()) == vox
 
         # e: export the mesh as STL
-        if _has("meshio", "save_mesh") and _has("surface", "mask_surface"):
-            stl = tmp_path / "kidney.stl"
-            await pilot.press("e")
-            await choose(pilot, "mesh-stl")
-            await answer_prompt(pilot, str(stl))
-            await wait_for(pilot, lambda: stl.exists(), what="the STL file")
-            from ctui.engine.meshio import load_mesh
+        stl = tmp_path / "kidney.stl"
+        await pilot.press("e")
+        await choose(pilot, "mesh-stl")
+        await answer_prompt(pilot, str(stl))
+        await wait_for(pilot, lambda: stl.exists(), what="the STL file")
+        from ctui.engine.io.meshes import load_mesh
 
-            mesh = load_mesh(stl)
-            assert abs(mesh.volume_mm3() / 1000.0 - kid["volume_ml"]) / kid["volume_ml"] < 0.03
+        mesh = load_mesh(stl)
+        assert abs(mesh.volume_mm3() / 1000.0 - kid["volume_ml"]) / kid["volume_ml"] < 0.03
         # e: label map as NIfTI
         nii = tmp_path / "labels.nii.gz"
         await pilot.press("e")
         await choose(pilot, "labels-nii")
         await answer_prompt(pilot, str(nii))
         await wait_for(pilot, lambda: nii.exists(), what="the NIfTI file")
-        from ctui.engine.labelio import load_labels
+        from ctui.engine.io.labels import load_labels
 
         lab, _ = load_labels(nii)
         assert np.array_equal(lab, s.seg.labels)
@@ -158,8 +149,7 @@ async def test_render_3d_shows_rendered_pixels(tmp_path):
         assert v3.scene.camera.azimuth == 45
         from ctui.screens.view3d import MODES
 
-        if _has("surface", "label_surfaces"):
-            assert v3.meshes and v3.mode == "surface"
+        assert v3.meshes and v3.mode == "surface"
         before = v3.mode
         await pilot.press("m")
         await wait_for(pilot, lambda: v3.shown_requests[-1] == v3._req, timeout=60, what="the next mode")
@@ -195,9 +185,9 @@ async def test_render_3d_shows_rendered_pixels(tmp_path):
 async def test_export_all_objects_in_one_mesh_file(tmp_path):
     """e -> 'Meshes of all objects': both kidneys (painted from the phantom's truth
     masks) in one STL, each closed, total volume the sum of the analytic volumes."""
-    pytest.importorskip("ctui.engine.meshio")
-    from ctui.engine.meshio import load_mesh
-    from ctui.engine.meshtools import components
+    pytest.importorskip("ctui.engine.io.meshes")
+    from ctui.engine.io.meshes import load_mesh
+    from ctui.engine.mesh.meshtools import components
 
     truth = load_truth()
     app = CtuiApp()

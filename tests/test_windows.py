@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.windows import (
+from ctui.engine.core.windows import (
     CT_PRESETS,
     apply_window,
     auto_window,
@@ -59,8 +59,8 @@ def test_percentile_window_for_mr_and_plain():
 
 def test_loaded_windows():
     from conftest import shared
-    from ctui.engine.loaders import load
-    from ctui.engine.phantom import SAMPLE_DIR
+    from ctui.engine.io.series import load
+    from ctui.engine.io.phantom import SAMPLE_DIR
 
     assert load(SAMPLE_DIR).window == (40.0, 400.0)  # the header's window
     vol = load(shared("cthead_tiff_stack/brain.tiff"))

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ctui.commands.segment import _err, build_pipeline, load_volume, make_project, segment_volume
-    from ctui.engine.drift import analyze_drift, corrections_from_report, plot_drift
+    from ctui.engine.segment.drift import analyze_drift, corrections_from_report, plot_drift
 
     if args.fit_window < 3:
         raise _err("--fit-window must be >= 3")
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     seg = pipeline = None
     settings: list[dict] = []
     if args.path.endswith(".ctui"):
-        from ctui.engine.project import load_project
+        from ctui.engine.io.project import load_project
 
         if not os.path.exists(args.path):
             raise _err(f"{args.path}: no such file")
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         volume = load_volume(args.path, series=args.series)
         if args.labels:
-            from ctui.engine.labelio import load_labels
+            from ctui.engine.io.labels import load_labels
 
             labels, _geom = load_labels(args.labels)
             if labels.shape != volume.data.shape:
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     drift_dict = {"threshold_mm": report.threshold_mm, "flagged": report.flagged, "corrections": corrections,
                   "method": args.fit, "estimate": args.estimate, "applied": False}
     if args.project:
-        from ctui.engine.project import save_project
+        from ctui.engine.io.project import save_project
 
         if project is not None:
             project.drift = drift_dict
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             if pipeline is None:
                 pipeline = build_pipeline(args)
             if seg is None:
-                from ctui.engine.selection import Segmentation
+                from ctui.engine.segment.selection import Segmentation
 
                 seg = Segmentation(labels.shape, labels=np.ascontiguousarray(labels, dtype=np.uint8))
             save_project(args.project, make_project(args.path, volume, seg, pipeline, settings, series=args.series, drift=drift_dict))

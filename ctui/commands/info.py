@@ -19,8 +19,8 @@ def add_load_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_kwargs(args: argparse.Namespace) -> dict:
-    """Keyword arguments for ctui.engine.loaders.load from the options above."""
-    from ctui.engine.errors import CtuiError
+    """Keyword arguments for ctui.engine.io.series.load from the options above."""
+    from ctui.engine.core.errors import CtuiError
 
     kw: dict = {}
     if getattr(args, "series", None) not in (None, ""):
@@ -76,7 +76,7 @@ def orientation_name(direction) -> str:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     path = args.path[0] if len(args.path) == 1 else list(args.path)
     vol = load(path, **load_kwargs(args))

@@ -50,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _err(msg: str):
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     return CtuiError(msg)
 
@@ -79,11 +79,11 @@ def _load_labels(path: str):
 
     kind = _kind(path)
     if kind == "labels":
-        from ctui.engine.labelio import load_labels
+        from ctui.engine.io.labels import load_labels
 
         labels, geom = load_labels(path)
         return labels, geom.spacing, geom.origin, geom.direction, [], None
-    from ctui.engine.project import load_project
+    from ctui.engine.io.project import load_project
 
     project = load_project(path)
     if project.labels is None:
@@ -93,7 +93,7 @@ def _load_labels(path: str):
     src = project.source_path
     meta = project.meta or {}
     if src and os.path.exists(src):
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
 
         opts = {k: v for k, v in (project.source_options or {}).items() if v is not None}
         vol = load(src, **opts)
@@ -154,15 +154,15 @@ def run(args: argparse.Namespace) -> int:
     if kind == "mesh":
         if args.path or between:
             raise _err(f"{args.input}: a mesh gives volume and area only (no --path/--between)")
-        from ctui.engine.measure import mesh_stats
-        from ctui.engine.meshio import load_mesh
+        from ctui.engine.measure.stats import mesh_stats
+        from ctui.engine.io.meshes import load_mesh
 
         st = mesh_stats(load_mesh(args.input))
         report["volume_ml"]["mesh"] = st["volume_ml"]
         report["area_mm2"] = st["area_mm2"]
         report["warnings"] += st["warnings"]
     else:
-        from ctui.engine.measure import measure_object
+        from ctui.engine.measure.stats import measure_object
 
         labels, spacing, origin, direction, notes, image = _load_labels(args.input)
         if args.partial_volume and image is None:
@@ -181,11 +181,11 @@ def run(args: argparse.Namespace) -> int:
         res["warnings"] = notes + res["warnings"]
         report.update(res)
         if args.csv:
-            from ctui.engine.sections import write_sections_csv
+            from ctui.engine.measure.sections import write_sections_csv
 
             write_sections_csv(args.csv, rows)
         if args.plot:
-            from ctui.engine.sections import plot_sections
+            from ctui.engine.measure.sections import plot_sections
 
             plot_sections(args.plot, rows, references=refs, title=f"object {oid} sections")
     if args.json:

@@ -20,7 +20,7 @@ LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from .info import add_load_options
+    from ctui.commands.info import add_load_options
 
     p = subparsers.add_parser(
         "mesh",
@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _err(msg: str):
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     return CtuiError(msg)
 
@@ -83,11 +83,11 @@ def _project_labels(path: str, args: argparse.Namespace):
     import numpy as np
 
     if _kind(path) == "labels":
-        from ctui.engine.labelio import load_labels
+        from ctui.engine.io.labels import load_labels
 
         labels, geom = load_labels(path)
         return np.asarray(labels), geom.spacing, geom.origin, geom.direction
-    from ctui.engine.project import load_project
+    from ctui.engine.io.project import load_project
 
     project = load_project(path)
     if project.labels is None:
@@ -96,7 +96,7 @@ def _project_labels(path: str, args: argparse.Namespace):
     meta = project.meta or {}
     src = project.source_path
     if src and os.path.exists(src):
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
 
         opts = {k: v for k, v in (project.source_options or {}).items() if v is not None}
         vol = load(src, **opts)
@@ -130,8 +130,8 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from ctui.engine import meshtools
-    from ctui.engine.meshio import FORMATS, save_mesh
+    from ctui.engine.mesh import meshtools
+    from ctui.engine.io.meshes import FORMATS, save_mesh
 
     src = args.input
     out = Path(args.out)
@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
             raise _err(f"{src}: an MRIC file holds contours only: use --method contours")
         if args.iso is not None:
             raise _err(f"{src}: --iso applies to a series, not to an MRIC file")
-        from ctui.engine.contour_connect import connect_mric
+        from ctui.engine.mesh.contour_connect import connect_mric
 
         sp = _spacing(getattr(args, "spacing", None), src) or (1.0, 1.0, 1.0)
         mesh = connect_mric(src, object_index=args.object, spacing=sp, method=args.tiling)
@@ -169,8 +169,8 @@ def run(args: argparse.Namespace) -> int:
         ids = _objects(labels, args.object, src)
         info["objects"] = ids
         if method == "contours":
-            from ctui.engine.borders import object_borders
-            from ctui.engine.contour_connect import connect_contours
+            from ctui.engine.core.borders import object_borders
+            from ctui.engine.mesh.contour_connect import connect_contours
 
             parts = []
             for k in ids:
@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
                 m.object_id = k
                 parts.append(m)
         else:
-            from ctui.engine.surface import label_surfaces
+            from ctui.engine.mesh.surface import label_surfaces
 
             surf = label_surfaces(labels, spacing=spacing, origin=origin, direction=direction,
                                   smooth=not args.terraced, objects=ids)
@@ -188,20 +188,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         if args.iso is None:
             raise _err(f"{src}: a series needs --iso VALUE (e.g. --iso 300 for bone in CT)")
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
 
-        from .info import load_kwargs
+        from ctui.commands.info import load_kwargs
 
         vol = load(src, **load_kwargs(args))
         if method == "contours":
-            from ctui.engine.borders import object_borders
-            from ctui.engine.contour_connect import connect_contours
+            from ctui.engine.core.borders import object_borders
+            from ctui.engine.mesh.contour_connect import connect_contours
 
             mask = (vol.data > args.iso).astype(np.uint8)
             mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,
                                     direction=vol.direction, method=args.tiling)
         else:
-            from ctui.engine.surface import isosurface
+            from ctui.engine.mesh.surface import isosurface
 
             mesh = isosurface(vol.data, args.iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction,
                               close=True)

@@ -25,7 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
     from ctui.screens.graphics import prepare_graphics
 
     try:

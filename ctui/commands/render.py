@@ -56,7 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     try:
         vals = tuple(float(v) for v in text.replace("x", ",").split(","))
@@ -68,10 +68,10 @@ def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:
 
 
 def _load_mesh_file(path):
-    from ctui.engine.errors import CtuiError, FormatError
+    from ctui.engine.core.errors import CtuiError, FormatError
 
     try:
-        from ctui.engine.meshio import load_mesh  # MESH engineer's reader
+        from ctui.engine.io.meshes import load_mesh  # MESH engineer's reader
     except ImportError:
         load_mesh = None
     if load_mesh is not None:
@@ -79,7 +79,7 @@ def _load_mesh_file(path):
     import numpy as np
     import trimesh
 
-    from ctui.engine.meshdata import Mesh
+    from ctui.engine.core.meshdata import Mesh
 
     try:
         tm = trimesh.load(str(path), force="mesh", process=False)
@@ -95,10 +95,10 @@ def _load_mesh_file(path):
 
 
 def _load_series(path, args):
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     try:
-        from ctui.engine.loaders import load
+        from ctui.engine.io.series import load
     except ImportError as exc:
         raise CtuiError("not a mesh (.stl/.ply/.obj), project (.ctui) or readable series", path=path) from exc
     opts = {}
@@ -120,9 +120,9 @@ def _project_meshes(path, args):
     """(meshes, volume or None) for a .ctui project's labelled objects."""
     import numpy as np
 
-    from ctui.engine.errors import CtuiError
-    from ctui.engine.meshdata import Mesh
-    from ctui.engine.project import load_project
+    from ctui.engine.core.errors import CtuiError
+    from ctui.engine.core.meshdata import Mesh
+    from ctui.engine.io.project import load_project
 
     proj = load_project(path)
     if proj.labels is None or not np.any(proj.labels):
@@ -149,7 +149,7 @@ def _project_meshes(path, args):
             raise CtuiError(f"object(s) {missing} not in the project (has {ids})", path=path)
         ids = list(args.object)
     try:
-        from ctui.engine.surface import label_surfaces
+        from ctui.engine.mesh.surface import label_surfaces
     except ImportError:
         label_surfaces = None
     meshes: list[Mesh] = []
@@ -161,7 +161,7 @@ def _project_meshes(path, args):
                 out[oid].object_id = oid
                 meshes.append(out[oid])
     else:
-        from ctui.engine.surface import isosurface
+        from ctui.engine.mesh.surface import isosurface
 
         for oid in ids:
             m = isosurface((proj.labels == oid).astype(np.float32), 0.5, spacing=spacing, origin=origin,
@@ -176,9 +176,8 @@ def _project_meshes(path, args):
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    import numpy as np
 
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
     from ctui.engine.render import (Light, Scene, SceneMesh, SceneVolume, SlicePlane, get_renderer, save_animation,
                                     save_png, turntable_frames)
 
@@ -219,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
     if kind == "series" and mode in ("surface", "wire", "transparent"):
         if args.iso is None:
             raise CtuiError(f"--mode {mode} on a series needs --iso LEVEL (e.g. --iso 300 for bone)", path=src)
-        from ctui.engine.surface import isosurface
+        from ctui.engine.mesh.surface import isosurface
 
         m = isosurface(volume.data, args.iso, spacing=volume.spacing, origin=volume.origin,
                        direction=volume.direction)
@@ -300,7 +299,7 @@ def _fly_path(spec: str, args, kind: str, src):
     """(n, 3) patient mm path for --flythrough."""
     import numpy as np
 
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     if spec.strip().lower() == "auto":
         geo = getattr(args, "_project_geometry", None)
@@ -312,7 +311,7 @@ def _fly_path(spec: str, args, kind: str, src):
         if kind != "project" or geo is None or len(objects) != 1:
             raise CtuiError("--flythrough auto needs a .ctui project and one --object (a tubular object)", path=src)
         labels, spacing, origin, direction = geo
-        from ctui.engine.centreline import centreline
+        from ctui.engine.measure.centreline import centreline
 
         path = centreline(labels == objects[0], spacing=spacing, origin=origin, direction=direction)
         if path is None or len(path) < 2:

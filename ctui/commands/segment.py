@@ -69,7 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 # ----------------------------------------------------------------------------- helpers
 def _err(msg: str):
-    from ctui.engine.errors import CtuiError
+    from ctui.engine.core.errors import CtuiError
 
     return CtuiError(msg)
 
@@ -99,7 +99,7 @@ def parse_range(text: str) -> tuple[float, float]:
 
 
 def build_pipeline(args: argparse.Namespace):
-    from ctui.engine.pipeline import Pipeline, parse_filter_spec
+    from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
 
     window = None
     if args.window:
@@ -122,7 +122,7 @@ def load_volume(path: str, *, series: str | None = None):
 
     if not os.path.exists(path):
         raise _err(f"{path}: no such file or folder")
-    from ctui.engine.loaders import load
+    from ctui.engine.io.series import load
 
     opts = {"series": series} if series else {}
     return load(path, **opts)
@@ -130,8 +130,8 @@ def load_volume(path: str, *, series: str | None = None):
 
 def segment_volume(volume, args: argparse.Namespace, *, pipeline=None):
     """Fill and propagate every --seed; returns (Segmentation, pipeline, settings list, results list)."""
-    from ctui.engine.propagate import PropagationSettings, propagate_object
-    from ctui.engine.selection import Segmentation
+    from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+    from ctui.engine.segment.selection import Segmentation
 
     seeds = [parse_seed(s) for s in args.seed]
     if not seeds:
@@ -206,7 +206,7 @@ def objects_report(seg, volume, results) -> list[dict]:
 def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, series: str | None = None, drift: dict | None = None):
     import os
 
-    from ctui.engine.project import Project
+    from ctui.engine.io.project import Project
 
     prop = dict(settings[0]) if settings else {}
     if len(settings) > 1:
@@ -219,18 +219,18 @@ def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, seri
 def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: list[dict]) -> list[str]:
     written = []
     if getattr(args, "project", None):
-        from ctui.engine.project import save_project
+        from ctui.engine.io.project import save_project
 
         save_project(args.project, make_project(args.path, volume, seg, pipeline, settings, series=args.series))
         written.append(args.project)
     if getattr(args, "mask", None):
-        from ctui.engine.labelio import save_labels
+        from ctui.engine.io.labels import save_labels
 
         save_labels(args.mask, seg.labels, volume, names={o["id"]: o["name"] for o in seg.object_list()})
         written.append(args.mask)
     if getattr(args, "mric", None):
-        from ctui.engine.borders import borders_for_mric
-        from ctui.engine.mric import write_mric
+        from ctui.engine.core.borders import borders_for_mric
+        from ctui.engine.io.mric import write_mric
 
         nz, ny, nx = seg.labels.shape
         mid = nz // 2

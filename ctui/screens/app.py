@@ -15,11 +15,12 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, ProgressBar, Static
 
-from ctui.engine.errors import CtuiError
-
-from .graphics import colour_advice
-from .guard import GuardMixin
-from .session import Session, engine, load_volume
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.io import project
+from ctui.engine.segment import pipeline, selection
+from ctui.screens.graphics import colour_advice
+from ctui.screens.guard import GuardMixin
+from ctui.screens.session import Session, load_volume
 
 AUTOSAVE_SECONDS = 180.0
 
@@ -60,7 +61,7 @@ class LoadingScreen(GuardMixin, Screen):
     def action_crop(self) -> None:
         if not self.too_big:
             return
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         def done(val: str | None) -> None:
             if not val:
@@ -117,7 +118,7 @@ class CtuiApp(App):
         self.project_file = project
         self.graphics = graphics
         if graphics:
-            from . import graphics as _g
+            from ctui.screens import graphics as _g
 
             if graphics in ("halfblock", "ascii") or _g._chosen is None:
                 _g._chosen = graphics if graphics in ("halfblock", "ascii") else "halfblock"
@@ -175,7 +176,7 @@ class CtuiApp(App):
         src = path
         if src is None:
             try:
-                from .session import sample_source
+                from ctui.screens.session import sample_source
 
                 src = sample_source()
             except CtuiError:
@@ -202,7 +203,7 @@ class CtuiApp(App):
     @work(thread=True, exclusive=True, group="load")
     def load_project_worker(self, path: str) -> None:
         try:
-            proj = engine("project").load_project(path)
+            proj = project.load_project(path)
             vol = load_volume(proj.source_path, **(proj.source_options or {}))
             sess = session_from_project(proj, vol, path)
         except CtuiError as exc:
@@ -214,7 +215,7 @@ class CtuiApp(App):
         self.call_from_thread(self._start_workspace, sess)
 
     def _start_workspace(self, session: Session) -> None:
-        from .workspace import WorkspaceScreen
+        from ctui.screens.workspace import WorkspaceScreen
 
         self.session = session
         for w in session.volume.warnings[:3]:
@@ -237,14 +238,13 @@ class CtuiApp(App):
     def _offer_recovery(self, session: Session) -> None:
         """An autosave newer than the project (or of an unsaved source): offer it."""
         try:
-            project = engine("project")
             key = session.project_path or session.source_path
             auto = project.find_autosave(key) if key else None
         except Exception:
             return
         if auto is None or str(auto) == str(session.project_path):
             return
-        from .dialogs import ConfirmScreen
+        from ctui.screens.dialogs import ConfirmScreen
 
         def done(ok: bool) -> None:
             if ok:
@@ -260,7 +260,7 @@ class CtuiApp(App):
 
     def _recover(self, session: Session, auto: str) -> None:
         try:
-            proj = engine("project").load_project(auto)
+            proj = project.load_project(auto)
             new = session_from_project(proj, session.volume, session.project_path or "")
         except (CtuiError, ValueError) as exc:
             self.notify(f"Autosave not recovered: {exc}", severity="error")
@@ -272,7 +272,7 @@ class CtuiApp(App):
         self.notify(f"Recovered {auto}", timeout=4)
 
     def _start_workspace_no_recovery(self, session: Session) -> None:
-        from .workspace import WorkspaceScreen
+        from ctui.screens.workspace import WorkspaceScreen
 
         self.session = session
         ws = WorkspaceScreen(session)
@@ -291,7 +291,7 @@ class CtuiApp(App):
 
     # ------------------------------------------------------------------ actions
     def action_open(self) -> None:
-        from .open_screen import OpenScreen
+        from ctui.screens.open_screen import OpenScreen
 
         start = None
         if self.session is not None and self.session.source_path:
@@ -302,7 +302,7 @@ class CtuiApp(App):
                 return
             path, series = choice
             if self.session is not None and self.session.dirty:
-                from .dialogs import ConfirmScreen
+                from ctui.screens.dialogs import ConfirmScreen
 
                 self.push_screen(ConfirmScreen("Discard unsaved work and open another series?", "Discard", "Keep"),
                                  lambda ok: ok and self.open_path(path, series))
@@ -312,7 +312,7 @@ class CtuiApp(App):
         self.push_screen(OpenScreen(start), done)
 
     def action_help(self) -> None:
-        from .dialogs import TextScreen, bindings_help
+        from ctui.screens.dialogs import TextScreen, bindings_help
 
         screen = self.screen
         text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
@@ -329,7 +329,7 @@ class CtuiApp(App):
         if s.project_path:
             self._save_to(s.project_path, then_quit)
             return
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         default = str(Path.cwd() / (Path(s.source_path or "project").name.replace(" ", "_") + ".ctui"))
 
@@ -346,14 +346,14 @@ class CtuiApp(App):
         s = self.session
         try:
             proj = project_from_session(s)
-            engine("project").save_project(path, proj)
+            project.save_project(path, proj)
         except (CtuiError, OSError, ValueError) as exc:
             self.notify(f"Project not saved: {exc}", severity="error", timeout=10)
             return
         s.project_path = path
         s.dirty = False
         try:
-            engine("project").remove_autosave(path)
+            project.remove_autosave(path)
         except Exception:
             pass
         self.notify(f"Project saved: {path}", timeout=3)
@@ -373,7 +373,6 @@ class CtuiApp(App):
     def autosave_worker(self) -> None:
         s = self.session
         try:
-            project = engine("project")
             proj = project_from_session(s)
             target = project.autosave(proj, s.project_path or s.source_path)
         except Exception as exc:
@@ -384,7 +383,7 @@ class CtuiApp(App):
     def action_request_quit(self) -> None:
         s = self.session
         if s is not None and s.dirty:
-            from .dialogs import ChoiceScreen
+            from ctui.screens.dialogs import ChoiceScreen
 
             def done(choice: str | None) -> None:
                 if choice == "save":
@@ -403,7 +402,7 @@ class CtuiApp(App):
     # ------------------------------------------------------------------ errors
     def _handle_exception(self, error: Exception) -> None:
         """Workers and handlers: report and keep running once the app is up."""
-        from .guard import report_internal_error
+        from ctui.screens.guard import report_internal_error
 
         if self.is_running and self.screen_stack and not isinstance(error, (KeyboardInterrupt, SystemExit)):
             report_internal_error(self, error)
@@ -414,7 +413,7 @@ class CtuiApp(App):
         try:
             return await super()._dispatch_action(namespace, action_name, params)
         except Exception as exc:  # noqa: BLE001
-            from .guard import report_internal_error
+            from ctui.screens.guard import report_internal_error
 
             report_internal_error(self, exc)
             return True
@@ -427,14 +426,14 @@ class CtuiApp(App):
                 try:
                     return _inner(result)
                 except Exception as exc:  # noqa: BLE001
-                    from .guard import report_internal_error
+                    from ctui.screens.guard import report_internal_error
 
                     report_internal_error(self, exc)
 
         return super().push_screen(screen, callback, wait_for_dismiss=wait_for_dismiss)
 
     def action_last_error(self) -> None:
-        from .dialogs import TextScreen
+        from ctui.screens.dialogs import TextScreen
 
         body = self.internal_errors[-1] if self.internal_errors else "No internal error so far."
         self.push_screen(TextScreen("Last internal error", body, markup=False))
@@ -466,8 +465,7 @@ class CtuiApp(App):
 
 # ---------------------------------------------------------------------- projects
 def project_from_session(s: Session):
-    """A ctui.engine.project.Project of the session's state."""
-    project = engine("project")
+    """A ctui.engine.io.project.Project of the session's state."""
     seg = s.seg
     labels = getattr(seg, "labels", None)
     objects = seg.object_list() if seg is not None else []
@@ -487,8 +485,7 @@ def project_from_session(s: Session):
 
 def session_from_project(proj, volume, path: str) -> Session:
     """Rebuild a Session from a loaded Project and its source volume."""
-    pipeline_mod = engine("pipeline")
-    selection = engine("selection")
+    pipeline_mod = pipeline
     labels = proj.labels
     if labels is not None and tuple(labels.shape) != tuple(volume.shape):
         raise CtuiError(f"labels {labels.shape} do not match the series {volume.shape}", path=path)

@@ -9,8 +9,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
-
-from .guard import GuardMixin
+from ctui.screens.guard import GuardMixin
 
 
 class PromptScreen(GuardMixin, ModalScreen[str | None]):

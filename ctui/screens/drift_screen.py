@@ -1,5 +1,5 @@
 """Drift screen (``d``): per-object centroid x and y against slice as a picture, the
-flagged slices, and apply/undo of the correction (``ctui.engine.drift``)."""
+flagged slices, and apply/undo of the correction (``ctui.engine.segment.drift``)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,11 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, Static
 
-
-from ctui.engine.colors import object_color
-
-from .guard import GuardMixin
-from .imageview import ImageView
-from .plot import line_plot
-from .session import engine
+from ctui.engine.core.colors import object_color
+from ctui.engine.segment import drift
+from ctui.screens.guard import GuardMixin
+from ctui.screens.imageview import ImageView
+from ctui.screens.plot import line_plot
 
 
 class DriftScreen(GuardMixin, Screen):
@@ -63,7 +61,7 @@ class DriftScreen(GuardMixin, Screen):
             self.app.call_from_thread(self._info, "No objects yet: segment one (Enter, p) to check drift.")
             return
         try:
-            rep = engine("drift").analyze_drift(labels, self.s.volume)
+            rep = drift.analyze_drift(labels, self.s.volume)
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Drift analysis failed: {exc}", severity="error")
             return
@@ -123,7 +121,6 @@ class DriftScreen(GuardMixin, Screen):
         if self.corrections():
             self.app.notify("A correction is already applied (u undoes it first)", severity="warning")
             return
-        drift = engine("drift")
         s = self.s
         try:
             corr = drift.corrections_from_report(self.report, estimate=self.estimate, volume=s.volume)
@@ -146,7 +143,6 @@ class DriftScreen(GuardMixin, Screen):
         if not corr:
             self.app.notify("No correction applied", timeout=3)
             return
-        drift = engine("drift")
         orig = getattr(s, "original_data", None)
         s.volume.data = orig if orig is not None else drift.apply_corrections(s.volume.data, drift.invert_corrections(corr))
         s.original_data = None
@@ -158,7 +154,7 @@ class DriftScreen(GuardMixin, Screen):
         self.analyse()
 
     def action_save_plot(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         if self.report is None:
             return
@@ -172,7 +168,7 @@ class DriftScreen(GuardMixin, Screen):
     @work(thread=True, group="drift-save")
     def _save(self, path: str) -> None:
         try:
-            engine("drift").plot_drift(self.report, path)
+            drift.plot_drift(self.report, path)
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Plot not saved: {exc}", severity="error")
             return

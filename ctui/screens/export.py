@@ -8,7 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .session import engine
+from ctui.engine.core import borders
+from ctui.engine.io import labels as labelio
+from ctui.engine.io import meshes as meshio
+from ctui.engine.io import mric
+from ctui.engine.mesh import meshtools, surface
 
 KINDS = [
     ("mesh-stl", "Mesh of the current object: STL", ".stl"),
@@ -41,9 +45,9 @@ def export_mesh(session, path: str, object_id: int):
     if labels is None or not (labels == object_id).any():
         raise ValueError(f"object {object_id} is empty: nothing to export")
     v = session.volume
-    mesh = engine("surface").mask_surface(labels == object_id, spacing=v.spacing, origin=v.origin, direction=v.direction)
+    mesh = surface.mask_surface(labels == object_id, spacing=v.spacing, origin=v.origin, direction=v.direction)
     mesh.object_id = int(object_id)
-    engine("meshio").save_mesh(path, mesh)
+    meshio.save_mesh(path, mesh)
     return mesh
 
 
@@ -54,9 +58,9 @@ def export_all_meshes(session, path: str):
     if labels is None or not labels.any():
         raise ValueError("no objects to export")
     v = session.volume
-    meshes = engine("surface").label_surfaces(labels, spacing=v.spacing, origin=v.origin, direction=v.direction)
-    mesh = engine("meshtools").merge([meshes[k] for k in sorted(meshes)])
-    engine("meshio").save_mesh(path, mesh)
+    meshes = surface.label_surfaces(labels, spacing=v.spacing, origin=v.origin, direction=v.direction)
+    mesh = meshtools.merge([meshes[k] for k in sorted(meshes)])
+    meshio.save_mesh(path, mesh)
     return mesh, len(meshes)
 
 
@@ -65,25 +69,25 @@ def export_labels(session, path: str):
     if labels is None or not labels.any():
         raise ValueError("no objects to export")
     names = {i: o.name for i, o in session.seg.objects.items()} if session.seg is not None else None
-    return engine("labelio").save_labels(path, labels, session.volume, names=names)
+    return labelio.save_labels(path, labels, session.volume, names=names)
 
 
 def export_mric(session, path: str):
     labels = session.labels()
     if labels is None or not labels.any():
         raise ValueError("no objects to export")
-    slices = engine("borders").borders_for_mric(labels)
+    slices = borders.borders_for_mric(labels)
     ny, nx = labels.shape[1:]
-    from ctui.engine.windows import apply_window
+    from ctui.engine.core.windows import apply_window
 
     image = apply_window(session.volume.data[session.z], session.window)
-    return engine("mric").write_mric(path, slices, width=nx, height=ny, image=image)
+    return mric.write_mric(path, slices, width=nx, height=ny, image=image)
 
 
 def export_image(rgb: np.ndarray, path: str):
     import cv2
 
-    from ctui.engine.atomic import write_bytes
+    from ctui.engine.core.atomic import write_bytes
 
     ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]) if rgb.ndim == 3 else rgb)
     if not ok:
@@ -118,7 +122,7 @@ def run_export(ws, kind: str, path: str) -> str:
 
 
 def export_dialog(ws) -> None:
-    from .dialogs import ChoiceScreen, PromptScreen
+    from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 
     app = ws.app
 

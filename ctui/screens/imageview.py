@@ -18,8 +18,8 @@ from textual.geometry import Size
 from textual.strip import Strip
 from textual.widget import Widget
 
-from . import cells
-from .graphics import cell_pixels, graphics_mode
+from ctui.screens import cells
+from ctui.screens.graphics import cell_pixels, graphics_mode
 
 
 class ImageView(Widget):

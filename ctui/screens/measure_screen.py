@@ -1,6 +1,6 @@
 """Measure screen (``M``): volume (voxels and mesh, Gauss theorem) and area per object
-(``ctui.engine.measure.object_stats``), and for a tubular object the section-area plot
-along its centreline (``ctui.engine.centreline`` + ``ctui.engine.sections``)."""
+(``ctui.engine.measure.stats.object_stats``), and for a tubular object the section-area plot
+along its centreline (``ctui.engine.measure.centreline`` + ``ctui.engine.measure.sections``)."""
 
 from __future__ import annotations
 
@@ -14,14 +14,13 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Label, Static
 
-
-from ctui.engine.colors import object_color
-from ctui.engine.errors import CtuiError
-
-from .guard import GuardMixin
-from .imageview import ImageView
-from .plot import line_plot
-from .session import engine
+from ctui.engine.core.colors import object_color
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.measure import centreline, sections
+from ctui.engine.measure import stats as measure
+from ctui.screens.guard import GuardMixin
+from ctui.screens.imageview import ImageView
+from ctui.screens.plot import line_plot
 
 
 def is_tubular(stats: dict) -> bool:
@@ -81,7 +80,7 @@ class MeasureScreen(GuardMixin, Screen):
         if labels is None or not labels.any():
             self.app.call_from_thread(self._status, "No objects yet: fill (Enter) and propagate (p) first")
             return
-        meas = engine("measure")
+        meas = measure
         ids = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=11)[1:]) + 1]
         v = s.volume
         for oid in ids:
@@ -152,13 +151,13 @@ class MeasureScreen(GuardMixin, Screen):
         self.app.call_from_thread(self._status, f"Centreline and sections of object {oid} ...")
         try:
             mask = s.labels() == oid
-            path = engine("centreline").centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
+            path = centreline.centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
             field = None
             if self.grey:  # the fraction measured for the table (or now, if it is not there yet)
-                pv = self.pv.get(oid) or engine("measure").partial_volume_fraction(v.data, mask)
-                field = engine("measure").partial_volume_field(pv, spacing=v.spacing, origin=v.origin,
+                pv = self.pv.get(oid) or measure.partial_volume_fraction(v.data, mask)
+                field = measure.partial_volume_field(pv, spacing=v.spacing, origin=v.origin,
                                                                direction=v.direction)
-            rows = engine("sections").sections_along_path(mask, path, field=field, spacing=v.spacing,
+            rows = sections.sections_along_path(mask, path, field=field, spacing=v.spacing,
                                                           origin=v.origin, direction=v.direction, step_mm=1.0)
         except Exception as exc:
             self.app.call_from_thread(self.app.notify, f"Sections of object {oid} failed: {exc}", severity="error")
@@ -181,7 +180,7 @@ class MeasureScreen(GuardMixin, Screen):
         if ok.size:
             lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
         try:
-            steps = engine("sections").find_steps(np.array(sm), a)
+            steps = sections.find_steps(np.array(sm), a)
             if steps:
                 lines += ["", "[b]steps[/b]"]
                 for st in steps[:6]:
@@ -193,7 +192,7 @@ class MeasureScreen(GuardMixin, Screen):
         self._status(f"Sections of object {oid}: {len(rows)} along {length:.0f} mm")
 
     def action_save(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         if not self.sections:
             self.app.notify("No sections computed yet (c)", timeout=3)
@@ -207,7 +206,7 @@ class MeasureScreen(GuardMixin, Screen):
 
     @work(thread=True, group="ms-save")
     def _save(self, path: str) -> None:
-        sec = engine("sections")
+        sec = sections
         try:
             sec.write_sections_csv(path, self.sections)
             png = path.rsplit(".", 1)[0] + ".png"

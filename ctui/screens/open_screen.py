@@ -1,5 +1,5 @@
 """Open screen (``o``): browse folders, see the series found in each
-(``ctui.engine.loaders.scan``, headers only, in a worker), open one."""
+(``ctui.engine.io.series.scan``, headers only, in a worker), open one."""
 
 from __future__ import annotations
 
@@ -15,9 +15,8 @@ from textual.screen import ModalScreen
 from textual.widgets import DirectoryTree, Footer, Input, Label, OptionList
 from textual.widgets.option_list import Option
 
-
-from .guard import GuardMixin
-from .session import engine
+from ctui.engine.io import series as loaders
+from ctui.screens.guard import GuardMixin
 
 
 def describe_series(s: dict) -> str:
@@ -105,7 +104,7 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
     def scan(self, path: Path) -> None:
         self.app.call_from_thread(self._status, f"Scanning {path} ...")
         try:
-            found = engine("loaders").scan(str(path))
+            found = loaders.scan(str(path))
             err = None
         except Exception as exc:  # unreadable folder, loader error: a reason, not a traceback
             found, err = [], str(exc)

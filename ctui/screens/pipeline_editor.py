@@ -1,5 +1,5 @@
 """Pipeline editor (``f``): add/remove/reorder/toggle steps of
-``ctui.engine.pipeline.Pipeline``, edit parameters, a kernel editor grid for custom
+``ctui.engine.segment.pipeline.Pipeline``, edit parameters, a kernel editor grid for custom
 structuring elements, and a live preview of the intermediate and final views."""
 
 from __future__ import annotations
@@ -14,9 +14,8 @@ from textual.screen import ModalScreen
 from textual.widgets import Footer, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
-
-from .guard import GuardMixin
-from .imageview import ImageView
+from ctui.screens.guard import GuardMixin
+from ctui.screens.imageview import ImageView
 
 MORPHOLOGY = ("closing", "opening", "erode", "dilate", "conservative")
 
@@ -220,9 +219,8 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
 
     # ------------------------------------------------------------ actions
     def action_add(self) -> None:
-        from ctui.engine.filters import FILTERS, PARAMS
-
-        from .dialogs import ChoiceScreen, PromptScreen
+        from ctui.engine.segment.filters import FILTERS, PARAMS
+        from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 
         def chose(name: str | None) -> None:
             if not name:
@@ -253,7 +251,7 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         self._changed(i)
 
     def action_edit(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         i = self._index()
         if i is None:

@@ -1,5 +1,5 @@
 """Propagation from the workspace: a thread worker driving
-``ctui.engine.propagate.propagate_object`` with a progress bar and cancel (Escape),
+``ctui.engine.segment.propagate.propagate_object`` with a progress bar and cancel (Escape),
 then a pending proposal shown on the slices until accepted (``a``) or rejected (``x``)."""
 
 from __future__ import annotations
@@ -9,9 +9,8 @@ import time
 
 from textual.worker import get_current_worker
 
-from ctui.engine.errors import CtuiError
-
-from .session import engine
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.segment import propagate
 
 
 class PropagationRun:
@@ -28,7 +27,7 @@ class PropagationRun:
 
 def settings_for(session, direction: str):
     """PropagationSettings from the current object's fill range (or the session's)."""
-    prop = engine("propagate")
+    prop = propagate
     s = session
     info = s.seg.objects.get(s.current) if s.seg is not None else None
     st = dict(info.settings) if info is not None else {}
@@ -70,7 +69,7 @@ def _work(run: PropagationRun, settings) -> None:
     app = ws.app
     s = ws.s
     worker = get_current_worker()
-    prop = engine("propagate")
+    prop = propagate
     last = [0.0]
 
     def progress(ev) -> bool:

@@ -2,48 +2,38 @@
 
 A :class:`Session` holds the loaded volume, the slice pipeline, the segmentation, the
 cursor and the view settings. Every computation is an engine call
-(``ctui.engine.loaders``, ``pipeline``, ``selection``, ``propagate``, ``drift``,
+(``ctui.engine.io.series``, ``pipeline``, ``selection``, ``propagate``, ``drift``,
 ``project``...); engine modules are imported lazily so the app still starts while a
 module is missing, and the action that needs it reports that as a notification.
 """
 
 from __future__ import annotations
 
-import importlib
 import threading
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ctui.engine.errors import CtuiError
-from ctui.engine.volume import Volume
-from ctui.engine.windows import CT_PRESETS, apply_window
+from ctui.engine.core.volume import Volume
+from ctui.engine.core.windows import CT_PRESETS, apply_window
+from ctui.engine.io import phantom
+from ctui.engine.io import series as loaders
+from ctui.engine.segment import pipeline, selection
 
 VIEWS = ("original", "overlay", "intermediate", "final")
 
 
-def engine(name: str):
-    """Import ``ctui.engine.<name>`` or raise a CtuiError saying it is not available."""
-    try:
-        return importlib.import_module(f"ctui.engine.{name}")
-    except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith("ctui.engine"):
-            raise CtuiError(f"ctui.engine.{name} is not available in this build") from None
-        raise
-
-
 def sample_source() -> str:
     """Path of the bundled sample series."""
-    return str(engine("phantom").sample_path())
+    return str(phantom.sample_path())
 
 
 def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
-    """Load a series with ``ctui.engine.loaders.load`` (the bundled sample when None)."""
+    """Load a series with ``ctui.engine.io.series.load`` (the bundled sample when None)."""
     if path is None:
         path = sample_source()
-    return engine("loaders").load(path, progress=progress, **options)
+    return loaders.load(path, progress=progress, **options)
 
 
 @dataclass
@@ -79,15 +69,9 @@ class Session:
         if self.volume.window:
             self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
         if self.pipeline is None:
-            try:
-                self.pipeline = engine("pipeline").Pipeline()
-            except CtuiError:
-                self.pipeline = None
+            self.pipeline = pipeline.Pipeline()
         if self.seg is None:
-            try:
-                self.seg = engine("selection").Segmentation(self.volume.shape)
-            except CtuiError:
-                self.seg = None
+            self.seg = selection.Segmentation(self.volume.shape)
 
     # ------------------------------------------------------------ geometry
     @property
@@ -120,7 +104,7 @@ class Session:
         return apply_window(image, self.window)
 
     def stage_views(self, z: int | None = None):
-        """ctui.engine.pipeline.SliceViews of slice z (cached by the engine)."""
+        """ctui.engine.segment.pipeline.SliceViews of slice z (cached by the engine)."""
         z = self.z if z is None else z
         with self._lock:
             return self.pipeline.run_slice(self.volume, z)
@@ -145,7 +129,7 @@ class Session:
         if self.volume.modality == "CT":
             items += list(CT_PRESETS.items())
         else:
-            from ctui.engine.windows import auto_window
+            from ctui.engine.core.windows import auto_window
 
             items.append(("auto", auto_window(self.volume.data, modality=self.volume.modality)))
         return items  # type: ignore[return-value]

@@ -15,12 +15,13 @@ from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import Footer, Static
 
-
-from ctui.engine.errors import CtuiError
-
-from .guard import GuardMixin
-from .imageview import ImageView
-from .session import engine
+from ctui.engine import render
+from ctui.engine.core import borders
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.measure import centreline
+from ctui.engine.mesh import contour_connect, surface
+from ctui.screens.guard import GuardMixin
+from ctui.screens.imageview import ImageView
 
 MODES = ("surface", "wire", "transparent", "mip", "dvr")
 METHODS = ("marching-cubes", "contours")
@@ -33,8 +34,7 @@ def build_meshes(session, method: str) -> dict:
     if labels is None or not labels.any():
         return {}
     if method == "contours":
-        borders = engine("borders")
-        cc = engine("contour_connect")
+        cc = contour_connect
         out = {}
         for oid in sorted(int(i) for i in set(labels.ravel().tolist()) - {0}) if labels.size < 4_000_000 else range(1, 11):
             per_slice = borders.object_borders(labels, oid)
@@ -43,7 +43,6 @@ def build_meshes(session, method: str) -> dict:
             out[oid] = cc.connect_contours(per_slice, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
             out[oid].object_id = oid
         return out
-    surface = engine("surface")
     meshes = surface.label_surfaces(labels, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
     for oid, m in meshes.items():
         m.object_id = int(oid)
@@ -154,7 +153,6 @@ class View3DScreen(GuardMixin, Screen):
     def _meshes_ready(self, meshes: dict, dt: float) -> None:
         self.meshes = meshes
         try:
-            render = engine("render")
             scene = render.Scene.from_meshes(list(meshes.values()))
             scene.options.show_surfaces = True
         except CtuiError as exc:
@@ -188,7 +186,6 @@ class View3DScreen(GuardMixin, Screen):
     def _render_worker(self, scene, size, req: int) -> None:
         t0 = time.perf_counter()
         try:
-            render = engine("render")
             fut = render.get_renderer().submit(scene, size)
             while True:
                 try:
@@ -267,7 +264,7 @@ class View3DScreen(GuardMixin, Screen):
             return
         opts = self.scene.options
         if opts.slice_plane is None:
-            opts.slice_plane = engine("render").SlicePlane(axis="z", index=int(self.s.z))
+            opts.slice_plane = render.SlicePlane(axis="z", index=int(self.s.z))
         else:
             opts.slice_plane = None
         self._info()
@@ -275,7 +272,7 @@ class View3DScreen(GuardMixin, Screen):
 
     def _ask_path(self, title: str, default: str, then) -> None:
         """Prompt for an output path, then call ``then(path)`` (nothing on cancel)."""
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         if self.scene is None:
             return
@@ -291,7 +288,6 @@ class View3DScreen(GuardMixin, Screen):
 
     @work(thread=True, group="save")
     def _save_png(self, path: str) -> None:
-        render = engine("render")
         scene = self.scene.snapshot()
         scene.mode = self.mode
         try:
@@ -308,7 +304,6 @@ class View3DScreen(GuardMixin, Screen):
 
     @work(thread=True, group="save")
     def _turntable(self, path: str) -> None:
-        render = engine("render")
         scene = self.scene.snapshot()
         scene.mode = self.mode
         self.app.call_from_thread(self._status, f"Writing turntable {path} ...")
@@ -330,7 +325,7 @@ class View3DScreen(GuardMixin, Screen):
         if labels is None or not (labels == oid).any():
             raise CtuiError(f"object {oid} is empty: fill and propagate it first")
         v = self.s.volume
-        path = engine("centreline").centreline(labels == oid, spacing=v.spacing, origin=v.origin,
+        path = centreline.centreline(labels == oid, spacing=v.spacing, origin=v.origin,
                                                direction=v.direction)
         if path is None or len(path) < 2:
             raise CtuiError(f"no centreline through object {oid}")
@@ -362,7 +357,6 @@ class View3DScreen(GuardMixin, Screen):
 
     @work(thread=True, exclusive=True, group="render")
     def _fly_worker(self, scene, size, req: int) -> None:
-        render = engine("render")
         try:
             self.app.call_from_thread(self._status, "Centreline of the current object ...")
             path = self._fly_path()
@@ -393,7 +387,6 @@ class View3DScreen(GuardMixin, Screen):
 
     @work(thread=True, group="save")
     def _fly_save(self, path: str) -> None:
-        render = engine("render")
         scene = self._fly_scene()
         self.app.call_from_thread(self._status, f"Writing fly-through {path} ...")
         try:

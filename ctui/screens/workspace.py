@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 from rich.text import Text
 from textual import work
@@ -12,12 +11,10 @@ from textual.containers import Grid, Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, ProgressBar, Static
 
-
-from ctui.engine.errors import CtuiError
-
-from .guard import GuardMixin
-from .imageview import ImageView
-from .session import VIEWS, Session, engine
+from ctui.engine.core.errors import CtuiError
+from ctui.screens.guard import GuardMixin
+from ctui.screens.imageview import ImageView
+from ctui.screens.session import VIEWS, Session
 
 
 class SidePanel(Static):
@@ -99,7 +96,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self._volumes_cache: tuple[int, dict] | None = None
         self._labels_version = 0
         self._prop = None  # running propagation handle
-        self.proposal = None  # pending propagation result (ctui.engine.propagate.Proposal)
+        self.proposal = None  # pending propagation result (ctui.engine.segment.propagate.Proposal)
         self._views_token = 0
         self.last_views = None
 
@@ -149,13 +146,13 @@ class WorkspaceScreen(GuardMixin, Screen):
     def _quick_image(self, view: str) -> np.ndarray | None:
         """Original/overlay straight from the volume (no filtering): instant."""
         s = self.s
-        from ctui.engine.windows import apply_window
+        from ctui.engine.core.windows import apply_window
 
         gray = apply_window(s.volume.data[s.z], s.window)
         if view == "original":
             return gray
         if view == "overlay":
-            from ctui.engine.pipeline import overlay
+            from ctui.engine.segment.pipeline import overlay
 
             lab = s.labels()
             lab2 = None if lab is None else lab[s.z]
@@ -343,7 +340,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.refresh_view()
 
     def action_goto(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         def done(val: str | None) -> None:
             if not val:
@@ -376,7 +373,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.app.notify(f"Window {name}: C {win[0]:g} W {win[1]:g}", timeout=2)
 
     def action_window_set(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         def done(val: str | None) -> None:
             if not val:
@@ -476,7 +473,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.update_panel()
 
     def action_range_edit(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         def done(val: str | None) -> None:
             if val is None:
@@ -520,7 +517,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.update_panel()
 
     def action_rename_object(self) -> None:
-        from .dialogs import PromptScreen
+        from ctui.screens.dialogs import PromptScreen
 
         s = self.s
         if not self._need_seg():
@@ -537,7 +534,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
 
     def action_clear_object(self) -> None:
-        from .dialogs import ConfirmScreen
+        from ctui.screens.dialogs import ConfirmScreen
 
         s = self.s
         if not self._need_seg() or self._busy():
@@ -596,21 +593,21 @@ class WorkspaceScreen(GuardMixin, Screen):
         bar.update(total=max(total, 1), progress=done)
 
     def action_propagate(self, direction: str) -> None:
-        from .propagation import start_propagation
+        from ctui.screens.propagation import start_propagation
 
         if not self._need_seg():
             return
         start_propagation(self, direction)
 
     def action_accept(self) -> None:
-        from .propagation import accept
+        from ctui.screens.propagation import accept
 
         if self._busy():
             return
         accept(self)
 
     def action_reject(self) -> None:
-        from .propagation import reject
+        from ctui.screens.propagation import reject
 
         reject(self)
 
@@ -623,7 +620,7 @@ class WorkspaceScreen(GuardMixin, Screen):
     def action_filters(self) -> None:
         if self._busy():
             return
-        from .pipeline_editor import PipelineEditor
+        from ctui.screens.pipeline_editor import PipelineEditor
 
         if self.s.pipeline is None:
             self.app.notify("The pipeline engine is not available in this build", severity="error")
@@ -640,22 +637,22 @@ class WorkspaceScreen(GuardMixin, Screen):
     def action_drift(self) -> None:
         if self._busy():
             return
-        from .drift_screen import DriftScreen
+        from ctui.screens.drift_screen import DriftScreen
 
         self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
 
     def action_render3d(self) -> None:
-        from .view3d import View3DScreen
+        from ctui.screens.view3d import View3DScreen
 
         self.app.push_screen(View3DScreen(self.s))
 
     def action_measure(self) -> None:
-        from .measure_screen import MeasureScreen
+        from ctui.screens.measure_screen import MeasureScreen
 
         self.app.push_screen(MeasureScreen(self.s))
 
     def action_export(self) -> None:
-        from .export import export_dialog
+        from ctui.screens.export import export_dialog
 
         export_dialog(self)
 

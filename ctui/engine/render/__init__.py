@@ -24,13 +24,13 @@ For interactive volume rendering set ``scene.options.volume_scale = 0.5`` while 
 user moves the camera and 1.0 for the still frame.
 """
 
-from .camera import CameraSetup, setup_camera
-from .context import EGL_PACKAGES, EGLUnavailable, Renderer, egl_available, get_renderer
-from .outputs import (encode_png, flythrough_cameras, flythrough_frames, flythrough_scene, save_animation,
+from ctui.engine.render.camera import CameraSetup, setup_camera
+from ctui.engine.render.context import EGL_PACKAGES, EGLUnavailable, Renderer, egl_available, get_renderer
+from ctui.engine.render.outputs import (encode_png, flythrough_cameras, flythrough_frames, flythrough_scene, save_animation,
                       save_flythrough, save_png, save_turntable, turntable_frames)
-from .scene import (ANTIALIAS, MODES, Camera, Light, Material, RenderOptions, Scene, SceneMesh, SceneVolume,
+from ctui.engine.render.scene import (ANTIALIAS, MODES, Camera, Light, Material, RenderOptions, Scene, SceneMesh, SceneVolume,
                     SlicePlane)
-from .transfer import PRESETS, preset_names
+from ctui.engine.render.transfer import PRESETS, preset_names
 
 __all__ = [
     "ANTIALIAS", "MODES", "PRESETS", "EGL_PACKAGES", "Camera", "CameraSetup", "EGLUnavailable", "Light",

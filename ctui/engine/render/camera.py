@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import Camera, Light, Scene
+from ctui.engine.render.scene import Camera, Light, Scene
 
 
 @dataclass

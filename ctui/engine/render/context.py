@@ -20,7 +20,7 @@ import time
 from concurrent.futures import Future
 from typing import Any, Callable
 
-from ..errors import CtuiError
+from ctui.engine.core.errors import CtuiError
 
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri"
 
@@ -71,7 +71,7 @@ class Renderer:
     def _loop(self) -> None:
         try:
             ctx = create_context()
-            from .gl import GLEngine
+            from ctui.engine.render.gl import GLEngine
 
             self.engine = GLEngine(ctx)
             self.info = {"renderer": ctx.info.get("GL_RENDERER", "?"), "version": ctx.info.get("GL_VERSION", "?"),

@@ -4,17 +4,16 @@
 from __future__ import annotations
 
 import math
-import time
 import weakref
 from collections import OrderedDict
 from typing import Any
 
 import numpy as np
 
-from . import shaders
-from .camera import CameraSetup, look_at, ortho, setup_camera, light_position
-from .scene import Scene, SceneMesh, SceneVolume, VOLUME_MODES
-from .transfer import resolve_preset, transfer_table
+from ctui.engine.render import shaders
+from ctui.engine.render.camera import CameraSetup, look_at, ortho, setup_camera, light_position
+from ctui.engine.render.scene import Scene, SceneMesh, SceneVolume, VOLUME_MODES
+from ctui.engine.render.transfer import resolve_preset, transfer_table
 
 BRICK = 8
 TF_SIZE = 1024
@@ -56,11 +55,11 @@ class _MeshGPU:
         self.vao_v = ctx.vertex_array(progs["surface_v"], [(self.vbo, "3f 3f", "in_pos", "in_normal")], self.ibo)
         self.vao_depth = ctx.vertex_array(progs["depth"], [(self.vbo, "3f 12x", "in_pos")], self.ibo)
         self.nbytes = inter.nbytes + f.nbytes
-        from ..meshdata import face_areas
+        from ctui.engine.core.meshdata import face_areas
 
         self.mean_area = float(face_areas(v, f).mean()) if len(f) else 0.0
         self.cull = _cull_mode(v, f)
-        from .scene import mesh_bounds
+        from ctui.engine.render.scene import mesh_bounds
 
         self.lo, self.hi = mesh_bounds(mesh)
         self.ref = weakref.ref(mesh.vertices) if isinstance(mesh.vertices, np.ndarray) else None
@@ -85,7 +84,7 @@ def _cull_mode(v: np.ndarray, f: np.ndarray) -> str | None:
         return None  # a directed edge used twice: inconsistent or non-manifold
     if not np.array_equal(fwd, np.sort(b * n + a)):
         return None  # an edge without its twin: open surface
-    from ..meshdata import signed_volume_mm3
+    from ctui.engine.core.meshdata import signed_volume_mm3
 
     vol = signed_volume_mm3(v, f)
     return "back" if vol > 0 else "front"
@@ -684,7 +683,7 @@ class GLEngine:
     def _window_norm(self, scene: Scene, g: _VolumeGPU) -> tuple[float, float]:
         win = scene.options.window or scene.volume.window
         if win is None:
-            from ..windows import auto_window
+            from ctui.engine.core.windows import auto_window
 
             win = auto_window(scene.volume.data, modality=scene.volume.modality)
         c, wd = float(win[0]), max(float(win[1]), 1e-6)

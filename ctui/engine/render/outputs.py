@@ -3,16 +3,14 @@ endoscopic fly-throughs along a path."""
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from ..atomic import atomic_write, write_bytes
-from ..errors import CtuiError
-from .scene import Camera, Scene
+from ctui.engine.core.atomic import atomic_write, write_bytes
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.render.scene import Camera, Scene
 
 
 def encode_png(image: np.ndarray, *, compression: int = 3) -> bytes:
@@ -41,7 +39,7 @@ def turntable_frames(scene: Scene, n: int, size: tuple[int, int], *, renderer=No
                      start: float | None = None, degrees: float = 360.0) -> list[np.ndarray]:
     """``n`` images with the camera's azimuth stepped by degrees/n (all frames queued at
     once on the render thread)."""
-    from .context import get_renderer
+    from ctui.engine.render.context import get_renderer
 
     n = int(n)
     if n < 1:
@@ -156,7 +154,7 @@ def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, siz
 
     ``endoscope_light``: light mostly from the camera (head light 0.8, the movable
     light dimmed to 30%, no shadows), as an endoscope's own lamp."""
-    from .context import get_renderer
+    from ctui.engine.render.context import get_renderer
 
     r = renderer or get_renderer()
     futs = []

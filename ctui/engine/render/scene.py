@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ..meshdata import Mesh
+from ctui.engine.core.meshdata import Mesh
 
 MODES = ("surface", "wire", "transparent", "mip", "minip", "dvr")
 VOLUME_MODES = ("mip", "minip", "dvr")
@@ -165,7 +165,7 @@ class RenderOptions:
 
 @dataclass
 class SceneMesh:
-    """One surface: a :class:`~ctui.engine.meshdata.Mesh` with display attributes.
+    """One surface: a :class:`~ctui.engine.core.meshdata.Mesh` with display attributes.
 
     color : RGB 0..1; None = the object colour of ``mesh.object_id`` (bone white when 0).
     The renderer caches GPU buffers per mesh array: treat vertex/face arrays as
@@ -182,7 +182,7 @@ class SceneMesh:
         if self.color is not None:
             return tuple(float(c) for c in self.color)  # type: ignore[return-value]
         if self.mesh.object_id:
-            from ..colors import object_color_float
+            from ctui.engine.core.colors import object_color_float
 
             return object_color_float(self.mesh.object_id)
         return (0.89, 0.85, 0.77)
@@ -194,7 +194,7 @@ class SceneVolume:
 
     data : ndarray (nz, ny, nx), any numeric dtype (HU for CT).
     spacing (dz, dy, dx) mm, origin (x, y, z) mm, direction 3x3 (columns = x, y, z
-    index axes), as :class:`ctui.engine.volume.Volume`. Treat ``data`` as immutable
+    index axes), as :class:`ctui.engine.core.volume.Volume`. Treat ``data`` as immutable
     (the GPU texture is cached per array).
     """
 
@@ -207,7 +207,7 @@ class SceneVolume:
 
     @classmethod
     def from_volume(cls, vol: Any) -> "SceneVolume":
-        """From a :class:`ctui.engine.volume.Volume`."""
+        """From a :class:`ctui.engine.core.volume.Volume`."""
         return cls(vol.data, tuple(vol.spacing), tuple(vol.origin), np.asarray(vol.direction, float),
                    getattr(vol, "modality", "CT") or "CT", getattr(vol, "window", None))
 
@@ -269,7 +269,7 @@ class Scene:
         return item
 
     def set_volume(self, vol: Any) -> None:
-        """Attach a :class:`ctui.engine.volume.Volume` or a :class:`SceneVolume`."""
+        """Attach a :class:`ctui.engine.core.volume.Volume` or a :class:`SceneVolume`."""
         self.volume = vol if isinstance(vol, SceneVolume) or vol is None else SceneVolume.from_volume(vol)
 
     def snapshot(self) -> "Scene":

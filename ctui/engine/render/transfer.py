@@ -48,7 +48,7 @@ def resolve_preset(name: str) -> str:
     key = str(name).lower().replace("_", "-")
     key = ALIASES.get(key, key)
     if key not in PRESETS:
-        from ..errors import CtuiError
+        from ctui.engine.core.errors import CtuiError
 
         raise CtuiError(f"unknown transfer-function preset {name!r} (choose from {', '.join(PRESETS)})")
     return key

@@ -1,0 +1,191 @@
+"""Mesh files: STL (binary or ASCII), PLY, OBJ; written atomically, read with validation.
+
+* :func:`save_mesh` picks the format from the extension. Binary STL is written here
+  with numpy (a fixed 80-byte header ``"ctui"`` padded with spaces: never patient
+  information; one structured array write, faster than per-facet writers); ASCII STL
+  is written here too. PLY (binary little-endian) and OBJ use trimesh's maintained
+  exporters. Every write goes through :func:`ctui.engine.core.atomic.atomic_write`.
+* :func:`load_mesh` reads STL (binary or ASCII), PLY and OBJ into a
+  :class:`~ctui.engine.core.meshdata.Mesh`; STL vertices are welded (identical positions
+  merged). A binary STL's triangle count is checked against the file size *before*
+  anything is allocated; every fault raises :class:`~ctui.engine.core.errors.FormatError`
+  naming the file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ctui.engine.core.atomic import atomic_write
+from ctui.engine.core.errors import FormatError
+from ctui.engine.core.meshdata import Mesh
+
+STL_HEADER = b"ctui".ljust(80, b" ")
+FORMATS = (".stl", ".ply", ".obj")
+
+_STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def _face_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, np.float64)
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    ln[ln == 0] = 1.0
+    return (n / ln).astype(np.float32)
+
+
+def _fmt(path: Path) -> str:
+    ext = path.suffix.lower()
+    if ext not in FORMATS:
+        raise FormatError(f"{path}: unknown mesh format {ext or '(no extension)'}; use .stl, .ply or .obj")
+    return ext
+
+
+def save_mesh(path: str | os.PathLike, mesh: Mesh, *, ascii: bool = False) -> Path:
+    """Write ``mesh`` (mm) to ``path`` (.stl, .ply, .obj), atomically.
+
+    ``ascii`` selects ASCII STL/PLY (binary by default; OBJ is always text).
+    Returns the path.
+    """
+    p = Path(path)
+    ext = _fmt(p)
+    v = np.asarray(mesh.vertices, np.float32)
+    f = np.asarray(mesh.faces, np.int64)
+    if ext == ".stl":
+        fn = _face_normals(v, f) if len(f) else np.zeros((0, 3), np.float32)
+        if ascii:
+            with atomic_write(p, "w") as fh:
+                fh.write("solid ctui\n")
+                tri = v[f]
+                lines = []
+                for n, t in zip(fn, tri):
+                    lines.append(
+                        f"facet normal {n[0]:e} {n[1]:e} {n[2]:e}\n outer loop\n"
+                        f"  vertex {t[0, 0]:e} {t[0, 1]:e} {t[0, 2]:e}\n"
+                        f"  vertex {t[1, 0]:e} {t[1, 1]:e} {t[1, 2]:e}\n"
+                        f"  vertex {t[2, 0]:e} {t[2, 1]:e} {t[2, 2]:e}\n endloop\nendfacet\n")
+                    if len(lines) >= 4096:
+                        fh.write("".join(lines))
+                        lines = []
+                fh.write("".join(lines))
+                fh.write("endsolid ctui\n")
+        else:
+            rec = np.zeros(len(f), _STL_DTYPE)
+            rec["normal"] = fn
+            rec["v"] = v[f]
+            with atomic_write(p, "wb") as fh:
+                fh.write(STL_HEADER)
+                fh.write(np.uint32(len(f)).tobytes())
+                fh.write(rec.tobytes())
+        return p
+    import trimesh
+
+    tm = trimesh.Trimesh(vertices=v, faces=f, process=False, validate=False)
+    if mesh.normals is not None and len(mesh.normals) == len(v):
+        tm.vertex_normals = np.asarray(mesh.normals, np.float64)
+    if ext == ".ply":
+        data = trimesh.exchange.ply.export_ply(tm, encoding="ascii" if ascii else "binary",
+                                               include_attributes=False)
+        with atomic_write(p, "wb") as fh:
+            fh.write(data)
+    else:
+        text = trimesh.exchange.obj.export_obj(tm, include_normals=mesh.normals is not None, include_color=False,
+                                               include_texture=False, header="ctui")
+        with atomic_write(p, "w") as fh:
+            fh.write(text)
+    return p
+
+
+def _weld_triangles(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    flat = tri.reshape(-1, 3)
+    uniq, inv = np.unique(flat, axis=0, return_inverse=True)
+    return uniq.astype(np.float32), inv.reshape(-1, 3).astype(np.int32)
+
+
+def _load_stl(p: Path) -> Mesh:
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(84)
+    if size < 84:
+        if head.lstrip().lower().startswith(b"solid"):
+            return _load_stl_ascii(p)
+        raise FormatError(f"{p}: not an STL file (only {size} bytes; a binary STL needs at least 84)")
+    count = int(np.frombuffer(head[80:84], "<u4")[0])
+    expected = 84 + 50 * count
+    if size != expected:
+        if head.lstrip().lower().startswith(b"solid"):
+            return _load_stl_ascii(p)
+        if size < expected:
+            raise FormatError(f"{p}: truncated binary STL: header says {count} triangles ({expected} bytes) "
+                              f"but the file has {size} bytes")
+        raise FormatError(f"{p}: binary STL size mismatch: header says {count} triangles ({expected} bytes) "
+                          f"but the file has {size} bytes")
+    rec = np.fromfile(p, dtype=_STL_DTYPE, count=count, offset=84)
+    tri = rec["v"].astype(np.float32)
+    if not np.isfinite(tri).all():
+        raise FormatError(f"{p}: STL has non-finite vertex coordinates")
+    v, f = _weld_triangles(tri)
+    return Mesh(vertices=v, faces=f, meta={"source": p.name, "format": "stl"})
+
+
+def _load_stl_ascii(p: Path) -> Mesh:
+    try:
+        text = p.read_text(encoding="ascii", errors="strict")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise FormatError(f"{p}: not a valid ASCII STL ({exc})") from exc
+    vals = []
+    for ln, line in enumerate(text.splitlines(), 1):
+        s = line.split()
+        if s and s[0].lower() == "vertex":
+            if len(s) != 4:
+                raise FormatError(f"{p}: ASCII STL line {ln}: a vertex needs 3 coordinates")
+            try:
+                vals.append((float(s[1]), float(s[2]), float(s[3])))
+            except ValueError as exc:
+                raise FormatError(f"{p}: ASCII STL line {ln}: bad number") from exc
+    if len(vals) == 0 or len(vals) % 3:
+        raise FormatError(f"{p}: ASCII STL has {len(vals)} vertices (not a positive multiple of 3)")
+    tri = np.asarray(vals, np.float32).reshape(-1, 3, 3)
+    if not np.isfinite(tri).all():  # "nan", "inf", 1e999 (found by FMT's tests/test_fuzz_mesh.py)
+        raise FormatError(f"{p}: ASCII STL has non-finite vertex coordinates")
+    v, f = _weld_triangles(tri)
+    return Mesh(vertices=v, faces=f, meta={"source": p.name, "format": "stl-ascii"})
+
+
+def load_mesh(path: str | os.PathLike) -> Mesh:
+    """Read an STL, PLY or OBJ file into a Mesh (vertices float32 mm, faces int32).
+
+    Raises FormatError (one line naming the file and the fault) on a missing,
+    truncated or inconsistent file.
+    """
+    p = Path(path)
+    ext = _fmt(p)
+    if not p.is_file():
+        raise FormatError(f"{p}: no such file")
+    if ext == ".stl":
+        return _load_stl(p)
+    import trimesh
+
+    try:
+        tm = trimesh.load(str(p), file_type=ext[1:], process=False, force="mesh")
+    except Exception as exc:  # trimesh raises many types on bad files
+        raise FormatError(f"{p}: cannot read {ext[1:].upper()} ({type(exc).__name__}: {exc})") from exc
+    v = np.asarray(getattr(tm, "vertices", np.zeros((0, 3))), np.float32)
+    f = np.asarray(getattr(tm, "faces", np.zeros((0, 3))), np.int64)
+    if len(f) == 0:
+        raise FormatError(f"{p}: no triangles found")
+    if f.min() < 0 or f.max() >= len(v):
+        raise FormatError(f"{p}: face indices out of range (0..{len(v) - 1})")
+    if not np.isfinite(v).all():
+        raise FormatError(f"{p}: non-finite vertex coordinates")
+    normals = None
+    try:
+        vn = tm._cache.get("vertex_normals") if hasattr(tm, "_cache") else None
+        if vn is not None and len(vn) == len(v):
+            normals = np.asarray(vn, np.float32)
+    except Exception:
+        normals = None
+    return Mesh(vertices=v, faces=f.astype(np.int32), normals=normals, meta={"source": p.name, "format": ext[1:]})

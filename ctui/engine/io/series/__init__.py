@@ -1,0 +1,390 @@
+"""Load CT/MR series and image stacks into :class:`~ctui.engine.core.volume.Volume`.
+
+``load(path, **options)`` recognises what it is given:
+
+* **DICOM**: a folder (searched recursively), one file, or a list of files; with or
+  without the preamble / file meta; single- and multi-frame; grouped by
+  SeriesInstanceUID (largest series unless ``series=``), sorted along the slice
+  normal, rescaled to HU for CT; tilt and uneven spacing corrected onto a regular
+  grid (see :mod:`ctui.engine.io.series.dicom`);
+* **image stacks**: a folder of PNG/BMP/TIFF/JPEG slices (natural order: 2 before 10)
+  or a multi-page TIFF; colour becomes grey; ``spacing`` default 1 mm (a warning);
+* **raw**: one headerless file with ``shape=(z, y, x)`` (or ``(y, x)``: z from the
+  size) and ``dtype`` (``'>u2'`` = big-endian uint16), or a folder / glob / list of
+  headerless per-slice files with ``shape=(y, x)`` in numeric name order
+  (CThead.1 .. CThead.113);
+* **MetaImage** ``.mhd`` (+ ``.raw``) and ``.mha``.
+
+Files that are not images, are broken, or whose slice size differs are skipped with a
+reason each (``Volume.skipped``); when nothing loads a :class:`LoadError` names the
+path. Before allocating, the memory needed is compared with the available memory; a
+:class:`CtuiError` offers ``crop=`` / ``downsample=`` when it would not fit. Those two
+options are applied while decoding, so the full array is never allocated.
+
+Pixels are decoded by a thread pool into one preallocated array (peak memory: the
+final array plus one slice buffer per thread).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import stat
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.core.volume import Volume
+from ctui.engine.io.series._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_key
+
+__all__ = ["load", "scan", "estimate", "LoadError"]
+
+_MHD = {".mhd", ".mha"}
+_RESEARCH = (".nii", ".nii.gz", ".nrrd", ".nhdr")
+
+
+def _is_volume_file(p: Path) -> bool:
+    """A single-file volume format with its own geometry (MetaImage, NIfTI, NRRD)."""
+    name = p.name.lower()
+    return p.suffix.lower() in _MHD or name.endswith(_RESEARCH)
+
+
+def _load_volume_file(p: Path, **kw: Any) -> Volume:
+    name = p.name.lower()
+    if name.endswith((".nii", ".nii.gz")):
+        from ctui.engine.io.series.research import load_nifti
+
+        return load_nifti(p, **kw)
+    if name.endswith((".nrrd", ".nhdr")):
+        from ctui.engine.io.series.research import load_nrrd
+
+        return load_nrrd(p, **kw)
+    from ctui.engine.io.series.stacks import load_mhd
+
+    return load_mhd(p, **kw)
+
+
+def _as_paths(path: Any) -> tuple[Path | None, list[Path] | None]:
+    """(single path, None) or (common base, list of files)."""
+    if isinstance(path, (list, tuple)):
+        files = [Path(p) for p in path]
+        if not files:
+            raise LoadError("no files given", path="(empty list)")
+        if len(files) == 1:
+            return files[0], None
+        try:
+            base = Path(os.path.commonpath([str(p.parent) for p in files]))
+        except ValueError:
+            base = None
+        return base, files
+    s = str(path)
+    if any(ch in s for ch in "*?[") and not Path(s).exists():
+        files = sorted((Path(p) for p in glob.glob(s)), key=lambda p: natural_key(str(p)))
+        files = [p for p in files if p.is_file()]
+        if not files:
+            raise LoadError("no file matches the pattern", path=s)
+        return Path(os.path.commonpath([str(p.parent) for p in files])), files
+    return Path(s), None
+
+
+def _is_dicom_candidate(p: Path) -> bool:
+    return p.suffix.lower() not in IMAGE_SUFFIXES | _MHD | {".raw", ".txt", ".md", ".json", ".nii", ".gz", ".nrrd", ".orig"}
+
+
+def _looks_dicom(p: Path) -> bool:
+    """Cheap sniff: 'DICM' at 128, or a plausible first group-0008/0002 tag."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(132)
+    except OSError:
+        return False
+    if len(head) >= 132 and head[128:132] == b"DICM":
+        return True
+    if len(head) >= 8:
+        group = int.from_bytes(head[0:2], "little")
+        return group in (0x0002, 0x0008) or int.from_bytes(head[0:2], "big") in (0x0002, 0x0008)
+    return False
+
+
+def _classify(files: Sequence[Path], *, shape: Any) -> str:
+    """'dicom', 'images', 'raw' or 'mhd' for a set of files."""
+    if shape is not None:
+        return "raw"
+    if any(_looks_dicom(p) for p in files[:: max(1, len(files) // 64)][:64]) or any(
+        _looks_dicom(p) for p in files if _is_dicom_candidate(p)
+    ):
+        return "dicom"
+    if any(p.suffix.lower() in IMAGE_SUFFIXES for p in files):
+        return "images"
+    vols = [p for p in files if _is_volume_file(p)]
+    if len(vols) == 1:
+        return "mhd"
+    return "dicom"  # last resort: try every file as DICOM (force=True), skipping with reasons
+
+
+def load(
+    path: str | os.PathLike | Sequence[str | os.PathLike],
+    *,
+    series: int | str | None = None,
+    spacing: Any = None,
+    shape: Any = None,
+    dtype: Any = None,
+    progress: Callable[[int, int], Any] | None = None,
+    crop: Sequence[int | None] | None = None,
+    downsample: int | Sequence[int] | None = None,
+    offset: int | None = None,
+    resample: bool = True,
+    memory_limit: int | None = None,
+    **options: Any,
+) -> Volume:
+    """Load a series, image stack or raw volume.
+
+    Parameters
+    ----------
+    path : folder, file, glob pattern or list of files.
+    series : int or str, optional
+        DICOM series to load: index into :func:`scan`'s list (0-based) or a
+        SeriesInstanceUID (or unique prefix). Default: the series with most slices.
+    spacing : float or (dz, dy, dx) mm, optional
+        For image stacks and raw data (default 1 mm with a warning); overrides a
+        MetaImage header's spacing.
+    shape : (z, y, x) or (y, x), optional
+        Raw data: the volume (one file) or slice (one file per slice) shape. Giving a
+        shape makes ``path`` be read as raw.
+    dtype : numpy dtype or str, optional
+        Raw data: e.g. ``uint8``, ``int16``, ``'>u2'`` (big-endian uint16), ``float32``.
+    progress : callable(done, total), optional
+        Called as slices are decoded.
+    crop : (z0, z1, y0, y1, x0, x1), optional
+        Voxel index ranges of the full volume to load (end exclusive; None = edge).
+    downsample : int or (sz, sy, sx), optional
+        Integer strides: an int strides y and x (all slices kept); three ints stride
+        z, y and x. Spacing grows accordingly.
+    offset : int, optional
+        Raw data: header bytes to skip.
+    resample : bool
+        DICOM: resample unevenly spaced slices onto a regular grid (default True).
+    memory_limit : int, optional
+        Bytes the volume may use (default: 90% of available memory).
+
+    Returns
+    -------
+    Volume
+        data (z, y, x) (int16 HU for CT when the values fit, else float32 or the stored
+        integer type), spacing (dz, dy, dx) mm, origin/direction in LPS mm.
+
+    Raises
+    ------
+    LoadError
+        Nothing loadable at ``path`` (the message names it and why).
+    CtuiError
+        Bad options, or the volume would not fit in memory.
+    """
+    if options:
+        raise CtuiError(f"unknown load option(s): {', '.join(sorted(options))}", path=path)
+    single, files = _as_paths(path)
+    common = dict(crop=crop, downsample=downsample, progress=progress, memory_limit=memory_limit)
+    skipped: list[dict[str, str]] = []
+    if files is None:
+        p = single
+        assert p is not None
+        if not p.exists():
+            if p.is_symlink():
+                raise LoadError("broken or looping symbolic link", path=p)
+            raise LoadError("no such file or folder", path=p)
+        if p.is_dir():
+            base = p
+            files = list_files(p, skipped=skipped)
+            if not files:
+                raise LoadError("empty folder: no files to load" if not skipped else
+                                f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
+        else:
+            base = p.parent
+            if not stat.S_ISREG(p.stat().st_mode):
+                raise LoadError("not a regular file (FIFO, device or socket)", path=p)
+            if not os.access(p, os.R_OK):
+                raise LoadError("cannot read (permission denied)", path=p)
+            if p.stat().st_size == 0:
+                raise LoadError("empty file", path=p)
+            suf = p.suffix.lower()
+            if _is_volume_file(p) and shape is None:
+                return _with_series(_load_volume_file(p, skipped=skipped, spacing=spacing, **common))
+            if shape is not None:
+                from ctui.engine.io.series.stacks import load_raw
+
+                return _with_series(load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset,
+                                         base=base, skipped=skipped, **common))
+            if suf in IMAGE_SUFFIXES:
+                from ctui.engine.io.series.stacks import load_images
+
+                return _with_series(load_images([p], path=p, base=base, skipped=skipped, spacing=spacing, **common))
+            files = [p]
+        path_label = p
+    else:
+        base = single
+        path_label = f"{base}/ ({len(files)} files)" if base else f"{len(files)} files"
+    kind = _classify(files, shape=shape)
+    if kind == "raw":
+        from ctui.engine.io.series.stacks import load_raw
+
+        one = len(files) == 1 and not (single and single.is_dir())
+        return _with_series(load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape,
+                                 dtype=dtype, spacing=spacing, offset=offset, base=base, skipped=skipped, **common))
+    if kind == "images":
+        from ctui.engine.io.series.stacks import load_images
+
+        imgs = [f for f in files if f.suffix.lower() in IMAGE_SUFFIXES]
+        for f in files:
+            if f.suffix.lower() not in IMAGE_SUFFIXES:
+                skipped.append({"file": _rel(f, base), "reason": "not an image file (by extension)"})
+        return _with_series(load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common))
+    if kind == "mhd":
+        vf = next(f for f in files if _is_volume_file(f))
+        return _with_series(_load_volume_file(vf, skipped=skipped, spacing=spacing, **common))
+    from ctui.engine.io.series import dicom
+
+    n_files = len(files)
+    # progress: headers count as the first half of the work, decoding as the second
+    head_progress = (lambda done, total: progress(done, 2 * total)) if progress else None
+    found, skip2, ids = dicom.read_headers(files, base=base, progress=head_progress)
+    skipped.extend(skip2)
+    if progress:
+        common["progress"] = lambda done, total: progress(n_files + done, n_files + total)
+    if not found:
+        reasons = {d["reason"] for d in skipped}
+        why = next(iter(reasons)) if len(reasons) == 1 else "no DICOM image, image stack or MetaImage found"
+        hint = ("; for headerless raw data give shape and dtype (--shape, --dtype)"
+                if any("not a DICOM" in r for r in reasons) else "")
+        raise LoadError(f"nothing loadable: {why}{hint}", path=path_label)
+    ordered = dicom._ordered_series(found)
+    summaries = [dicom.series_summary(s) for s in ordered]
+    chosen = dicom.pick_series(ordered, series, path_label)
+    vol = dicom.load_series(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
+                            all_series=summaries, **common)
+    if len(ordered) > 1:
+        idx = ordered.index(chosen)
+        vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "
+                            f"({len(chosen.frames)} images); choose another with series=N (--series N)")
+    vol.meta["series_index"] = ordered.index(chosen)
+    return vol
+
+
+def _rel(p: Path, base: Path | None) -> str:
+    from ctui.engine.io.series._common import rel
+
+    return rel(p, base)
+
+
+def _with_series(vol: Volume) -> Volume:
+    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it)."""
+    if not vol.series:
+        vol.series = [{"uid": "", "description": vol.meta.get("format", ""), "modality": vol.modality,
+                       "files": int(vol.meta.get("files", 1)), "shape_zyx": list(vol.shape),
+                       "spacing_zyx_mm": [round(s, 6) for s in vol.spacing], "kind": vol.meta.get("format", "")}]
+    return vol
+
+
+def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = None, dtype: Any = None,
+         spacing: Any = None) -> list[dict[str, Any]]:
+    """Series found at ``path``, from headers only (no pixel decoding).
+
+    Returns a list of dicts ``{"uid", "description", "modality", "files",
+    "shape_zyx", "spacing_zyx_mm", "kind"}`` (DICOM: one per SeriesInstanceUID, in the
+    order ``series=`` indexes; other inputs: one entry, uid ""). Empty when nothing
+    loadable is found.
+    """
+    single, files = _as_paths(path)
+    if files is None:
+        p = single
+        assert p is not None
+        if not p.exists():
+            raise LoadError("no such file or folder", path=p)
+        files = list_files(p) if p.is_dir() else [p]
+        base = p if p.is_dir() else p.parent
+    else:
+        base = single
+    if not files:
+        return []
+    kind = _classify(files, shape=shape)
+    if len(files) == 1 and _is_volume_file(files[0]) and shape is None:
+        kind = "mhd"
+    if len(files) == 1 and files[0].suffix.lower() in IMAGE_SUFFIXES:
+        kind = "images"
+    if kind == "dicom":
+        from ctui.engine.io.series import dicom
+
+        found, _, _ = dicom.read_headers(files, base=base)
+        return [dicom.series_summary(s) for s in dicom._ordered_series(found)]
+    if kind == "images":
+        from ctui.engine.io.series.stacks import image_entries, parse_spacing
+
+        entries, _ = image_entries([f for f in files if f.suffix.lower() in IMAGE_SUFFIXES], base)
+        if not entries:
+            return []
+        from collections import Counter
+
+        (h, w), n = Counter((e[2], e[3]) for e in entries).most_common(1)[0]
+        sp = parse_spacing(spacing, path) or (1.0, 1.0, 1.0)
+        multipage = len({e[0] for e in entries}) == 1 and len(entries) > 1
+        return [{"uid": "", "description": "multi-page TIFF" if multipage else "image stack", "modality": "OT",
+                 "files": len({e[0] for e in entries}), "shape_zyx": [n, h, w], "spacing_zyx_mm": list(sp),
+                 "kind": "tiff" if multipage else "image-stack"}]
+    if kind == "mhd":
+        vf = next(f for f in files if _is_volume_file(f))
+        if vf.suffix.lower() in _MHD:
+            from ctui.engine.io.series.stacks import read_mhd_header
+
+            hdr, _ = read_mhd_header(vf)
+            dims = [int(v) for v in hdr.get("DimSize", "0 0 0").split()] + [1]
+            sp = [float(v) for v in (hdr.get("ElementSpacing") or "1 1 1").split()] + [1.0]
+            return [{"uid": "", "description": "MetaImage",
+                     "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
+                     "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],
+                     "kind": "mhd"}]
+        from ctui.engine.io.series.research import header_info
+
+        return [header_info(vf)]
+    # raw: geometry from the options
+    from ctui.engine.io.series.stacks import parse_dtype, parse_shape, parse_spacing
+
+    shp = parse_shape(shape, path)
+    dt = parse_dtype(dtype, path)
+    sp = parse_spacing(spacing, path) or (1.0, 1.0, 1.0)
+    if len(shp) == 2:
+        nbytes = shp[0] * shp[1] * dt.itemsize
+        n = sum(1 for f in files if f.stat().st_size == nbytes) if len(files) > 1 else files[0].stat().st_size // nbytes
+        shp = (n, *shp)
+    return [{"uid": "", "description": f"raw {dt.str}", "modality": "OT", "files": len(files),
+             "shape_zyx": list(shp), "spacing_zyx_mm": list(sp), "kind": "raw"}]
+
+
+def estimate(path: Any, **opts: Any) -> dict[str, Any]:
+    """Memory a load would need (from headers): ``{"shape_zyx", "bytes", "available", "fits"}``.
+
+    Options as :func:`load` (series, shape, dtype, crop, downsample); the dtype assumed
+    for DICOM is 2 bytes per voxel (int16 HU), 4 for float data.
+    """
+    from ctui.engine.io.series._common import available_memory
+
+    info = scan(path, shape=opts.get("shape"), dtype=opts.get("dtype"), spacing=opts.get("spacing"))
+    if not info:
+        raise LoadError("nothing loadable found", path=path)
+    s = opts.get("series")
+    if s is None:
+        entry = max(info, key=lambda d: d["shape_zyx"][0])
+    elif isinstance(s, int):
+        entry = info[s]
+    else:
+        entry = next((d for d in info if d["uid"].startswith(str(s))), info[0])
+    shp = entry["shape_zyx"]
+    plan = make_plan(shp, crop=opts.get("crop"), downsample=opts.get("downsample"), path=path)
+    out = plan.out_shape(shp)
+    item = 2
+    if opts.get("dtype") is not None:
+        item = np.dtype(opts["dtype"]).itemsize
+    nbytes = int(np.prod(out)) * item
+    avail = available_memory()
+    return {"shape_zyx": list(out), "bytes": nbytes, "human": fmt_bytes(nbytes), "available": avail,
+            "fits": nbytes <= 0.9 * avail}

@@ -1,0 +1,297 @@
+"""Research volume formats: NIfTI (.nii, .nii.gz) and NRRD (.nrrd, .nhdr).
+
+Geometry is converted to ctui's convention: data (z, y, x), LPS patient mm (NIfTI's
+RAS affine and NRRD's RAS spaces are flipped in x and y).
+
+Memory: uncompressed data (NIfTI .nii, NRRD raw encoding, including detached per-slice
+data files such as ``data file: quarter.%d 1 93 1``) is read slice by slice into the
+preallocated array through :func:`~ctui.engine.io.series.stacks.load_raw` (crop and
+downsample applied while reading). Compressed files are decompressed whole first by
+nibabel / pynrrd (peak: the array plus the compressed stream; crop and downsample
+apply after).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.core.volume import Volume
+from ctui.engine.io.series._common import check_memory, make_plan
+
+_LPS_FROM_RAS = np.diag([-1.0, -1.0, 1.0])
+
+
+def _geometry_from_matrix(m: np.ndarray) -> tuple[tuple[float, float, float], np.ndarray]:
+    """3x3 matrix with columns = (x, y, z) index axis steps in mm -> (spacing zyx, direction)."""
+    sp = np.linalg.norm(m, axis=0)
+    sp[sp == 0] = 1.0
+    return (float(sp[2]), float(sp[1]), float(sp[0])), m / sp[None, :]
+
+
+def _finish(data: np.ndarray, spacing, direction, origin, *, path, fmt, skipped, warnings, plan=None, full=None) -> Volume:
+    if plan is not None and full is not None:
+        z0, y0, x0 = plan.starts(full)
+        zs, ys, xs = plan.steps()
+        origin = np.asarray(origin, float) + direction @ (np.array([x0 * spacing[2], y0 * spacing[1], z0 * spacing[0]]))
+        spacing = (spacing[0] * zs, spacing[1] * ys, spacing[2] * xs)
+    nz, ny, nx = data.shape
+    return Volume(
+        data=data,
+        spacing=spacing,
+        origin=tuple(float(v) for v in origin),
+        direction=direction,
+        modality="OT",
+        window=None,
+        source=f"{fmt}, {nz}x{ny}x{nx}, from {path}",
+        series=[],
+        skipped=skipped,
+        warnings=warnings,
+        meta={"format": fmt.lower().split()[0], "files": 1},
+    )
+
+
+# --------------------------------------------------------------------- NIfTI
+def _nib():
+    import logging
+
+    import nibabel as nib
+
+    # nibabel logs header repairs to stderr; ctui reports problems itself
+    logging.getLogger("nibabel").setLevel(logging.ERROR)
+    return nib
+
+
+def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
+               spacing=None) -> Volume:
+    nib = _nib()
+
+    try:
+        img = nib.load(str(path))
+    except Exception as exc:
+        raise LoadError(f"not a readable NIfTI file ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
+    hdr = img.header
+    shape = tuple(int(s) for s in img.shape)
+    warnings: list[str] = []
+    if len(shape) < 2 or len(shape) > 5 or min(shape) < 1:
+        raise LoadError(f"NIfTI image of shape {shape} is not a 2D/3D volume", path=path)
+    if len(shape) > 3 and int(np.prod(shape[3:])) > 1:
+        warnings.append(f"NIfTI has {int(np.prod(shape[3:]))} volumes (shape {shape}): loaded the first")
+    nx, ny = shape[0], shape[1]
+    nz = shape[2] if len(shape) > 2 else 1
+    affine = img.affine
+    m = _LPS_FROM_RAS @ affine[:3, :3]
+    sp, direction = _geometry_from_matrix(m)
+    origin = _LPS_FROM_RAS @ affine[:3, 3]
+    if spacing is not None:
+        from ctui.engine.io.series.stacks import parse_spacing
+
+        sp = parse_spacing(spacing, path)
+    full = (nz, ny, nx)
+    plan = make_plan(full, crop=crop, downsample=downsample, path=path)
+    proxy = img.dataobj
+    dt = np.dtype(getattr(proxy, "dtype", hdr.get_data_dtype()))
+    slope, inter = getattr(proxy, "slope", 1.0), getattr(proxy, "inter", 0.0)
+    scaled = not (slope is None or slope == 1.0 or not np.isfinite(slope)) or not (
+        inter is None or inter == 0.0 or not np.isfinite(inter))
+    compressed = str(path).lower().endswith(".gz")
+    if not compressed and not scaled and dt.kind in "uif" and len(shape) <= 4 and hasattr(proxy, "offset"):
+        from ctui.engine.io.series.stacks import load_raw
+
+        off = int(getattr(proxy, "offset", hdr.get_data_offset()))
+        if getattr(proxy, "order", "F") != "F":
+            raise LoadError("NIfTI data not in Fortran order", path=path)
+        vol = load_raw(path, None, shape=full, dtype=dt, spacing=sp, offset=off, skipped=skipped, crop=crop,
+                       downsample=downsample, progress=progress, memory_limit=memory_limit, origin=origin,
+                       direction=direction, source_kind="NIfTI", warnings=warnings)
+        vol.meta["format"] = "nifti"
+        return vol
+    out_dt = np.dtype(np.float32) if scaled or dt.kind == "f" else dt.newbyteorder("=")
+    oshape = plan.out_shape(full)
+    check_memory(int(np.prod(full)) * max(dt.itemsize, out_dt.itemsize) + int(np.prod(oshape)) * out_dt.itemsize,
+                 shape=oshape, path=path, limit=memory_limit)
+    try:
+        arr = np.asanyarray(img.dataobj)
+    except Exception as exc:
+        raise LoadError(f"cannot read the NIfTI data ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    while arr.ndim > 3:
+        arr = arr[..., 0]
+    data = arr.T[plan.z, plan.y, plan.x]  # (i, j, k) Fortran -> (k, j, i) C-contiguous view
+    data = np.ascontiguousarray(data, dtype=out_dt)
+    return _finish(data, sp, direction, origin, path=path, fmt="NIfTI", skipped=skipped, warnings=warnings, plan=plan, full=full)
+
+
+# --------------------------------------------------------------------- NRRD
+_NRRD_TYPES = {
+    "i1": ("signed char", "int8", "int8_t"),
+    "u1": ("uchar", "unsigned char", "uint8", "uint8_t"),
+    "i2": ("short", "short int", "signed short", "signed short int", "int16", "int16_t"),
+    "u2": ("ushort", "unsigned short", "unsigned short int", "uint16", "uint16_t"),
+    "i4": ("int", "signed int", "int32", "int32_t"),
+    "u4": ("uint", "unsigned int", "uint32", "uint32_t"),
+    "i8": ("longlong", "long long", "long long int", "signed long long", "signed long long int", "int64", "int64_t"),
+    "u8": ("ulonglong", "unsigned long long", "unsigned long long int", "uint64", "uint64_t"),
+    "f4": ("float",),
+    "f8": ("double",),
+}
+_TYPE = {name: code for code, names in _NRRD_TYPES.items() for name in names}
+
+
+def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
+              spacing=None) -> Volume:
+    import nrrd
+
+    try:
+        hdr = nrrd.read_header(str(path))
+    except Exception as exc:
+        raise LoadError(f"not a readable NRRD header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
+    dim = int(hdr.get("dimension", 0))
+    sizes = [int(s) for s in np.atleast_1d(hdr.get("sizes", []))]
+    if dim not in (2, 3) or len(sizes) != dim or min(sizes) < 1:
+        raise LoadError(f"NRRD of dimension {dim} sizes {sizes} is not a 2D/3D scalar volume", path=path)
+    code = _TYPE.get(str(hdr.get("type", "")).strip().lower())
+    if code is None:
+        raise LoadError(f"unsupported NRRD type {hdr.get('type')!r}", path=path)
+    dt = np.dtype(code)
+    if dt.itemsize > 1:
+        dt = dt.newbyteorder(">" if str(hdr.get("endian", "little")).lower() == "big" else "<")
+    nx, ny = sizes[0], sizes[1]
+    nz = sizes[2] if dim == 3 else 1
+    # geometry
+    space = str(hdr.get("space", "")).lower()
+    ras = space in ("right-anterior-superior", "ras", "3d-right-handed")
+    m = np.eye(3)
+    if "space directions" in hdr and hdr["space directions"] is not None:
+        sd = np.asarray(hdr["space directions"], dtype=float)
+        if sd.shape[0] == dim and not np.isnan(sd).any():
+            for a in range(dim):
+                m[:, a] = sd[a][:3] if sd.shape[1] >= 3 else np.r_[sd[a], 0][:3]
+    elif "spacings" in hdr:
+        spc = [float(s) if np.isfinite(s) else 1.0 for s in np.atleast_1d(hdr["spacings"])]
+        for a in range(dim):
+            m[a, a] = spc[a]
+    origin = np.zeros(3)
+    if hdr.get("space origin") is not None:
+        o = np.asarray(hdr["space origin"], float)
+        origin[: len(o)] = o[:3]
+    if ras and space != "3d-right-handed":
+        m = _LPS_FROM_RAS @ m
+        origin = _LPS_FROM_RAS @ origin
+    sp, direction = _geometry_from_matrix(m)
+    warnings: list[str] = []
+    if "space directions" not in hdr and "spacings" not in hdr:
+        warnings.append("default spacing 1 mm: the NRRD header gives no spacing")
+    if spacing is not None:
+        from ctui.engine.io.series.stacks import parse_spacing
+
+        sp = parse_spacing(spacing, path)
+    encoding = str(hdr.get("encoding", "raw")).lower()
+    datafile = hdr.get("data file") or hdr.get("datafile")
+    full = (nz, ny, nx)
+    if encoding == "raw" and int(hdr.get("line skip", 0) or 0) == 0:
+        from ctui.engine.io.series.stacks import load_raw
+
+        skip = int(hdr.get("byte skip", 0) or 0)
+        if datafile is None:
+            # attached: data right after the header's blank line
+            raw = path.read_bytes()[: 1 << 16]
+            end = raw.find(b"\n\n")
+            if end < 0:
+                raise LoadError("NRRD header without the blank line that ends it", path=path)
+            files, target, off = None, path, end + 2 + max(skip, 0)
+        else:
+            files, target, off = _nrrd_data_files(path, str(datafile), nz), None, max(skip, 0)
+            if files is None:
+                try:
+                    target = (path.parent / str(datafile)).resolve()
+                    ok = target.is_file()
+                except (OSError, ValueError):  # embedded NUL, name too long, link loop
+                    ok = False
+                if not ok:
+                    raise LoadError(f"data file {datafile!r} named by the NRRD header is missing", path=path)
+            if skip == -1:
+                off = None
+        if files is not None:
+            vol = load_raw(path.parent, files, shape=(ny, nx), dtype=dt, spacing=sp, offset=off or 0,
+                           base=path.parent, skipped=skipped, crop=crop, downsample=downsample, progress=progress,
+                           memory_limit=memory_limit, origin=origin, direction=direction, warnings=warnings)
+        else:
+            vol = load_raw(target, None, shape=full, dtype=dt, spacing=sp, offset=off, skipped=skipped, crop=crop,
+                           downsample=downsample, progress=progress, memory_limit=memory_limit, origin=origin,
+                           direction=direction, source_kind="NRRD", warnings=warnings)
+        vol.meta["format"] = "nrrd"
+        vol.source = f"NRRD ({encoding}), {vol.shape[0]}x{ny}x{nx}, from {path}"
+        return vol
+    plan = make_plan(full, crop=crop, downsample=downsample, path=path)
+    check_memory(2 * int(np.prod(full)) * dt.itemsize, shape=full, path=path, limit=memory_limit)
+    try:
+        data, _ = nrrd.read(str(path), index_order="C")
+    except Exception as exc:
+        raise LoadError(f"cannot read the NRRD data ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
+    data = data.reshape(full)[plan.z, plan.y, plan.x]
+    data = np.ascontiguousarray(data, dtype=dt.newbyteorder("="))
+    return _finish(data, sp, direction, origin, path=path, fmt=f"NRRD ({encoding})", skipped=skipped, warnings=warnings,
+                   plan=plan, full=full)
+
+
+def _nrrd_data_files(path: Path, spec: str, nz: int) -> list[Path] | None:
+    """Files of a 'data file: <format> <min> <max> <step> [<subdim>]' or 'LIST' spec, else None."""
+    parts = spec.split()
+    if parts and parts[0].upper() == "LIST":
+        lines = path.read_text(errors="replace").split("\n")
+        idx = next((i for i, ln in enumerate(lines) if re.match(r"\s*data ?file\s*:", ln, re.I)), None)
+        if idx is None:
+            return None
+        return [path.parent / ln.strip() for ln in lines[idx + 1 :] if ln.strip()]
+    if len(parts) >= 4 and "%" in parts[0]:
+        try:
+            lo, hi, step = int(parts[1]), int(parts[2]), int(parts[3])
+        except ValueError:
+            raise CtuiError(f"bad NRRD data file list {spec!r}", path=path) from None
+        if step == 0 or abs(hi - lo) // abs(step) + 1 > 100_000:
+            raise CtuiError(f"bad NRRD data file list {spec!r}", path=path)
+        return [path.parent / (parts[0] % i) for i in range(lo, hi + (1 if step > 0 else -1), step)]
+    return None
+
+
+def header_info(path: Path) -> dict[str, Any]:
+    """scan() entry of a NIfTI or NRRD file, from its header only."""
+    name = path.name.lower()
+    if name.endswith((".nii", ".nii.gz")):
+        nib = _nib()
+
+        try:
+            img = nib.load(str(path))
+        except Exception as exc:
+            raise LoadError(f"not a readable NIfTI file ({type(exc).__name__})", path=path) from None
+        shp = (list(img.shape) + [1, 1])[:3]
+        m = _LPS_FROM_RAS @ img.affine[:3, :3]
+        sp, _ = _geometry_from_matrix(m)
+        kind = "nifti"
+    else:
+        import nrrd
+
+        try:
+            hdr = nrrd.read_header(str(path))
+        except Exception as exc:
+            raise LoadError(f"not a readable NRRD header ({type(exc).__name__})", path=path) from None
+        shp = ([int(s) for s in np.atleast_1d(hdr.get("sizes", []))] + [1, 1])[:3]
+        m = np.eye(3)
+        if hdr.get("space directions") is not None:
+            sd = np.asarray(hdr["space directions"], dtype=float)
+            if not np.isnan(sd).any():
+                for a in range(min(3, sd.shape[0])):
+                    m[: sd.shape[1], a] = sd[a][:3]
+        elif "spacings" in hdr:
+            for a, v in enumerate(np.atleast_1d(hdr["spacings"])[:3]):
+                m[a, a] = float(v) if np.isfinite(v) else 1.0
+        sp, _ = _geometry_from_matrix(m)
+        kind = "nrrd"
+    return {"uid": "", "description": kind, "modality": "OT", "files": 1, "shape_zyx": [shp[2], shp[1], shp[0]],
+            "spacing_zyx_mm": [round(v, 6) for v in sp], "kind": kind}

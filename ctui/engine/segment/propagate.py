@@ -1,0 +1,585 @@
+"""Propagate an object through the slice series (slice by slice, or one 3D fill).
+
+Slice mode (default, as the prototype): starting from the object's mask on the seed
+slice, each next slice is filled with the in-range connected regions (of the
+pipeline's final view) that touch the previous slice's object, grown by
+``neighbourhood`` pixels. Propagation in a direction stops when
+
+* the object ends (fewer than ``min_area`` pixels), or the series ends;
+* the leak guard fires: the area grows by more than ``leak_factor`` times the
+  previous slice's area (and by at least ``leak_min_pixels``), e.g. when a one-pixel
+  bridge opens into a neighbouring structure. The leaking slice is not included, and
+  the stop is reported (``Proposal.leaks``). With ``on_leak="confine"`` the leaking
+  slice is instead retried restricted to the previous object grown by
+  ``neighbourhood`` pixels, and propagation goes on if that passes the guard;
+* it is cancelled (``cancel`` event set, or the progress callback returns False).
+
+Only a crop around the previous object is filtered and filled (grown when the region
+touches the crop's edge), so one object through 300 slices of 512x512 takes well
+under a second.
+
+3D mode (``mode="3d"``): the in-range mask of every slice in the chosen direction(s)
+is flood-filled at once in 3D (:func:`fill3d`, a numba scanline fill; 6-connected for
+connectivity 4, in-plane 8 plus the slice above/below for connectivity 8), keeping
+what is connected to the seed slice's object; the leak guard is then applied to the
+per-slice areas of that component.
+
+The result is a :class:`Proposal` (pending: the label volume is untouched) the TUI can
+show, then :meth:`Proposal.accept` (one undo step) or simply drop (reject).
+
+Progress: :func:`iter_propagation` is a generator yielding :class:`Progress` events
+and returning the proposal (``StopIteration.value``); :func:`propagate` drives it with
+an optional callback and ``threading.Event`` for cancel.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Generator
+
+import cv2
+import numpy as np
+
+from ctui.engine.segment.selection import Segmentation, in_range, seeded_components
+
+DIRECTIONS = ("both", "forward", "backward")
+
+
+@dataclass
+class PropagationSettings:
+    """How to propagate. ``low``/``high``: inclusive in-range values in the pipeline's domain."""
+
+    low: float
+    high: float
+    direction: str = "both"
+    connectivity: int = 8
+    neighbourhood: int = 2
+    min_area: int = 5
+    leak_factor: float = 2.5
+    leak_min_pixels: int = 64
+    on_leak: str = "stop"  # "stop" | "confine"
+    confine: bool = False  # always restrict each slice to the previous object grown by `neighbourhood`
+    mode: str = "slice"  # "slice" | "3d"
+    overwrite: bool = False  # claim voxels of other objects
+    max_slices: int | None = None  # per direction
+
+    def __post_init__(self) -> None:
+        if self.direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {self.direction!r}")
+        if self.connectivity not in (4, 8):
+            raise ValueError(f"connectivity must be 4 or 8, got {self.connectivity}")
+        if self.mode not in ("slice", "3d"):
+            raise ValueError(f"mode must be 'slice' or '3d', got {self.mode!r}")
+        if self.on_leak not in ("stop", "confine"):
+            raise ValueError(f"on_leak must be 'stop' or 'confine', got {self.on_leak!r}")
+        if self.low > self.high:
+            raise ValueError(f"range low {self.low:g} > high {self.high:g}")
+        if self.leak_factor <= 1:
+            raise ValueError("leak_factor must be > 1")
+        self.neighbourhood = int(self.neighbourhood)
+        if self.neighbourhood < 0:
+            raise ValueError("neighbourhood must be >= 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "PropagationSettings":
+        names = set(cls.__dataclass_fields__)
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+@dataclass
+class Progress:
+    """One propagation step: slice ``z`` done with ``area`` pixels (``done`` of at most ``total`` slices)."""
+
+    z: int
+    area: int
+    direction: str
+    done: int
+    total: int
+    status: str = "ok"  # "ok" | "end" | "leak" | "confined"
+
+
+@dataclass
+class Proposal:
+    """A pending propagation result (labels untouched until :meth:`accept`).
+
+    ``masks``: {z: (y0, x0, bool (h, w))} per slice; ``areas``: {z: pixels};
+    ``stops``: {"forward"/"backward": reason}; ``leaks``: list of
+    {slice, area, previous_area, direction, action}; ``timings``: seconds per phase.
+    """
+
+    object_id: int
+    start_slice: int
+    shape: tuple[int, int, int]
+    masks: dict[int, tuple[int, int, np.ndarray]] = field(default_factory=dict)
+    areas: dict[int, int] = field(default_factory=dict)
+    stops: dict[str, str] = field(default_factory=dict)
+    leaks: list[dict[str, Any]] = field(default_factory=list)
+    cancelled: bool = False
+    settings: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    accepted: bool = False
+
+    @property
+    def voxels(self) -> int:
+        return int(sum(self.areas.values()))
+
+    @property
+    def slices(self) -> tuple[int, int] | None:
+        zs = [z for z, a in self.areas.items() if a > 0]
+        return (min(zs), max(zs)) if zs else None
+
+    def warnings(self) -> list[str]:
+        out = []
+        for lk in self.leaks:
+            out.append(f"leak guard at slice {lk['slice']} ({lk['direction']}): area {lk['area']} px after {lk['previous_area']} px, {lk['action']}")
+        if self.cancelled:
+            out.append("propagation cancelled; result is partial")
+        return out
+
+    def bbox(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None:
+        if not self.masks:
+            return None
+        zs = sorted(self.masks)
+        y0 = min(m[0] for m in self.masks.values())
+        x0 = min(m[1] for m in self.masks.values())
+        y1 = max(m[0] + m[2].shape[0] for m in self.masks.values())
+        x1 = max(m[1] + m[2].shape[1] for m in self.masks.values())
+        return (zs[0], zs[-1] + 1), (y0, y1), (x0, x1)
+
+    def mask3d(self) -> tuple[tuple[int, int, int], np.ndarray] | None:
+        """(offset (z, y, x), bool array of the bounding box), or None if empty."""
+        bb = self.bbox()
+        if bb is None:
+            return None
+        (z0, z1), (y0, y1), (x0, x1) = bb
+        out = np.zeros((z1 - z0, y1 - y0, x1 - x0), bool)
+        for z, (my, mx, m) in self.masks.items():
+            out[z - z0, my - y0:my - y0 + m.shape[0], mx - x0:mx - x0 + m.shape[1]] |= m
+        return (z0, y0, x0), out
+
+    def slice_mask(self, z: int) -> np.ndarray:
+        """bool (ny, nx) of the proposal on slice ``z`` (for preview)."""
+        out = np.zeros(self.shape[1:], bool)
+        if z in self.masks:
+            y0, x0, m = self.masks[z]
+            out[y0:y0 + m.shape[0], x0:x0 + m.shape[1]] = m
+        return out
+
+    def accept(self, segmentation: Segmentation) -> int:
+        """Write the proposal into the label volume as one undo step; returns voxels changed."""
+        got = self.mask3d()
+        self.accepted = True
+        if got is None:
+            return 0
+        offset, m = got
+        return segmentation.paint(m, self.object_id, offset=offset, overwrite=bool(self.settings.get("overwrite")),
+                                  label=f"propagate object {self.object_id}")
+
+    def summary(self) -> dict[str, Any]:
+        rng = self.slices
+        return {"object_id": self.object_id, "start_slice": self.start_slice, "voxels": self.voxels,
+                "slices": None if rng is None else list(rng), "stops": dict(self.stops),
+                "leaks": list(self.leaks), "cancelled": self.cancelled, "warnings": self.warnings(),
+                "areas": {int(z): int(a) for z, a in sorted(self.areas.items())}}
+
+
+def _bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+_DISKS: dict[int, np.ndarray] = {}
+
+
+def _disk(r: int) -> np.ndarray:
+    k = _DISKS.get(r)
+    if k is None:
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+        _DISKS[r] = k
+    return k
+
+
+def _grow(mask: np.ndarray, r: int) -> np.ndarray:
+    if r <= 0:
+        return mask
+    return cv2.dilate(mask.astype(np.uint8), _disk(r)).astype(bool)
+
+
+class _SliceFiller:
+    """Fills one slice from the previous slice's object, on a crop that grows as needed."""
+
+    def __init__(self, volume: Any, pipeline: Any, settings: PropagationSettings, labels: np.ndarray | None,
+                 object_id: int, timings: dict[str, float]) -> None:
+        self.volume = volume
+        self.pipeline = pipeline
+        self.s = settings
+        self.labels = labels
+        self.object_id = object_id
+        self.window = pipeline.window_for(volume)
+        self.reach = pipeline.reach()
+        self.t = timings
+        self.ny, self.nx = volume.data.shape[1:]
+
+    def fill(self, z: int, prev: tuple[int, int, np.ndarray], *, confine: bool) -> tuple[int, int, np.ndarray]:
+        py0, px0, pm = prev
+        s = self.s
+        margin = s.neighbourhood + 16 + max(pm.shape) // 4
+        while True:
+            y0, y1 = max(py0 - margin, 0), min(py0 + pm.shape[0] + margin, self.ny)
+            x0, x1 = max(px0 - margin, 0), min(px0 + pm.shape[1] + margin, self.nx)
+            t0 = time.perf_counter()
+            final = self.pipeline.final_region(self.volume, z, y0, y1, x0, x1, window=self.window)
+            t1 = time.perf_counter()
+            inr = in_range(final, s.low, s.high)
+            if self.labels is not None and not s.overwrite:
+                lab = self.labels[z, y0:y1, x0:x1]
+                inr[(lab != 0) & (lab != self.object_id)] = 0
+            prevc = np.zeros(inr.shape, np.uint8)
+            prevc[py0 - y0:py0 - y0 + pm.shape[0], px0 - x0:px0 - x0 + pm.shape[1]] = pm
+            near = _grow(prevc, s.neighbourhood)
+            if confine:
+                comp = seeded_components(inr & near, near, connectivity=s.connectivity)
+            else:
+                comp = seeded_components(inr, near, connectivity=s.connectivity)
+            t2 = time.perf_counter()
+            self.t["filter"] = self.t.get("filter", 0.0) + (t1 - t0)
+            self.t["fill"] = self.t.get("fill", 0.0) + (t2 - t1)
+            touches = ((y0 > 0 and comp[0].any()) or (y1 < self.ny and comp[-1].any())
+                       or (x0 > 0 and comp[:, 0].any()) or (x1 < self.nx and comp[:, -1].any()))
+            if not touches or (y0 == 0 and x0 == 0 and y1 == self.ny and x1 == self.nx):
+                break
+            margin = max(margin * 4, max(self.ny, self.nx))  # region leaves the crop: take the whole slice
+        bb = _bbox(comp)
+        if bb is None:
+            return y0, x0, np.zeros((0, 0), bool)
+        a0, a1, b0, b1 = bb
+        return y0 + a0, x0 + b0, comp[a0:a1, b0:b1].copy()
+
+
+def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settings: PropagationSettings, *,
+                     object_id: int = 1, labels: np.ndarray | None = None,
+                     cancel: threading.Event | None = None) -> Generator[Progress, None, Proposal]:
+    """Propagate from ``start_mask`` (bool (ny, nx)) on slice ``z``; yields Progress, returns a Proposal.
+
+    Parameters
+    ----------
+    volume : Volume (data (nz, ny, nx))
+    pipeline : ctui.engine.segment.pipeline.Pipeline (its final view is thresholded)
+    start_mask : bool (ny, nx), the object on slice z
+    z : seed slice index
+    settings : PropagationSettings
+    object_id : id written by :meth:`Proposal.accept`
+    labels : current label volume (voxels of other objects are not claimed)
+    cancel : a threading.Event; when set, propagation stops after the current slice.
+    """
+    nz = volume.data.shape[0]
+    if not 0 <= z < nz:
+        raise IndexError(f"slice {z} outside 0..{nz - 1}")
+    s = settings
+    prop = Proposal(object_id=object_id, start_slice=int(z), shape=tuple(volume.data.shape), settings=s.to_dict())
+    t_start = time.perf_counter()
+    bb = _bbox(start_mask)
+    if bb is None:
+        prop.stops["forward"] = prop.stops["backward"] = "empty start mask"
+        return prop
+    y0, y1, x0, x1 = bb
+    start = (y0, x0, start_mask[y0:y1, x0:x1].astype(bool).copy())
+    prop.masks[z] = start
+    prop.areas[z] = int(start[2].sum())
+    dirs = [d for d in ("forward", "backward") if s.direction in (d, "both")]
+    total = sum((nz - 1 - z) if d == "forward" else z for d in dirs)
+    if s.max_slices is not None:
+        total = sum(min(s.max_slices, (nz - 1 - z) if d == "forward" else z) for d in dirs)
+    if s.mode == "3d":
+        result = yield from _iter_3d(volume, pipeline, start_mask, z, s, prop, dirs, labels, object_id, cancel, total)
+        prop.timings["total"] = time.perf_counter() - t_start
+        return result
+    filler = _SliceFiller(volume, pipeline, s, labels, object_id, prop.timings)
+    done = 0
+    for d in dirs:
+        step = 1 if d == "forward" else -1
+        prev = start
+        zz = z + step
+        count = 0
+        while True:
+            if not 0 <= zz < nz:
+                prop.stops[d] = "series ends"
+                break
+            if s.max_slices is not None and count >= s.max_slices:
+                prop.stops[d] = "max slices"
+                break
+            if cancel is not None and cancel.is_set():
+                prop.cancelled = True
+                prop.stops[d] = "cancelled"
+                break
+            cur = filler.fill(zz, prev, confine=s.confine)
+            tb = time.perf_counter()
+            area = int(cur[2].sum())
+            prev_area = int(prev[2].sum())
+            status = "ok"
+            if area >= s.min_area and area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels:
+                leak = {"slice": int(zz), "area": area, "previous_area": prev_area, "direction": d, "action": "stopped"}
+                if s.on_leak == "confine" and not s.confine:
+                    cur = filler.fill(zz, prev, confine=True)
+                    area = int(cur[2].sum())
+                    if area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels:
+                        leak["action"] = "stopped (confined fill still too large)"
+                        status = "leak"
+                    else:
+                        leak["action"] = f"confined to the previous object's neighbourhood ({area} px)"
+                        status = "confined"
+                else:
+                    status = "leak"
+                prop.leaks.append(leak)
+                if status == "leak":
+                    prop.stops[d] = f"leak guard at slice {zz}"
+            if status != "leak" and area < s.min_area:
+                status = "end"
+                prop.stops[d] = f"object ends at slice {zz}"
+            done += 1
+            count += 1
+            if status in ("ok", "confined"):
+                prop.masks[zz] = cur
+                prop.areas[zz] = area
+            prop.timings["bookkeeping"] = prop.timings.get("bookkeeping", 0.0) + (time.perf_counter() - tb)
+            yield Progress(z=int(zz), area=area if status != "leak" else area, direction=d, done=done, total=total, status=status)
+            if status in ("leak", "end"):
+                break
+            prev = cur
+            zz += step
+    prop.timings["total"] = time.perf_counter() - t_start
+    return prop
+
+
+def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
+    """Voxels of ``inrange`` (bool (nz, ny, nx)) connected to ``start_mask`` (bool (ny, nx)) on slice ``z``.
+
+    Connectivity in 3D: 6 for ``connectivity=4``; in-plane 8 plus the voxel above and
+    below for ``connectivity=8``. A numba scanline flood fill (runs along x, so memory
+    is read in order) visits only the component: on 300x512x512 it took 0.15 s on a
+    70%-noisy block and a few ms on solid objects, against about 0.4 s for
+    ``scipy.ndimage.label`` of the whole mask (equal results: tests/test_propagate.py).
+    A plain voxel-by-voxel depth-first numba fill was slower than scipy (cache misses)
+    and was dropped. scipy is the fallback when numba is missing.
+    """
+    inr = np.ascontiguousarray(inrange, dtype=bool)
+    start = start_mask.astype(bool) & inr[z]
+    kernel = _scanline_kernel()
+    if kernel is None:  # pragma: no cover - numba is a declared dependency
+        from scipy import ndimage
+
+        lab, n = ndimage.label(inr, structure=_structure(connectivity))
+        keep = np.zeros(n + 1, bool)
+        keep[np.unique(lab[z][start])] = True
+        keep[0] = False
+        return keep[lab]
+    yx = np.argwhere(start)
+    seeds = np.column_stack([np.full(len(yx), z), yx]).astype(np.int32)
+    out = np.zeros(inr.shape, np.uint8)
+    kernel(inr.view(np.uint8), seeds, out, connectivity == 8)
+    return out.view(bool)
+
+
+def _scanline_fill_py(inr, seeds, out, eight):  # pragma: no cover - compiled by numba
+    nz, ny, nx = inr.shape
+    cap = max(seeds.shape[0] * 2, 4096)
+    stack = np.empty((cap, 3), np.int32)
+    top = 0
+    for i in range(seeds.shape[0]):
+        stack[top, 0] = seeds[i, 0]
+        stack[top, 1] = seeds[i, 1]
+        stack[top, 2] = seeds[i, 2]
+        top += 1
+    e = 1 if eight else 0
+    while top > 0:
+        top -= 1
+        z = stack[top, 0]
+        y = stack[top, 1]
+        x = stack[top, 2]
+        if inr[z, y, x] == 0 or out[z, y, x] != 0:
+            continue
+        xl = x
+        while xl > 0 and inr[z, y, xl - 1] != 0 and out[z, y, xl - 1] == 0:
+            xl -= 1
+        xr = x
+        while xr < nx - 1 and inr[z, y, xr + 1] != 0 and out[z, y, xr + 1] == 0:
+            xr += 1
+        for xx in range(xl, xr + 1):
+            out[z, y, xx] = 1
+        for k in range(4):
+            if k == 0:
+                zz = z
+                yy = y - 1
+                a = xl - e
+                b = xr + e
+            elif k == 1:
+                zz = z
+                yy = y + 1
+                a = xl - e
+                b = xr + e
+            elif k == 2:
+                zz = z - 1
+                yy = y
+                a = xl
+                b = xr
+            else:
+                zz = z + 1
+                yy = y
+                a = xl
+                b = xr
+            if zz < 0 or zz >= nz or yy < 0 or yy >= ny:
+                continue
+            if a < 0:
+                a = 0
+            if b > nx - 1:
+                b = nx - 1
+            inseg = False
+            for xx in range(a, b + 1):
+                if inr[zz, yy, xx] != 0 and out[zz, yy, xx] == 0:
+                    if not inseg:
+                        if top >= stack.shape[0]:
+                            bigger = np.empty((stack.shape[0] * 2, 3), np.int32)
+                            bigger[:top] = stack[:top]
+                            stack = bigger
+                        stack[top, 0] = zz
+                        stack[top, 1] = yy
+                        stack[top, 2] = xx
+                        top += 1
+                        inseg = True
+                else:
+                    inseg = False
+
+
+_SCAN: list = []
+
+
+def _scanline_kernel():
+    """The numba-compiled scanline fill (compiled once, cached on disk), or None."""
+    if not _SCAN:
+        try:
+            from numba import njit
+
+            _SCAN.append(njit(cache=True, nogil=True)(_scanline_fill_py))
+        except ImportError:  # pragma: no cover
+            _SCAN.append(None)
+    return _SCAN[0]
+
+
+def _structure(connectivity: int) -> np.ndarray:
+    st = np.zeros((3, 3, 3), bool)
+    st[1] = True if connectivity == 8 else np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+    st[0, 1, 1] = st[2, 1, 1] = True
+    return st
+
+
+def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: PropagationSettings, prop: Proposal,
+             dirs: list[str], labels: np.ndarray | None, object_id: int, cancel: threading.Event | None,
+             total: int) -> Generator[Progress, None, Proposal]:
+    nz = volume.data.shape[0]
+    z0 = 0 if "backward" in dirs else z
+    z1 = nz if "forward" in dirs else z + 1
+    if s.max_slices is not None:
+        z0 = max(z0, z - s.max_slices) if "backward" in dirs else z0
+        z1 = min(z1, z + s.max_slices + 1) if "forward" in dirs else z1
+    t0 = time.perf_counter()
+    window = pipeline.window_for(volume)
+    inr = np.zeros((z1 - z0,) + volume.data.shape[1:], bool)
+    done = 0
+    for zz in range(z0, z1):
+        if cancel is not None and cancel.is_set():
+            prop.cancelled = True
+            prop.stops["forward"] = prop.stops["backward"] = "cancelled"
+            return prop
+        if not pipeline.active_steps():
+            img = pipeline.prepare(volume.data[zz], window)
+        else:
+            img = pipeline.final_region(volume, zz, 0, volume.data.shape[1], 0, volume.data.shape[2], window=window)
+        inr[zz - z0] = in_range(img, s.low, s.high).astype(bool)
+        if zz != z:
+            done += 1
+            yield Progress(z=zz, area=-1, direction="3d-threshold", done=done, total=total)
+    if labels is not None and not s.overwrite:
+        for k in range(z1 - z0):  # per slice: no full-volume temporaries
+            lab = labels[z0 + k]
+            if lab.any():
+                inr[k] &= (lab == 0) | (lab == object_id)
+    inr[z - z0] = start_mask.astype(bool)
+    t1 = time.perf_counter()
+    comp = fill3d(inr, z - z0, start_mask.astype(bool), connectivity=s.connectivity)
+    t2 = time.perf_counter()
+    prop.timings["filter"] = t1 - t0
+    prop.timings["fill"] = t2 - t1
+    areas = np.count_nonzero(comp, axis=(1, 2))
+    for d in dirs:
+        step = 1 if d == "forward" else -1
+        zz = z + step
+        prev_area = int(areas[z - z0])
+        prop.stops[d] = "series ends"
+        while z0 <= zz < z1:
+            a = int(areas[zz - z0])
+            if a < s.min_area:
+                prop.stops[d] = f"object ends at slice {zz}"
+                break
+            if a > s.leak_factor * prev_area and a - prev_area >= s.leak_min_pixels:
+                prop.leaks.append({"slice": int(zz), "area": a, "previous_area": prev_area, "direction": d, "action": "stopped"})
+                prop.stops[d] = f"leak guard at slice {zz}"
+                break
+            m = comp[zz - z0]
+            bb = _bbox(m)
+            assert bb is not None
+            prop.masks[zz] = (bb[0], bb[2], m[bb[0]:bb[1], bb[2]:bb[3]].copy())
+            prop.areas[zz] = a
+            prev_area = a
+            zz += step
+    prop.timings["bookkeeping"] = time.perf_counter() - t2
+    return prop
+
+
+def propagate(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settings: PropagationSettings, *,
+              object_id: int = 1, labels: np.ndarray | None = None,
+              progress: Callable[[Progress], bool | None] | None = None,
+              cancel: threading.Event | None = None) -> Proposal:
+    """Run :func:`iter_propagation` to the end; ``progress(event)`` returning False cancels.
+
+    Returns the :class:`Proposal` (pending; call ``proposal.accept(segmentation)``).
+    """
+    own = _Either(cancel)
+    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own)  # type: ignore[arg-type]
+    try:
+        while True:
+            ev = next(gen)
+            if progress is not None and progress(ev) is False:
+                own.set()  # the generator stops before the next slice
+    except StopIteration as stop:
+        return stop.value
+
+
+class _Either:
+    """Cancel flag set either by the caller's Event or by the progress callback."""
+
+    def __init__(self, other: threading.Event | None) -> None:
+        self.other = other
+        self.flag = False
+
+    def set(self) -> None:
+        self.flag = True
+
+    def is_set(self) -> bool:
+        return self.flag or (self.other is not None and self.other.is_set())
+
+
+def propagate_object(segmentation: Segmentation, volume: Any, pipeline: Any, object_id: int, z: int,
+                     settings: PropagationSettings, **kwargs: Any) -> Proposal:
+    """Propagate the object ``object_id`` as drawn on slice ``z`` of ``segmentation``."""
+    start = segmentation.labels[z] == object_id
+    if not start.any():
+        raise ValueError(f"object {object_id} has no pixels on slice {z}")
+    return propagate(volume, pipeline, start, z, settings, object_id=object_id, labels=segmentation.labels, **kwargs)
