@@ -15,11 +15,25 @@ import pytest
 pytestmark = pytest.mark.slow
 
 TMUX = shutil.which("tmux")
+# a private server (own socket) for these tests: they pass inside tmux and beside a
+# server the user already runs (the default socket is never touched)
+SOCKET = f"ctui-test-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+
+
+def _tmux(*args: str) -> list[str]:
+    return ["tmux", "-L", SOCKET, *args]
+
+
+def _env(**extra: str) -> dict[str, str]:
+    """The child's environment: never the caller's tmux (TMUX, TMUX_PANE)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("TMUX", "TMUX_PANE")}
+    env.update(extra)
+    return env
 
 
 def _cap(session: str, *, escapes: bool = False) -> str:
-    args = ["tmux", "capture-pane", "-p", "-t", session] + (["-e"] if escapes else [])
-    return subprocess.run(args, capture_output=True, text=True, timeout=10).stdout
+    args = _tmux("capture-pane", "-p", "-t", session) + (["-e"] if escapes else [])
+    return subprocess.run(args, capture_output=True, text=True, timeout=10, env=_env()).stdout
 
 
 def _wait(session: str, text: str, timeout: float = 60.0) -> str:
@@ -34,7 +48,7 @@ def _wait(session: str, text: str, timeout: float = 60.0) -> str:
 
 
 def _keys(session: str, *keys: str) -> None:
-    subprocess.run(["tmux", "send-keys", "-t", session, *keys], check=True, timeout=10)
+    subprocess.run(_tmux("send-keys", "-t", session, *keys), check=True, timeout=10, env=_env())
 
 
 @pytest.fixture
@@ -43,16 +57,18 @@ def tmux_session(tmp_path):
         pytest.skip("tmux is not installed")
     name = f"ctui-test-{uuid.uuid4().hex[:8]}"
     yield name
-    subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=10)
+    subprocess.run(_tmux("kill-session", "-t", name), capture_output=True, timeout=10, env=_env())
+    # the private server ends with its last session; make sure
+    subprocess.run(_tmux("kill-server"), capture_output=True, timeout=10, env=_env())
 
 
 @pytest.mark.parametrize("size", [(160, 50), (80, 24)], ids=["160x50", "80x24"])
 def test_real_binary_in_tmux(tmux_session, tmp_path, size):
     w, h = size
-    env = {**os.environ, "CTUI_AUTOSAVE_DIR": str(tmp_path / "autosave"), "COLORTERM": "truecolor"}
+    env = _env(CTUI_AUTOSAVE_DIR=str(tmp_path / "autosave"), COLORTERM="truecolor")
     env.pop("TEXTUAL_COLOR_SYSTEM", None)
     cmd = f"cd {tmp_path} && {sys.executable} -m ctui --graphics halfblock; echo CTUI-EXIT=$?; sleep 30"
-    subprocess.run(["tmux", "new-session", "-d", "-s", tmux_session, "-x", str(w), "-y", str(h), cmd],
+    subprocess.run(_tmux("new-session", "-d", "-s", tmux_session, "-x", str(w), "-y", str(h), cmd),
                    check=True, env=env, timeout=10)
     screen = _wait(tmux_session, "Slice")
     assert "Traceback" not in screen
@@ -73,9 +89,9 @@ def test_real_binary_in_tmux(tmux_session, tmp_path, size):
     assert "Keys on this screen" in screen and "Cursor left" in screen
     _keys(tmux_session, "Escape")
     # resize the window: still alive and redrawn
-    subprocess.run(["tmux", "resize-window", "-t", tmux_session, "-x", "60", "-y", "20"], capture_output=True, timeout=10)
+    subprocess.run(_tmux("resize-window", "-t", tmux_session, "-x", "60", "-y", "20"), capture_output=True, timeout=10, env=_env())
     time.sleep(1.0)
-    subprocess.run(["tmux", "resize-window", "-t", tmux_session, "-x", str(w), "-y", str(h)], capture_output=True, timeout=10)
+    subprocess.run(_tmux("resize-window", "-t", tmux_session, "-x", str(w), "-y", str(h)), capture_output=True, timeout=10, env=_env())
     _wait(tmux_session, "Slice")
     # quit (nothing unsaved: exits at once)
     _keys(tmux_session, "q")
@@ -87,11 +103,11 @@ def test_real_binary_in_tmux(tmux_session, tmp_path, size):
 def test_tmux_without_colorterm_tells_how_to_fix(tmux_session, tmp_path):
     """Over SSH COLORTERM is usually not forwarded: Rich drops to 256 colours and grey
     slices band. ctui says once how to fix it."""
-    env = {k: v for k, v in os.environ.items() if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM")}
+    env = {k: v for k, v in _env().items() if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM")}
     env.update({"CTUI_AUTOSAVE_DIR": str(tmp_path / "autosave"), "SSH_CONNECTION": "10.0.0.1 5555 10.0.0.2 22"})
     cmd = (f"cd {tmp_path} && unset COLORTERM TEXTUAL_COLOR_SYSTEM && TERM=screen-256color "
            f"SSH_CONNECTION='10.0.0.1 5555 10.0.0.2 22' {sys.executable} -m ctui --graphics halfblock; sleep 30")
-    subprocess.run(["tmux", "new-session", "-d", "-s", tmux_session, "-x", "160", "-y", "50", cmd],
+    subprocess.run(_tmux("new-session", "-d", "-s", tmux_session, "-x", "160", "-y", "50", cmd),
                    check=True, env=env, timeout=10)
     screen = _wait(tmux_session, "SendEnv")
     assert "TEXTUAL_COLOR_SYSTEM=truecolor" in screen.replace("\n", " ") or "TEXTUAL_COLOR_SYSTEM" in screen
