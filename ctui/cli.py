@@ -59,13 +59,37 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         rc = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows up here, not at exit
+    except BrokenPipeError:
+        return _broken_pipe()
     except CtuiError as exc:
         print(f"ctui {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"ctui {args.command}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print(f"ctui {args.command}: not enough memory for this input (MemoryError); try --crop or --downsample",
+              file=sys.stderr)
+        return 2
+    except OSError as exc:  # an input or output the command did not wrap: still one line naming the file
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"ctui {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     return int(rc or 0)
+
+
+def _broken_pipe() -> int:
+    """stdout's reader went away (``ctui ... --json | head``): stop quietly like other
+    Unix tools, exit 141 (128 + SIGPIPE), and keep Python from complaining at exit."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+    return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

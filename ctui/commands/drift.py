@@ -45,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     from ctui.commands.segment import _err, build_pipeline, load_volume, make_project, segment_volume
     from ctui.engine.segment.drift import analyze_drift, corrections_from_report, plot_drift
 
+    from ctui.engine.core.atomic import check_outputs
+
+    check_outputs({"--project": args.project, "--plot": args.plot}, inputs=[args.path, args.labels])
     if args.fit_window < 3:
         raise _err("--fit-window must be >= 3")
     if args.threshold is not None and args.threshold <= 0:

@@ -143,6 +143,9 @@ def run(args: argparse.Namespace) -> int:
         raise _err(f"--average must be >= 0, got {args.average}")
     if not os.path.exists(args.input):
         raise _err(f"{args.input}: no such file")
+    from ctui.engine.core.atomic import check_outputs
+
+    check_outputs({"--csv": args.csv, "--plot": args.plot}, inputs=[args.input])
     between = _floats(args.between, 2, "--between") if args.between else None
     refs = _floats(args.reference, None, "--reference") if args.reference else None
     if (between or args.csv or args.plot) and not args.path:

@@ -141,6 +141,9 @@ def run(args: argparse.Namespace) -> int:
         raise _err(f"{src}: no such file or folder")
     if out.parent and not out.parent.exists():
         raise _err(f"{out}: folder {out.parent} does not exist")
+    from ctui.engine.core.atomic import check_output
+
+    check_output(out, inputs=[src], label="--out")
     if args.smooth < 0:
         raise _err(f"--smooth {args.smooth}: must be 0 or more iterations")
     if args.decimate is not None and args.decimate < 4:

@@ -187,6 +187,9 @@ def run(args: argparse.Namespace) -> int:
         raise CtuiError("no such file or folder", path=src)
     if out.parent and not out.parent.exists():
         raise CtuiError("output folder does not exist", path=out)
+    from ctui.engine.core.atomic import check_output
+
+    check_output(out, inputs=[src], label="--out")
     w, h = (int(v) for v in _pair(args.size, "--size (want WxH)"))
     if not (1 <= w <= 8192 and 1 <= h <= 8192):
         raise CtuiError(f"--size {args.size}: width and height must be 1..8192")

@@ -243,6 +243,9 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
 def run(args: argparse.Namespace) -> int:
     import json
 
+    from ctui.engine.core.atomic import check_outputs
+
+    check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
     volume = load_volume(args.path, series=args.series)
     seg, pipeline, settings, results = segment_volume(volume, args)
     written = write_outputs(args, volume, seg, pipeline, settings)

@@ -5,6 +5,13 @@ temporary file in the target's folder, flushed, fsynced and renamed over the tar
 so a crash (even SIGKILL) leaves either the previous complete file or the new one,
 never a half-written file. On failure (disk full, permission denied) the temporary
 file is removed and a :class:`~ctui.engine.core.errors.CtuiError` names the target.
+
+Permissions: a new file gets ``0o666 & ~umask`` (what ``open()`` would give; with
+umask 077 the user's projects stay private), a replaced file keeps its mode.
+
+:func:`check_output` refuses an output that is one of the command's inputs (the same
+file through a symlink or a hard link, or a file inside an input folder): commands
+call it before they write anything.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ import os
 import stat
 import tempfile
 from pathlib import Path
-from typing import IO, Iterator
+from typing import IO, Iterable, Iterator
 
 from ctui.engine.core.errors import CtuiError
 
@@ -30,6 +37,29 @@ def _fsync_dir(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def current_umask() -> int:
+    """The process umask, read without changing it (Linux /proc; else a set-and-restore)."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)  # not thread-safe, hence only the fallback
+    os.umask(mask)
+    return mask
+
+
+def target_mode(target: str | os.PathLike) -> int:
+    """Permission bits for a file written to ``target``: the mode of the file it
+    replaces (followed through a symlink), else ``0o666 & ~umask``."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except OSError:
+        return 0o666 & ~current_umask()
 
 
 def _lock(fd: int) -> bool:
@@ -93,6 +123,7 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     if suffix is None:
         suffix = "".join(target.suffixes) or ""
     clean_stale_temps(target)
+    mode = target_mode(target)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=folder)
     except OSError as exc:
@@ -106,7 +137,7 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
         yield tmp_path
         with open(tmp_path, "rb+") as fh:
             os.fsync(fh.fileno())
-        os.chmod(tmp_path, 0o644)
+        os.chmod(tmp_path, mode)
         os.replace(tmp_path, target)
         _fsync_dir(folder)
     except OSError as exc:
@@ -149,3 +180,82 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_write(path, "w") as fh:
         fh.write(text)
+
+
+# --------------------------------------------------------------------- outputs vs inputs
+def _ident(path: str | os.PathLike) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino)
+
+
+def _folders_up(path: str) -> Iterator[tuple[str, tuple[int, int]]]:
+    """The existing folders containing ``path`` (resolved), nearest first, with their ids."""
+    cur = os.path.dirname(os.path.realpath(path))
+    while True:
+        ident = _ident(cur)
+        if ident is not None:
+            yield cur, ident
+        parent = os.path.dirname(cur)
+        if parent == cur:
+            return
+        cur = parent
+
+
+def _flat(items: Iterable) -> Iterator[str]:
+    for item in items:
+        if item is None or item == "":
+            continue
+        if isinstance(item, (list, tuple, set, frozenset)):
+            yield from _flat(item)
+        else:
+            yield os.fspath(item)
+
+
+def check_output(out: str | os.PathLike | None, *, inputs: Iterable, label: str = "output") -> None:
+    """Refuse to write ``out`` when that would overwrite or pollute an input.
+
+    Raises a one-line :class:`CtuiError` naming both files when ``out`` is the same
+    file as an input (also through a symlink or a hard link: same ``(st_dev, st_ino)``)
+    or lies inside an input folder (a series folder: a new file there would join the
+    series). ``inputs``: paths, possibly nested lists (glob lists), None ignored.
+    ``label``: how the message names the output (e.g. "--csv").
+    """
+    if out is None or out == "":
+        return
+    out_s = os.fspath(out)
+    out_id = _ident(out_s)
+    up = None
+    for inp in _flat(inputs):
+        in_id = _ident(inp)
+        if in_id is None:
+            continue
+        if out_id is not None and out_id == in_id:
+            what = "the input folder" if os.path.isdir(inp) else "the input"
+            raise CtuiError(f"{label} {out_s} is {what} {inp}; refusing to overwrite it, choose another file", path=None)
+        if os.path.isdir(inp):
+            if up is None:
+                up = list(_folders_up(out_s))
+            if any(ident == in_id for _, ident in up):
+                raise CtuiError(f"{label} {out_s} is inside the input folder {inp}; refusing to write into it, "
+                                "choose another folder", path=None)
+
+
+def check_outputs(outputs: dict, *, inputs: Iterable) -> None:
+    """:func:`check_output` for each ``{label: path}`` output, and no two outputs the same file."""
+    inputs = list(_flat(inputs))
+    seen: dict[str, str] = {}
+    for label, out in outputs.items():
+        if out is None or out == "":
+            continue
+        check_output(out, inputs=inputs, label=label)
+        key = os.path.realpath(os.fspath(out))
+        ident = _ident(key)
+        for k in ([key] + ([f"{ident}"] if ident else [])):
+            if k in seen:
+                raise CtuiError(f"{label} {out} and {seen[k]} are the same file; choose two different files")
+        seen[key] = f"{label} {out}"
+        if ident:
+            seen[f"{ident}"] = f"{label} {out}"
