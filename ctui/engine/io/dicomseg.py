@@ -1,0 +1,381 @@
+"""DICOM Segmentation (SEG) objects: write with highdicom over the source series, read back.
+
+Writing (:func:`write_seg`)
+---------------------------
+A ctui label map (z, y, x) uint8 over a DICOM series becomes one SEG instance that
+
+* references every source SOP instance (SOPClassUID + SOPInstanceUID), found by reading
+  the series' headers again (:func:`source_datasets`, no pixels) and sorting them along
+  the slice normal exactly as the loader does; the slices must sit where the volume's
+  geometry puts them (a resampled, cropped or tilt-corrected volume is refused);
+* holds one segment per object (ids 1..255 renumbered 1..S in ascending order) with
+  the object's name, its colour as CIELab, algorithm type SEMIAUTOMATIC and algorithm
+  "ctui" (family: neighborhood analysis: threshold fill + propagation);
+* is BINARY, with frames only where a segment has voxels (highdicom's
+  ``omit_empty_frames``), its plane positions taken from the source images;
+* carries no PatientName, PatientID or PatientBirthDate (blanked: empty type-2 values)
+  nor the other identifying attributes highdicom copies from the source, unless
+  ``keep_identifiers``.
+
+Reading (:func:`read_seg`) returns the segments' descriptions and each segment's mask
+on the SEG's own voxel grid (highdicom ``get_volume``), converted to ctui's geometry
+convention; :mod:`ctui.engine.io.imports` places them on a series' grid.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.core.atomic import atomic_path
+from ctui.engine.core.colors import object_color
+from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.privacy import is_identifying
+from ctui.engine.core.progress import Progress, report
+
+SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
+RTSTRUCT_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.481.3"
+#: identifying attributes that are type 2 in the modules highdicom/ctui write: kept empty
+TYPE2_IDENTIFIERS = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyID",
+                     "AccessionNumber", "ReferringPhysicianName")
+_NOT_IMAGES = {SEG_SOP_CLASS, RTSTRUCT_SOP_CLASS, "1.2.840.10008.5.1.4.1.1.88.22", "1.2.840.10008.5.1.4.1.1.88.33"}
+
+
+# =========================================================================== source
+def _read_headers(path: Path) -> list[Any]:
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    files = sorted(f for f in path.rglob("*") if f.is_file()) if path.is_dir() else [path]
+    out = []
+    for f in files:
+        if f.suffix.lower() in (".json", ".txt", ".md", ".png", ".jpg", ".nrrd", ".nii", ".gz", ".csv"):
+            continue
+        try:
+            ds = pydicom.dcmread(f, stop_before_pixels=True)
+        except (InvalidDicomError, OSError, ValueError, EOFError, TypeError, AttributeError, KeyError):
+            continue
+        if "SOPInstanceUID" not in ds or str(ds.get("SOPClassUID", "")) in _NOT_IMAGES:
+            continue
+        ds.filename = str(f)
+        out.append(ds)
+    return out
+
+
+def _wanted_series(volume: Any, series: str | None, groups: dict[str, list[Any]], path: Path) -> str:
+    if series:
+        key = str(series).strip()
+        if key in groups:
+            return key
+        if key.isdigit() and volume is not None and volume.series and int(key) < len(volume.series):
+            return str(volume.series[int(key)].get("uid"))
+        hits = [u for u in groups if u.startswith(key)]
+        if len(hits) == 1:
+            return hits[0]
+        raise CtuiError(f"no series {key!r} among {len(groups)} found", path=path)
+    if volume is not None and volume.series:
+        idx = int((volume.meta or {}).get("series_index", 0) or 0)
+        uid = volume.series[min(idx, len(volume.series) - 1)].get("uid")
+        if uid in groups:
+            return str(uid)
+    return max(groups, key=lambda u: len(groups[u]))
+
+
+def _normal(ds: Any) -> np.ndarray:
+    iop = np.asarray([float(v) for v in ds.ImageOrientationPatient], dtype=np.float64)
+    return np.cross(iop[:3], iop[3:])
+
+
+def source_datasets(path: str | os.PathLike, volume: Any = None, *, series: str | None = None) -> list[Any]:
+    """The headers (pydicom Datasets, no pixel data) of a series' images, in volume slice order.
+
+    Parameters
+    ----------
+    path : folder or file of the DICOM series the labels were drawn on.
+    volume : Volume, optional
+        What ctui loaded from ``path``; when given, the series it picked is used and every
+        slice is checked to sit where the volume's geometry puts it (within 1% of a voxel).
+    series : SeriesInstanceUID (or a unique prefix, or an index) when ``path`` holds several.
+
+    Returns
+    -------
+    list of Dataset: one per slice (slice 0 lowest along the slice normal), or a single
+    multi-frame dataset.
+
+    Raises
+    ------
+    CtuiError
+        No DICOM image at ``path``, images without position/orientation, or a volume
+        whose grid is not the series' own (resampled, cropped, downsampled, tilt-corrected).
+    """
+    p = Path(path)
+    if not p.exists():
+        raise CtuiError("the source series is not there (give its folder with --series)", path=p)
+    headers = _read_headers(p)
+    if not headers:
+        raise CtuiError("no DICOM image found: DICOM-SEG and RTSTRUCT need the DICOM series the labels were drawn on",
+                        path=p)
+    groups: dict[str, list[Any]] = {}
+    for ds in headers:
+        groups.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append(ds)
+    dss = groups[_wanted_series(volume, series, groups, p)]
+    if len(dss) == 1 and int(dss[0].get("NumberOfFrames", 1) or 1) > 1:
+        return dss  # one multi-frame image: highdicom reads its per-frame positions
+    for ds in dss:
+        if "ImagePositionPatient" not in ds or "ImageOrientationPatient" not in ds:
+            raise CtuiError(f"{ds.filename}: no ImagePositionPatient/ImageOrientationPatient: a DICOM-SEG or RTSTRUCT "
+                            "cannot place its voxels on this series", path=p)
+    normal = _normal(dss[0])
+    dss.sort(key=lambda d: float(np.dot([float(v) for v in d.ImagePositionPatient], normal)))
+    if volume is not None:
+        _check_grid(dss, volume, p)
+    return dss
+
+
+def _check_grid(dss: list[Any], volume: Any, p: Path) -> None:
+    nz, ny, nx = volume.shape
+    d0 = dss[0]
+    if len(dss) != nz or (int(d0.Rows), int(d0.Columns)) != (ny, nx):
+        raise CtuiError(f"the series has {len(dss)} slices of {int(d0.Rows)}x{int(d0.Columns)}, the labels' grid is "
+                        f"{nz}x{ny}x{nx}: DICOM-SEG/RTSTRUCT need labels on the series' own grid (not cropped, "
+                        "downsampled or resampled)", path=p)
+    tol = 0.01 * min(volume.spacing) + 1e-3
+    for k, ds in enumerate(dss):
+        ipp = np.asarray([float(v) for v in ds.ImagePositionPatient])
+        want = volume.index_to_mm((k, 0, 0))
+        if np.abs(ipp - want).max() > tol:
+            raise CtuiError(f"slice {k} of the series is at {np.round(ipp, 3).tolist()} mm, the labels' grid puts it at "
+                            f"{np.round(want, 3).tolist()} mm (the volume was resampled or tilt-corrected): "
+                            "DICOM-SEG/RTSTRUCT need the series' own grid", path=p)
+
+
+def blank_identifiers(ds: Any, *, keep: bool = False) -> Any:
+    """Empty the type-2 patient identifiers and drop the other identifying attributes (in place)."""
+    if keep:
+        return ds
+    for kw in TYPE2_IDENTIFIERS:
+        if kw in ds:
+            setattr(ds, kw, "")
+    for elem in list(ds):
+        kw = elem.keyword
+        if kw and kw not in TYPE2_IDENTIFIERS and is_identifying(kw):
+            del ds[elem.tag]
+    return ds
+
+
+# =========================================================================== write
+def _objects_in(labels: np.ndarray, objects: Sequence[dict] | None) -> list[dict]:
+    present = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=256)) if i != 0]
+    info = {int(o["id"]): o for o in (objects or []) if "id" in o}
+    out = []
+    for oid in present:
+        o = info.get(oid, {})
+        color = tuple(int(c) for c in o.get("color", object_color(oid)))[:3]
+        out.append({"id": oid, "name": str(o.get("name") or f"object {oid}"), "color": color})
+    return out
+
+
+def _segment_description(n: int, obj: dict) -> Any:
+    import highdicom as hd
+    from pydicom.sr.codedict import codes
+
+    from ctui import __version__
+
+    return hd.seg.SegmentDescription(
+        segment_number=n,
+        segment_label=obj["name"][:64],
+        segmented_property_category=codes.SCT.Tissue,
+        segmented_property_type=codes.SCT.Tissue,
+        algorithm_type=hd.seg.SegmentAlgorithmTypeValues.SEMIAUTOMATIC,
+        algorithm_identification=hd.AlgorithmIdentificationSequence(
+            name="ctui", family=codes.cid7162.NeighborhoodAnalysis, version=__version__),
+        display_color=hd.color.CIELabColor.from_rgb(*obj["color"]),
+    )
+
+
+def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any], *,
+              objects: Sequence[dict] | None = None, keep_identifiers: bool = False,
+              series_description: str = "ctui segmentation", progress: Progress | None = None) -> Path:
+    """Write ``labels`` as a BINARY DICOM-SEG over the source images.
+
+    Parameters
+    ----------
+    path : target ``.dcm`` file (written atomically).
+    labels : ndarray (z, y, x) uint8, 0 background, object ids 1..255; on the series' grid.
+    sources : the series' headers from :func:`source_datasets` (slice order).
+    objects : dicts with ``id``, ``name``, ``color`` (r, g, b 0..255), as in a project.
+    keep_identifiers : keep the patient name/ID/birth date copied from the source.
+
+    Returns the written path. Raises CtuiError when ``labels`` holds no object.
+    """
+    import highdicom as hd
+
+    from ctui import __version__
+
+    lab = np.asarray(labels)
+    objs = _objects_in(lab, objects)
+    if not objs:
+        raise CtuiError("no object in the labels: nothing to write", path=path)
+    report(progress, 0.05, 1.0, "DICOM-SEG: segments")
+    lut = np.zeros(256, np.uint8)
+    for n, o in enumerate(objs, start=1):
+        lut[o["id"]] = n
+    seg_array = lut[lab]
+    if len(sources) == 1 and seg_array.shape[0] > 1:
+        seg_array = _multiframe_order(seg_array, sources[0])
+    descs = [_segment_description(n, o) for n, o in enumerate(objs, start=1)]
+    report(progress, 0.2, 1.0, "DICOM-SEG: frames")
+    seg = hd.seg.Segmentation(
+        source_images=_prepared(sources, keep_identifiers), pixel_array=seg_array,
+        segmentation_type=hd.seg.SegmentationTypeValues.BINARY, segment_descriptions=descs,
+        series_instance_uid=hd.UID(), series_number=int(getattr(sources[0], "SeriesNumber", 0) or 0) + 1000,
+        sop_instance_uid=hd.UID(), instance_number=1, manufacturer="ctui", manufacturer_model_name="ctui",
+        software_versions=__version__, device_serial_number="0", series_description=series_description[:64],
+        content_label="CTUI", content_description="ctui segmentation", omit_empty_frames=True,
+    )
+    blank_identifiers(seg, keep=keep_identifiers)
+    report(progress, 0.9, 1.0, "DICOM-SEG: writing")
+    p = Path(path)
+    with atomic_path(p) as tmp:
+        seg.save_as(str(tmp), enforce_file_format=True)
+    report(progress, 1.0, 1.0, "DICOM-SEG written")
+    return p
+
+
+def _prepared(sources: Sequence[Any], keep: bool) -> list[Any]:
+    """The sources with the patient/study attributes highdicom copies present (blank unless ``keep``).
+
+    Only the first image's patient and study modules are copied, so only it is changed (a copy).
+    """
+    import copy
+
+    first = copy.deepcopy(sources[0])
+    for kw in (*TYPE2_IDENTIFIERS, "StudyDate", "StudyTime"):
+        if kw not in first:
+            setattr(first, kw, "")
+    blank_identifiers(first, keep=keep)
+    return [first, *sources[1:]]
+
+
+def _multiframe_order(seg_array: np.ndarray, ds: Any) -> np.ndarray:
+    """Reorder slice-ordered labels into the frame order of one multi-frame source image."""
+    try:
+        pffg = ds.PerFrameFunctionalGroupsSequence
+        iop = ds.SharedFunctionalGroupsSequence[0].PlaneOrientationSequence[0].ImageOrientationPatient
+        normal = np.cross(np.asarray(iop[:3], float), np.asarray(iop[3:], float))
+        pos = [float(np.dot(np.asarray(f.PlanePositionSequence[0].ImagePositionPatient, float), normal)) for f in pffg]
+    except (AttributeError, IndexError, KeyError):
+        return seg_array
+    rank = np.argsort(np.argsort(pos, kind="stable"), kind="stable")  # frame i holds slice rank[i]
+    if len(rank) != seg_array.shape[0]:
+        raise CtuiError(f"the multi-frame source has {len(rank)} frames, the labels {seg_array.shape[0]} slices")
+    return seg_array[rank]
+
+
+# =========================================================================== read
+@dataclass
+class SegSegment:
+    """One segment: ``number`` (SEG segment number), ``label``, ``color`` RGB 0..255, ``algorithm_type``."""
+
+    number: int
+    label: str
+    color: tuple[int, int, int] | None = None
+    algorithm_type: str = ""
+
+
+@dataclass
+class SegContents:
+    """A DICOM-SEG read back.
+
+    ``masks`` is bool (S, nz, ny, nx), one mask per entry of ``segments``, on ``geometry``
+    (ctui convention: slice axis along row x column). ``referenced_instances`` lists the
+    SOPInstanceUIDs of the source images the SEG references; ``referenced_series`` their
+    SeriesInstanceUID(s).
+    """
+
+    segments: list[SegSegment]
+    masks: np.ndarray
+    geometry: Geometry
+    segmentation_type: str
+    frame_of_reference: str = ""
+    referenced_series: list[str] = field(default_factory=list)
+    referenced_instances: list[str] = field(default_factory=list)
+    number_of_frames: int = 0
+
+
+def _rgb(desc: Any) -> tuple[int, int, int] | None:
+    lab = desc.get("RecommendedDisplayCIELabValue")
+    if lab is None:
+        return None
+    import highdicom as hd
+
+    try:
+        return tuple(int(c) for c in hd.color.CIELabColor.from_dicom_value(list(lab)).to_rgb(clip=True))
+    except (ValueError, TypeError):
+        return None
+
+
+def geometry_from_hd(affine: np.ndarray, shape: Sequence[int]) -> tuple[Geometry, bool]:
+    """ctui Geometry of a highdicom volume (affine on (slice, row, column) indices).
+
+    Returns (geometry, flipped): ``flipped`` True when the slice axis was reversed so that
+    slice 0 is the lowest along row x column (ctui's convention); flip the array's axis 0.
+    """
+    a = np.asarray(affine, dtype=np.float64)
+    cols = a[:3, :3]
+    sp = np.linalg.norm(cols, axis=0)  # (dz, dy, dx)
+    dirs = cols / sp[None, :]
+    row_dir, col_dir, slice_dir = dirs[:, 2], dirs[:, 1], dirs[:, 0]
+    origin = a[:3, 3].copy()
+    flipped = bool(np.dot(np.cross(row_dir, col_dir), slice_dir) < 0)
+    if flipped:
+        origin = origin + (int(shape[0]) - 1) * sp[0] * slice_dir
+        slice_dir = -slice_dir
+    direction = np.column_stack([row_dir, col_dir, slice_dir])
+    return Geometry(tuple(int(s) for s in shape[:3]), tuple(sp), tuple(origin), direction), flipped
+
+
+def read_seg(path: str | os.PathLike) -> SegContents:
+    """Read a DICOM-SEG (BINARY, FRACTIONAL thresholded at half, or LABELMAP).
+
+    Overlapping BINARY segments are kept apart: one mask per segment. A LABELMAP's
+    segment 0 (background) is left out. Raises FormatError for a file that is not a SEG
+    or whose frames do not form a regular volume.
+    """
+    import highdicom as hd
+
+    p = Path(path)
+    try:
+        seg = hd.seg.segread(str(p))
+    except Exception as exc:  # noqa: BLE001 - pydicom/highdicom raise many types on foreign files
+        raise FormatError(f"not a readable DICOM-SEG ({' '.join(str(exc).split())[:160]})", path=p) from None
+    numbers = [int(n) for n in seg.segment_numbers if n != 0]  # a LABELMAP's 0 is its background
+    try:
+        vol = seg.get_volume(combine_segments=False, segment_numbers=numbers, dtype=np.float32)
+    except (ValueError, RuntimeError) as exc:
+        raise FormatError(f"the SEG's frames do not form a regular volume ({' '.join(str(exc).split())[:160]})",
+                          path=p) from None
+    arr = np.asarray(vol.array)
+    if arr.ndim == 3:
+        arr = arr[..., None]
+    geom, flipped = geometry_from_hd(vol.affine, arr.shape[:3])
+    masks = np.moveaxis(arr >= 0.5, -1, 0)
+    if flipped:
+        masks = masks[:, ::-1]
+    segments = []
+    for n in numbers:
+        d = seg.get_segment_description(n)
+        segments.append(SegSegment(number=int(n), label=str(d.SegmentLabel), color=_rgb(d),
+                                   algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
+    refs = seg.get_source_image_uids()
+    return SegContents(
+        segments=segments, masks=np.ascontiguousarray(masks), geometry=geom,
+        segmentation_type=str(seg.SegmentationType), frame_of_reference=str(seg.get("FrameOfReferenceUID", "")),
+        referenced_series=sorted({str(r[1]) for r in refs}), referenced_instances=[str(r[2]) for r in refs],
+        number_of_frames=int(seg.get("NumberOfFrames", 0) or 0),
+    )

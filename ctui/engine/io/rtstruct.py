@@ -1,0 +1,267 @@
+"""DICOM RT Structure Set (RTSTRUCT): write closed planar contours over a series, read them back.
+
+highdicom has no RTSTRUCT class, so the dataset is built with pydicom, following PS3.3
+A.19 (RT Structure Set IOD) as 3D Slicer (SlicerRT), Eclipse and rt-utils read it:
+
+* one ROI per object (StructureSetROISequence: number, name, generation algorithm
+  SEMIAUTOMATIC; RTROIObservationsSequence; ROIContourSequence with the object's colour);
+* per slice where the object is, one CLOSED_PLANAR contour per boundary (outer
+  boundaries and holes alike; holes are read back by the even-odd rule, as SlicerRT
+  and rt-utils do), in patient mm (LPS), each referencing its image
+  (ContourImageSequence: ReferencedSOPClassUID + ReferencedSOPInstanceUID);
+* ReferencedFrameOfReferenceSequence lists every image of the series;
+* no PatientName/ID/BirthDate (blank type-2 values) unless ``keep_identifiers``.
+
+Contours are the 0.5 iso-lines of each slice's mask (marching squares, scikit-image):
+they pass half-way between object and background pixel centres, so filling the
+polygons by pixel centre (even-odd) gives back exactly the slice's mask; a round trip
+is lossless.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.core.atomic import atomic_write
+from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.progress import Progress, report
+from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, TYPE2_IDENTIFIERS, _objects_in, blank_identifiers
+
+STUDY_COMPONENT_MANAGEMENT = "1.2.840.10008.3.1.2.3.1"
+_COPIED = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyInstanceUID", "StudyDate",
+           "StudyTime", "StudyID", "AccessionNumber", "ReferringPhysicianName", "StudyDescription",
+           "FrameOfReferenceUID", "PositionReferenceIndicator", "SpecificCharacterSet")
+
+
+# =========================================================================== contours
+def slice_contours(mask2d: np.ndarray) -> list[np.ndarray]:
+    """Closed contours (n, 2) of (x, y) pixel coordinates around a 2D mask, not repeated at the end.
+
+    The 0.5 iso-lines of the padded mask: every object pixel centre is inside an odd
+    number of them, every background centre an even number.
+    """
+    from skimage.measure import find_contours
+
+    m = np.pad(np.asarray(mask2d, dtype=np.float32), 1)
+    out = []
+    for c in find_contours(m, 0.5):
+        pts = c[:-1] if len(c) > 1 and np.allclose(c[0], c[-1]) else c
+        if len(pts) >= 3:
+            out.append(np.column_stack([pts[:, 1] - 1.0, pts[:, 0] - 1.0]))  # (row, col) -> (x, y), unpad
+    return out
+
+
+def fill_contours(polys: Sequence[np.ndarray], shape: tuple[int, int]) -> np.ndarray:
+    """Even-odd fill of polygons (n, 2) in (x, y) pixel coordinates: bool (ny, nx) by pixel centre."""
+    from skimage.draw import polygon
+
+    out = np.zeros(shape, dtype=bool)
+    for poly in polys:
+        if len(poly) < 3:
+            continue
+        rr, cc = polygon(poly[:, 1], poly[:, 0], shape=shape)
+        out[rr, cc] ^= True
+    return out
+
+
+# =========================================================================== write
+def _item(**kw: Any) -> Any:
+    from pydicom.dataset import Dataset
+
+    ds = Dataset()
+    for k, v in kw.items():
+        setattr(ds, k, v)
+    return ds
+
+
+def _image_ref(ds: Any) -> Any:
+    return _item(ReferencedSOPClassUID=ds.SOPClassUID, ReferencedSOPInstanceUID=ds.SOPInstanceUID)
+
+
+def _fmt_mm(values: np.ndarray) -> list[str]:
+    # DS is at most 16 characters: 6 decimals of a mm is far below any voxel
+    return [f"{v:.6f}".rstrip("0").rstrip(".") if v else "0" for v in np.round(values.ravel(), 6)]
+
+
+def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any]) -> list[Any]:
+    m = labels == oid
+    items = []
+    for z in np.flatnonzero(m.any(axis=(1, 2))):
+        for poly in slice_contours(m[z]):
+            zyx = np.column_stack([np.full(len(poly), float(z)), poly[:, 1], poly[:, 0]])
+            mm = geometry.index_to_mm(zyx)
+            items.append(_item(ContourImageSequence=[_image_ref(sources[int(z)])], ContourGeometricType="CLOSED_PLANAR",
+                               NumberOfContourPoints=len(poly), ContourData=_fmt_mm(mm)))
+    return items
+
+
+def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any], *, objects: Sequence[dict] | None = None,
+                   keep_identifiers: bool = False, label: str = "ctui", progress: Progress | None = None) -> Any:
+    """The RTSTRUCT dataset (pydicom FileDataset-ready Dataset) for ``labels`` on ``sources``.
+
+    ``labels`` (z, y, x) uint8 on ``geometry``, the series' grid (one source header per slice,
+    in slice order, from :func:`ctui.engine.io.dicomseg.source_datasets`).
+    """
+    import pydicom
+    from pydicom.dataset import FileMetaDataset
+    from pydicom.uid import ExplicitVRLittleEndian, generate_uid
+
+    from ctui import __version__
+
+    lab = np.asarray(labels)
+    objs = _objects_in(lab, objects)
+    if not objs:
+        raise CtuiError("no object in the labels: nothing to write")
+    if len(sources) != lab.shape[0]:
+        raise CtuiError(f"RTSTRUCT needs one source image per slice ({len(sources)} images, {lab.shape[0]} slices); "
+                        "a multi-frame source is not supported for RTSTRUCT: export DICOM-SEG")
+    src = sources[0]
+    ds = pydicom.Dataset()
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.MediaStorageSOPClassUID = RTSTRUCT_SOP_CLASS
+    ds.file_meta.MediaStorageSOPInstanceUID = generate_uid()
+    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    for kw in _COPIED:
+        if kw in src:
+            setattr(ds, kw, src.data_element(kw).value)
+    for kw in ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyDate", "StudyTime", "StudyID",
+               "AccessionNumber", "ReferringPhysicianName"):
+        if kw not in ds:
+            setattr(ds, kw, "")
+    now = datetime.datetime.now()
+    ds.SOPClassUID = RTSTRUCT_SOP_CLASS
+    ds.SOPInstanceUID = ds.file_meta.MediaStorageSOPInstanceUID
+    ds.Modality = "RTSTRUCT"
+    ds.SeriesInstanceUID = generate_uid()
+    ds.SeriesNumber = int(src.get("SeriesNumber", 0) or 0) + 1001
+    ds.SeriesDescription = "ctui structures"
+    ds.InstanceNumber = 1
+    ds.OperatorsName = ""
+    ds.Manufacturer = "ctui"
+    ds.ManufacturerModelName = "ctui"
+    ds.SoftwareVersions = __version__
+    ds.StructureSetLabel = label[:16]
+    ds.StructureSetDate, ds.StructureSetTime = now.strftime("%Y%m%d"), now.strftime("%H%M%S")
+    ds.InstanceCreationDate, ds.InstanceCreationTime = ds.StructureSetDate, ds.StructureSetTime
+    for_uid = str(src.get("FrameOfReferenceUID", "")) or generate_uid()
+    ds.FrameOfReferenceUID = for_uid
+    series_ref = _item(SeriesInstanceUID=src.SeriesInstanceUID, ContourImageSequence=[_image_ref(s) for s in sources])
+    study_ref = _item(ReferencedSOPClassUID=STUDY_COMPONENT_MANAGEMENT, ReferencedSOPInstanceUID=src.StudyInstanceUID,
+                      RTReferencedSeriesSequence=[series_ref])
+    ds.ReferencedFrameOfReferenceSequence = [_item(FrameOfReferenceUID=for_uid, RTReferencedStudySequence=[study_ref])]
+    rois, contours, observations = [], [], []
+    for n, o in enumerate(objs, start=1):
+        report(progress, n - 1, len(objs), f"RTSTRUCT: contours of {o['name']}")
+        rois.append(_item(ROINumber=n, ReferencedFrameOfReferenceUID=for_uid, ROIName=o["name"][:64],
+                          ROIGenerationAlgorithm="SEMIAUTOMATIC", ROIGenerationDescription="ctui threshold fill"))
+        contours.append(_item(ROIDisplayColor=[int(c) for c in o["color"]], ReferencedROINumber=n,
+                              ContourSequence=_roi_contours(lab, o["id"], geometry, sources)))
+        observations.append(_item(ObservationNumber=n, ReferencedROINumber=n, RTROIInterpretedType="ORGAN",
+                                  ROIInterpreter=""))
+    ds.StructureSetROISequence = rois
+    ds.ROIContourSequence = contours
+    ds.RTROIObservationsSequence = observations
+    return blank_identifiers(ds, keep=keep_identifiers)
+
+
+def write_rtstruct(path: str | os.PathLike, labels: np.ndarray, geometry: Geometry, sources: Sequence[Any], *,
+                   objects: Sequence[dict] | None = None, keep_identifiers: bool = False,
+                   progress: Progress | None = None) -> Path:
+    """Write :func:`build_rtstruct`'s dataset to ``path`` atomically; returns the path."""
+    import pydicom
+
+    ds = build_rtstruct(labels, geometry, sources, objects=objects, keep_identifiers=keep_identifiers, progress=progress)
+    p = Path(path)
+    with atomic_write(p, "wb") as fh:
+        pydicom.dcmwrite(fh, ds, enforce_file_format=True)
+    report(progress, 1.0, 1.0, "RTSTRUCT written")
+    return p
+
+
+# =========================================================================== read
+@dataclass
+class RoiInfo:
+    """One ROI: ``number``, ``name``, ``color`` RGB or None, ``contours`` list of (n, 3) mm arrays, ``images`` UIDs."""
+
+    number: int
+    name: str
+    color: tuple[int, int, int] | None = None
+    contours: list[np.ndarray] = field(default_factory=list)
+    images: list[str] = field(default_factory=list)
+
+
+@dataclass
+class RtStructContents:
+    rois: list[RoiInfo]
+    frame_of_reference: str = ""
+    referenced_series: list[str] = field(default_factory=list)
+    referenced_instances: list[str] = field(default_factory=list)
+
+
+def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
+    """ROIs and their contours (patient mm) of an RTSTRUCT file; FormatError when it is not one."""
+    import pydicom
+
+    p = Path(path)
+    try:
+        ds = pydicom.dcmread(str(p))
+    except Exception as exc:  # noqa: BLE001 - foreign files raise many types
+        raise FormatError(f"not a readable DICOM file ({' '.join(str(exc).split())[:160]})", path=p) from None
+    if str(ds.get("SOPClassUID", "")) != RTSTRUCT_SOP_CLASS and ds.get("Modality") != "RTSTRUCT":
+        raise FormatError("not an RT Structure Set", path=p)
+    names = {int(r.ROINumber): str(r.get("ROIName", "")) for r in ds.get("StructureSetROISequence", [])}
+    rois: list[RoiInfo] = []
+    for rc in ds.get("ROIContourSequence", []):
+        num = int(rc.ReferencedROINumber)
+        color = tuple(int(c) for c in rc.ROIDisplayColor) if "ROIDisplayColor" in rc else None
+        roi = RoiInfo(number=num, name=names.get(num) or f"ROI {num}", color=color)
+        for c in rc.get("ContourSequence", []):
+            data = np.asarray([float(v) for v in c.get("ContourData", [])], dtype=np.float64)
+            if data.size < 3 or data.size % 3:
+                continue
+            roi.contours.append(data.reshape(-1, 3))
+            imgs = c.get("ContourImageSequence", [])
+            roi.images.append(str(imgs[0].ReferencedSOPInstanceUID) if imgs else "")
+        rois.append(roi)
+    series, instances = [], []
+    for fr in ds.get("ReferencedFrameOfReferenceSequence", []):
+        for st in fr.get("RTReferencedStudySequence", []):
+            for se in st.get("RTReferencedSeriesSequence", []):
+                series.append(str(se.SeriesInstanceUID))
+                instances += [str(i.ReferencedSOPInstanceUID) for i in se.get("ContourImageSequence", [])]
+    return RtStructContents(rois=rois, frame_of_reference=str(ds.get("FrameOfReferenceUID", "")),
+                            referenced_series=series, referenced_instances=instances)
+
+
+def roi_mask(roi: RoiInfo, geometry: Geometry, *, tol: float = 0.1) -> tuple[np.ndarray, int]:
+    """Rasterise an ROI on ``geometry``: (bool (z, y, x) mask, contours off the grid's slices).
+
+    A contour belongs to the slice its points lie on (within ``tol`` of a slice); holes and
+    nested parts by the even-odd rule per slice.
+    """
+    nz, ny, nx = geometry.shape
+    per_slice: dict[int, list[np.ndarray]] = {}
+    off = 0
+    for pts in roi.contours:
+        idx = geometry.mm_to_index(pts)  # (n, 3) z, y, x
+        z = float(np.median(idx[:, 0]))
+        k = int(round(z))
+        if abs(z - k) > tol or np.abs(idx[:, 0] - z).max() > tol or not 0 <= k < nz:
+            off += 1
+            continue
+        per_slice.setdefault(k, []).append(np.column_stack([idx[:, 2], idx[:, 1]]))
+    mask = np.zeros((nz, ny, nx), dtype=bool)
+    for k, polys in per_slice.items():
+        mask[k] = fill_contours(polys, (ny, nx))
+    return mask, off
+
+
+__all__ = ["slice_contours", "fill_contours", "build_rtstruct", "write_rtstruct", "read_rtstruct", "roi_mask",
+           "RoiInfo", "RtStructContents", "TYPE2_IDENTIFIERS"]
