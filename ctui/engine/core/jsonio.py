@@ -26,8 +26,13 @@ def _float(x: float, ndigits: int | None) -> float | None:
     return round(x, ndigits) if ndigits is not None else x
 
 
-def to_jsonable(obj: Any, *, ndigits: int | None = NDIGITS) -> Any:
-    """A JSON-ready copy of ``obj`` (NaN/inf become null)."""
+def to_jsonable(obj: Any, *, ndigits: int | None = NDIGITS, strict: bool = False) -> Any:
+    """A JSON-ready copy of ``obj`` (NaN/inf become null).
+
+    ``ndigits=None`` keeps floats exact (files that must round-trip); ``strict`` raises
+    TypeError for a value with no JSON form instead of storing its ``str()``.
+    """
+    kw = {"ndigits": ndigits, "strict": strict}
     if obj is None or isinstance(obj, (bool, str)):
         return obj
     if isinstance(obj, (bool, np.bool_)):
@@ -37,22 +42,24 @@ def to_jsonable(obj: Any, *, ndigits: int | None = NDIGITS) -> Any:
     if isinstance(obj, (float, np.floating)):
         return _float(obj, ndigits)
     if isinstance(obj, Enum):
-        return to_jsonable(obj.value, ndigits=ndigits)
+        return to_jsonable(obj.value, **kw)
     if isinstance(obj, PurePath):
         return str(obj)
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         if hasattr(obj, "to_dict"):
-            return to_jsonable(obj.to_dict(), ndigits=ndigits)
-        return {f.name: to_jsonable(getattr(obj, f.name), ndigits=ndigits)
+            return to_jsonable(obj.to_dict(), **kw)
+        return {f.name: to_jsonable(getattr(obj, f.name), **kw)
                 for f in dataclasses.fields(obj) if not f.name.startswith("_")}
     if isinstance(obj, np.ndarray):
-        return to_jsonable(obj.tolist(), ndigits=ndigits)
+        return to_jsonable(obj.tolist(), **kw)
     if isinstance(obj, dict):
-        return {str(k): to_jsonable(v, ndigits=ndigits) for k, v in obj.items()}
+        return {str(k): to_jsonable(v, **kw) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, set, frozenset)):
-        return [to_jsonable(v, ndigits=ndigits) for v in obj]
+        return [to_jsonable(v, **kw) for v in obj]
     if hasattr(obj, "to_dict"):
-        return to_jsonable(obj.to_dict(), ndigits=ndigits)
+        return to_jsonable(obj.to_dict(), **kw)
+    if strict:
+        raise TypeError(f"a {type(obj).__name__} has no JSON form")
     return str(obj)
 
 

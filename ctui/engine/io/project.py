@@ -32,6 +32,7 @@ import json
 import os
 import re
 import stat
+import weakref
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,10 +42,12 @@ import numpy as np
 
 from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import FormatError
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.jsonio import to_jsonable
+from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import scrub
+from ctui.engine.io.projectschema import FORMAT_NAME, FORMAT_VERSION, SOURCE_OPTION_KEYS, validate
 
-FORMAT_NAME = "ctui-project"
-FORMAT_VERSION = 1
 JSON_MEMBER = "project.json"
 LABELS_MEMBER = "labels.npy"
 #: Largest project.json accepted (bytes, uncompressed).
@@ -81,6 +84,13 @@ class Project:
         Display window.
     meta : dict
         Free-form extra data (no patient identifiers: identifying keys are dropped).
+    geometry : Geometry or None
+        The source grid (shape, spacing, origin, direction): measure, mesh, render and
+        drift work from the project alone when the series is gone.
+    modality, series_uid : str or None
+        Of the source series.
+    voxel_hash : str or None
+        :func:`voxel_hash` of the source voxels: a series that no longer matches is refused.
     version : int
         Format version the project was read from / will be written as.
     """
@@ -94,6 +104,10 @@ class Project:
     drift: dict = field(default_factory=dict)
     window: tuple | None = None
     meta: dict = field(default_factory=dict)
+    geometry: Geometry | None = None
+    modality: str | None = None
+    series_uid: str | None = None
+    voxel_hash: str | None = None
     version: int = FORMAT_VERSION
 
     def to_json_dict(self) -> dict:
@@ -109,11 +123,21 @@ class Project:
             "drift": self.drift or {},
             "window": list(self.window) if self.window is not None else None,
             "meta": scrub(self.meta or {}),
+            "geometry": self.geometry.to_dict() if self.geometry is not None else None,
+            "modality": self.modality,
+            "series_uid": self.series_uid,
+            "voxel_hash": self.voxel_hash,
             "labels": None,
         }
         if self.labels is not None:
             d["labels"] = {"member": LABELS_MEMBER, "shape": [int(s) for s in self.labels.shape], "dtype": "uint8"}
-        return _jsonable(d)
+        return to_jsonable(d, ndigits=None, strict=True)
+
+    def set_source(self, volume: Any) -> "Project":
+        """Record ``volume``'s geometry, modality, series UID and voxel hash; returns self."""
+        for key, value in source_identity(volume).items():
+            setattr(self, key, value)
+        return self
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Project):
@@ -125,25 +149,47 @@ class Project:
         return self.labels is None or bool(np.array_equal(self.labels, other.labels))
 
 
-def _jsonable(obj: Any) -> Any:
-    """Convert numpy scalars/arrays and tuples to plain JSON types (recursively)."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    if isinstance(obj, Path):
-        return str(obj)
-    if obj is None or isinstance(obj, (str, int, float, bool)):
-        return obj
-    raise TypeError(f"cannot store a {type(obj).__name__} in a project")
+def voxel_hash(data: np.ndarray) -> str:
+    """``blake2b-128:<hex>`` of the voxels (shape, dtype and bytes); ~1 GB/s, cached per array."""
+    arr = np.ascontiguousarray(data)
+    key = id(data)
+    hit = _HASHES.get(key)
+    if hit is not None and hit[0]() is data:
+        return hit[1]
+    h = hashlib.blake2b(digest_size=16)
+    h.update(f"{arr.dtype.str}{arr.shape}".encode())
+    h.update(memoryview(arr).cast("B"))
+    out = "blake2b-128:" + h.hexdigest()
+    try:
+        _HASHES[key] = (weakref.ref(data), out)
+    except TypeError:  # not weak-referenceable: no cache
+        pass
+    if len(_HASHES) > 64:
+        for k in [k for k, (ref, _) in _HASHES.items() if ref() is None]:
+            del _HASHES[k]
+    return out
+
+
+_HASHES: dict[int, tuple[Any, str]] = {}
+
+
+def source_identity(volume: Any) -> dict:
+    """The fields of :class:`Project` that tie it to ``volume`` (a Volume)."""
+    uid = None
+    idx = (volume.meta or {}).get("series_index")
+    if isinstance(idx, int) and 0 <= idx < len(volume.series or []):
+        uid = str(volume.series[idx].get("uid") or "") or None
+    return {"geometry": Geometry.of(volume), "modality": str(volume.modality or "") or None, "series_uid": uid,
+            "voxel_hash": voxel_hash(volume.data)}
+
+
+def source_load_options(project: Project) -> dict:
+    """The recorded loader options, as keyword arguments for ``ctui.engine.io.series.load``."""
+    opts = {k: v for k, v in (project.source_options or {}).items() if k in SOURCE_OPTION_KEYS and v is not None}
+    for k in ("spacing", "shape", "crop", "downsample"):
+        if isinstance(opts.get(k), list):
+            opts[k] = tuple(opts[k])
+    return opts
 
 
 # --------------------------------------------------------------------------- save
@@ -249,80 +295,61 @@ def _load_zip(p: Path, zf: zipfile.ZipFile, file_size: int) -> Project:
         meta = json.loads(_read_member(zf, ji, ji.file_size).decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise FormatError(f"{p}: not a valid ctui project: {JSON_MEMBER} is not JSON ({exc})") from None
-    _expect(isinstance(meta, dict) and meta.get("format") == FORMAT_NAME, p, "not a ctui project file")
-    version = meta.get("version")
-    _expect(isinstance(version, int) and not isinstance(version, bool) and version >= 1, p, f"bad version {version!r}")
-    if version > FORMAT_VERSION:
-        raise FormatError(f"{p}: project format version {version} is newer than this ctui supports ({FORMAT_VERSION}); update ctui")
-    for key, typ in (("source_options", dict), ("pipeline", dict), ("objects", list), ("propagation", dict), ("drift", dict), ("meta", dict)):
-        _expect(isinstance(meta.get(key, typ()), typ), p, f"{key} must be a {typ.__name__}")
-    _expect(isinstance(meta.get("source_path", ""), str), p, "source_path must be a string")
+    version, geometry = validate(meta, p)
     window = meta.get("window")
-    if window is not None:
-        _expect(
-            isinstance(window, list) and len(window) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in window),
-            p,
-            "window must be [centre, width]",
-        )
-        window = (window[0], window[1])
-    labels = None
-    lab = meta.get("labels")
-    if lab is not None:
-        _expect(isinstance(lab, dict), p, "labels entry must be an object")
-        shape = lab.get("shape")
-        _expect(
-            isinstance(shape, list) and len(shape) == 3 and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape),
-            p,
-            f"bad labels shape {shape!r}",
-        )
-        _expect(lab.get("dtype") == "uint8", p, f"labels dtype {lab.get('dtype')!r} is not uint8")
-        n = int(np.prod(shape, dtype=np.int64))
-        _expect(n <= MAX_VOXELS, p, f"labels shape {shape} too large")
-        _check_memory(p, n)
-        member = lab.get("member", LABELS_MEMBER)
-        _expect(member in infos, p, f"{member} is missing")
-        li = infos[member]
-        # an .npy header is 64..~4096 bytes; the data must be exactly n bytes
-        _expect(n <= li.file_size <= n + 4096 + 64, p, f"{member} size {li.file_size} does not match labels shape {shape}")
-        _expect(li.file_size <= li.compress_size * DEFLATE_MAX_RATIO + 4096, p, f"{member} declared size is implausible for its compressed size")
-        _expect(li.compress_size <= file_size, p, f"{member} is larger than the file (truncated?)")
-        raw = _read_member(zf, li, li.file_size)
-        fh = io.BytesIO(raw)
-        major, minor = np.lib.format.read_magic(fh)
-        if (major, minor) == (1, 0):
-            hshape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-        else:
-            hshape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-        _expect(list(hshape) == shape and dtype == np.uint8 and not fortran, p, f"{member} header {hshape} {dtype} differs from project.json")
-        off = fh.tell()
-        _expect(len(raw) - off == n, p, f"{member} holds {len(raw) - off} bytes, shape {shape} needs {n}")
-        labels = np.frombuffer(raw, np.uint8, count=n, offset=off).reshape(shape).copy()
+    labels = _read_labels(p, zf, infos, meta.get("labels"), file_size)
     return Project(
-        source_path=meta.get("source_path", ""),
-        source_options=meta.get("source_options", {}),
-        pipeline=meta.get("pipeline", {}),
+        source_path=meta.get("source_path") or "",
+        source_options=meta.get("source_options") or {},
+        pipeline=meta.get("pipeline") or {},
         labels=labels,
-        objects=meta.get("objects", []),
-        propagation=meta.get("propagation", {}),
-        drift=meta.get("drift", {}),
-        window=window,
-        meta=meta.get("meta", {}),
+        objects=meta.get("objects") or [],
+        propagation=meta.get("propagation") or {},
+        drift=meta.get("drift") or {},
+        window=(window[0], window[1]) if window is not None else None,
+        meta=meta.get("meta") or {},
+        geometry=geometry,  # version 1: from meta's spacing_zyx_mm... when recorded
+        modality=meta.get("modality"),
+        series_uid=meta.get("series_uid"),
+        voxel_hash=meta.get("voxel_hash"),
         version=version,
     )
 
 
-def _check_memory(p: Path, nbytes: int) -> None:
-    """Refuse to allocate more than half the available memory (psutil)."""
-    if nbytes < 256 * 1024 * 1024:
-        return
-    try:
-        import psutil
-
-        avail = psutil.virtual_memory().available
-    except Exception:  # noqa: BLE001 - psutil missing or failing: do not block
-        return
-    if nbytes > avail // 2:
-        raise FormatError(f"{p}: labels need {nbytes / 2**20:.0f} MiB, more than the memory available ({avail / 2**20:.0f} MiB free)")
+def _read_labels(p: Path, zf: zipfile.ZipFile, infos: dict, lab: Any, file_size: int) -> np.ndarray | None:
+    """The label volume of the ``labels`` entry, read within the bounds it declares."""
+    if lab is None:
+        return None
+    _expect(isinstance(lab, dict), p, "labels entry must be an object")
+    shape = lab.get("shape")
+    _expect(
+        isinstance(shape, list) and len(shape) == 3 and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape),
+        p,
+        f"bad labels shape {shape!r}",
+    )
+    _expect(lab.get("dtype") == "uint8", p, f"labels dtype {lab.get('dtype')!r} is not uint8")
+    n = int(np.prod(shape, dtype=np.int64))
+    _expect(n <= MAX_VOXELS, p, f"labels shape {shape} too large")
+    if n >= 256 * 1024 * 1024:
+        check_allocation(n, what="the project's labels", path=p, fraction=0.5)
+    member = lab.get("member", LABELS_MEMBER)
+    _expect(isinstance(member, str) and member in infos, p, f"{member} is missing")
+    li = infos[member]
+    # an .npy header is 64..~4096 bytes; the data must be exactly n bytes
+    _expect(n <= li.file_size <= n + 4096 + 64, p, f"{member} size {li.file_size} does not match labels shape {shape}")
+    _expect(li.file_size <= li.compress_size * DEFLATE_MAX_RATIO + 4096, p, f"{member} declared size is implausible for its compressed size")
+    _expect(li.compress_size <= file_size, p, f"{member} is larger than the file (truncated?)")
+    raw = _read_member(zf, li, li.file_size)
+    fh = io.BytesIO(raw)
+    major, minor = np.lib.format.read_magic(fh)
+    if (major, minor) == (1, 0):
+        hshape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+    else:
+        hshape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+    _expect(list(hshape) == shape and dtype == np.uint8 and not fortran, p, f"{member} header {hshape} {dtype} differs from project.json")
+    off = fh.tell()
+    _expect(len(raw) - off == n, p, f"{member} holds {len(raw) - off} bytes, shape {shape} needs {n}")
+    return np.frombuffer(raw, np.uint8, count=n, offset=off).reshape(shape).copy()
 
 
 # --------------------------------------------------------------------------- autosave

@@ -1,0 +1,39 @@
+"""Every default of a user action, in one place: the CLI's option defaults and the TUI's
+screens read them from here, so both give the same numbers for the same object."""
+
+from __future__ import annotations
+
+#: Distance between cross-sections along a path (mm), for `ctui measure` and the TUI's M screen.
+SECTION_STEP_MM = 0.5
+#: Section area estimate: "pv" (partial-volume integral) or "contour" (shoelace).
+SECTION_AREA = "pv"
+#: Thin-slab averaging of each section along the path (mm; 0 = single planes).
+SECTION_AVERAGE_MM = 0.0
+
+#: Object surfaces: "marching-cubes" (smoothed signed distance) or "contours".
+MESH_METHOD = "marching-cubes"
+#: Contour tiling: "dp" (minimum area) or "greedy".
+CONTOUR_TILING = "dp"
+#: Taubin smoothing iterations after meshing (0 = none).
+MESH_SMOOTH_ITERATIONS = 0
+
+#: Rendering.
+RENDER_SIZE = (800, 600)
+RENDER_AZIMUTH = 30.0
+RENDER_ELEVATION = 15.0
+TURNTABLE_FRAMES = 36
+ANIMATION_FPS = 15.0
+FLY_FRAMES = 48
+FLY_FOV_DEG = 70.0
+MAX_RENDER_SIDE = 8192
+
+#: Drift check: running-median fit over this many slices.
+DRIFT_FIT = "median"
+DRIFT_FIT_WINDOW = 9
+DRIFT_ESTIMATE = "centroid"
+
+#: Input kinds by file name.
+PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
+LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
+MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
+MRIC_SUFFIXES = (".mric",)

@@ -1,0 +1,29 @@
+"""Describe a series (``ctui info``): :func:`describe_series`."""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Sequence
+
+from ctui.engine.core.volume import Volume
+from ctui.engine.io.series import load
+
+
+def orientation_name(direction: Any) -> str:
+    """'axial', 'coronal', 'sagittal' or 'oblique (near ...)' from the slice normal (direction[:, 2])."""
+    n = [abs(float(v)) for v in (direction[0][2], direction[1][2], direction[2][2])]
+    k = max(range(3), key=lambda i: n[i])
+    name = ("sagittal", "coronal", "axial")[k]
+    return name if n[k] > 0.995 else f"oblique (near {name})"
+
+
+def describe_series(path: str | os.PathLike | Sequence[str], **load_options: Any) -> tuple[Volume, dict]:
+    """(Volume, the JSON description of ``ctui info --json``)."""
+    vol = load(path, **load_options)
+    d = vol.describe()
+    d["orientation"] = orientation_name(vol.direction)
+    d["value_range"] = [float(v) for v in d["value_range"]]
+    if vol.slice_positions is not None:
+        d["slice_positions_mm"] = [round(float(v), 4) for v in vol.slice_positions]
+    d["meta"] = {k: v for k, v in vol.meta.items() if isinstance(v, (str, int, float, bool, list, dict))}
+    return vol, d

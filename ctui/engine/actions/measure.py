@@ -1,0 +1,129 @@
+"""Measure an object: :func:`measure_object` (volumes, area, centreline, cross-sections,
+volume between planes), the one path ``ctui measure`` and the TUI's measure screen take,
+with one default section step (:data:`ctui.engine.actions.defaults.SECTION_STEP_MM`)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.actions import defaults
+from ctui.engine.actions.opened import Opened, open_input
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.measure import stats
+from ctui.engine.measure.sections import plot_sections, write_sections_csv
+
+
+@dataclass
+class MeasureResult:
+    """One object's measurements (JSON keys of ``ctui measure --json`` via :meth:`to_dict`).
+
+    volume_ml : {"voxels", "mesh"[, "partial_volume"]} mL; area_mm2 : mesh surface area;
+    path_length_mm, sections (list of {s_mm, area_mm2, eq_diameter_mm, min_diameter_mm,
+    max_diameter_mm}), between ({volume_ml, area1_mm2, area2_mm2}) when a path was given;
+    rows (full section dicts with contours) and path_mm (n, 3) for drawing, not in JSON.
+    """
+
+    input: str
+    object: int | None = None
+    volume_ml: dict = field(default_factory=lambda: {"voxels": None, "mesh": None})
+    volume_difference_percent: float | None = None
+    area_mm2: float | None = None
+    path_length_mm: float | None = None
+    sections: list = field(default_factory=list)
+    between: dict | None = None
+    centroid_mm: list | None = None
+    principal_axes_mm: list | None = None
+    partial_volume: dict | None = None
+    warnings: list = field(default_factory=list)
+    step_mm: float = defaults.SECTION_STEP_MM
+    rows: list = field(default_factory=list, repr=False)
+    path_mm: np.ndarray | None = field(default=None, repr=False)
+    stats: dict | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in ("input", "object", "volume_ml", "volume_difference_percent", "area_mm2",
+                                           "path_length_mm", "sections", "between", "warnings")}
+        if self.centroid_mm is not None:
+            d["centroid_mm"] = self.centroid_mm
+            d["principal_axes_mm"] = self.principal_axes_mm
+        if self.partial_volume is not None:
+            d["partial_volume"] = self.partial_volume
+        return d
+
+
+def _mesh_input(opened: Opened) -> MeasureResult:
+    assert opened.mesh is not None
+    st = stats.mesh_stats(opened.mesh)
+    return MeasureResult(os.path.basename(opened.path), volume_ml={"voxels": None, "mesh": st["volume_ml"]},
+                         area_mm2=st["area_mm2"], warnings=list(st["warnings"]))
+
+
+def measure_object(source: str | os.PathLike | Opened, *, object: int | None = None, path: Any = None,
+                   path_voxels: bool = False, step_mm: float = defaults.SECTION_STEP_MM,
+                   between: Sequence[float] | None = None, mesh: bool = True, area: str = defaults.SECTION_AREA,
+                   average_mm: float = defaults.SECTION_AVERAGE_MM, partial_volume: bool = False) -> MeasureResult:
+    """Measure one object of a project / label map (or a mesh file: volume and area only).
+
+    ``object``: its id (default: the first present). ``path``: None (no sections),
+    "auto" (centreline) or points "x,y,z;..." mm (voxel z,y,x with ``path_voxels``) or an
+    (n, 3) array; sections every ``step_mm``; ``between`` (s1, s2) mm: the volume between
+    the planes normal to the path there. ``partial_volume``: sections and a third volume
+    on the object's partial-volume fraction from the source series' grey levels.
+    """
+    if step_mm <= 0:
+        raise CtuiError(f"--step must be positive, got {step_mm}")
+    if average_mm < 0:
+        raise CtuiError(f"--average must be >= 0, got {average_mm}")
+    if isinstance(source, Opened):
+        opened = source
+    else:
+        p = os.fspath(source)
+        if not os.path.exists(p):
+            raise CtuiError("no such file", path=p)
+        if os.path.isdir(p):
+            raise CtuiError("is a folder; give a .ctui project, a label file or a mesh", path=p)
+        opened = open_input(p, require_labels=True, with_series=True if partial_volume else None)
+        if opened.kind not in ("project", "labels", "mesh"):
+            raise CtuiError("unknown input type (expected .ctui, .nii, .nii.gz, .nrrd, .stl, .ply or .obj)", path=p)
+    if opened.kind == "mesh":
+        if path is not None or between is not None:
+            raise CtuiError("a mesh gives volume and area only (no --path/--between)", path=opened.path)
+        return _mesh_input(opened)
+    image = None
+    if partial_volume:
+        if opened.volume is None:
+            raise CtuiError("--partial-volume needs a project whose source series can be loaded", path=opened.path)
+        image = opened.volume.data
+    oid = opened.pick_objects(object)[0]
+    g = opened.geometry
+    assert opened.labels is not None and g is not None
+    res = stats.measure_object(opened.labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
+                               path=path, path_voxels=path_voxels, step_mm=step_mm,
+                               between=tuple(between) if between is not None else None, mesh=mesh, area=area,
+                               average_mm=average_mm, image=image)
+    pv = res.get("partial_volume")
+    return MeasureResult(
+        os.path.basename(opened.path), object=res["object"], volume_ml=res["volume_ml"],
+        volume_difference_percent=res["volume_difference_percent"], area_mm2=res["area_mm2"],
+        path_length_mm=res["path_length_mm"], sections=res["sections"], between=res["between"],
+        centroid_mm=res["centroid_mm"], principal_axes_mm=res["principal_axes_mm"],
+        partial_volume=None if pv is None else {"object_value": pv["fg"], "surroundings_value": pv["bg"]},
+        warnings=list(opened.notes) + list(res["warnings"]), step_mm=step_mm, rows=res["rows"],
+        path_mm=res["path_mm"], stats=res["stats"])
+
+
+def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None,
+                  plot: str | os.PathLike | None = None, references: Sequence[float] | None = None) -> list[str]:
+    """Write the section table (CSV) and/or the area plot (PNG); returns the paths written."""
+    written = []
+    if csv:
+        write_sections_csv(csv, result.rows)
+        written.append(os.fspath(csv))
+    if plot:
+        plot_sections(plot, result.rows, references=references, title=f"object {result.object} sections")
+        written.append(os.fspath(plot))
+    return written

@@ -1,0 +1,182 @@
+"""Objects -> meshes: :func:`mesh_objects` (projects, label maps, series + iso, MRIC), the one
+path the CLI (``ctui mesh``, ``ctui render``) and the TUI (3D view, export) build surfaces by."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.actions import defaults
+from ctui.engine.actions.opened import Opened, open_input
+from ctui.engine.core.borders import object_borders
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.core.progress import Progress, report
+from ctui.engine.io.mric import read_mric
+from ctui.engine.mesh import meshtools
+from ctui.engine.mesh.contour_connect import connect_contours
+from ctui.engine.mesh.surface import isosurface, label_surfaces
+
+
+@dataclass
+class MeshResult:
+    """Surfaces of one meshing action: ``meshes`` {object id: Mesh} (id 0 for an
+    isosurface or MRIC surface), ``mesh`` all of them merged, and its report."""
+
+    meshes: dict[int, Mesh]
+    mesh: Mesh
+    kind: str
+    method: str
+    objects: list[int] = field(default_factory=list)
+    iso: float | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def report(self) -> dict:
+        return meshtools.mesh_report(self.mesh)
+
+    def to_dict(self) -> dict:
+        """The JSON of ``ctui mesh --json`` (without ``out``)."""
+        rep = self.report
+        d: dict[str, Any] = {
+            "triangles": rep["triangles"], "vertices": rep["vertices"], "watertight": rep["watertight"],
+            "volume_ml": round(rep["volume_ml"], 4), "area_mm2": round(rep["area_mm2"], 2),
+            "components": rep["components"], "boundary_edges": rep["boundary_edges"],
+            "non_manifold_edges": rep["non_manifold_edges"], "kind": self.kind, "method": self.method,
+        }
+        if self.kind in ("project", "labels"):
+            d["objects"] = list(self.objects)
+        if self.iso is not None:
+            d["iso"] = self.iso
+        return d
+
+
+def label_meshes(labels: np.ndarray, geometry: Geometry, ids: Sequence[int], *, method: str = defaults.MESH_METHOD,
+                 terraced: bool = False, tiling: str = defaults.CONTOUR_TILING,
+                 progress: Progress | None = None) -> dict[int, Mesh]:
+    """{id: Mesh} of the objects ``ids`` of a label map on ``geometry`` (patient mm)."""
+    g = geometry
+    if method == "contours":
+        out = {}
+        for n, k in enumerate(ids):
+            m = connect_contours(object_borders(labels, k), spacing=g.spacing, origin=g.origin,
+                                 direction=g.direction, method=tiling)
+            m.object_id = k
+            out[k] = m
+            report(progress, n + 1, len(ids), f"object {k}")
+        return out
+    surf = label_surfaces(labels, spacing=g.spacing, origin=g.origin, direction=g.direction, smooth=not terraced,
+                          objects=list(ids))
+    out = {k: surf[k] for k in ids if k in surf}
+    for k, m in out.items():
+        m.object_id = k
+    return out
+
+
+def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
+                 spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
+                 direction: np.ndarray | None = None, method: str = defaults.CONTOUR_TILING) -> Mesh:
+    """Surface from an MRIC contour file (:func:`ctui.engine.io.mric.read_mric`).
+
+    MRIC stores no object ids and no geometry: by default every border of every slice
+    is used (objects are disjoint, so they become separate closed components);
+    ``object_index`` (1-based) takes the N-th object list of each slice, as stored.
+    Holes are recognised by their clockwise orientation (negative shoelace area).
+    """
+    data = read_mric(path)
+    per_slice = []
+    for objs in data.slices:
+        if object_index is None:
+            per_slice.append([b for o in objs for b in o])
+        else:
+            k = int(object_index) - 1
+            per_slice.append(list(objs[k]) if 0 <= k < len(objs) else [])
+    return connect_contours(per_slice, spacing=spacing, origin=origin, direction=direction, method=method)
+
+
+def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str) -> Mesh:
+    vol = opened.volume
+    assert vol is not None
+    if iso is None:
+        raise CtuiError("a series needs --iso VALUE (e.g. --iso 300 for bone in CT)", path=opened.path)
+    if method == "contours":
+        mask = (vol.data > iso).astype(np.uint8)
+        mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,
+                                direction=vol.direction, method=tiling)
+    else:
+        mesh = isosurface(vol.data, iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction, close=True)
+    if mesh.n_faces == 0:
+        lo, hi = vol.value_range()
+        raise CtuiError(f"no surface at --iso {iso:g} (values range {lo:g} .. {hi:g})", path=opened.path)
+    return mesh
+
+
+def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[int] | None = None,
+                 method: str | None = None, iso: float | None = None, terraced: bool = False,
+                 tiling: str = defaults.CONTOUR_TILING, smooth: int = defaults.MESH_SMOOTH_ITERATIONS,
+                 decimate: int | None = None, spacing: Any = None, progress: Progress | None = None,
+                 **load_options: Any) -> MeshResult:
+    """Surfaces in patient mm of a project's / label map's objects, a series' isosurface
+    (``iso``) or an MRIC file's contours.
+
+    ``source`` is a path or an :class:`Opened` (the TUI passes its session's labels).
+    ``method`` "marching-cubes" (default; smoothed signed distance, or ``terraced``
+    plain marching cubes of the label map) or "contours" (default for MRIC);
+    ``smooth`` Taubin iterations and ``decimate`` a triangle target apply afterwards.
+    ``spacing`` (dz, dy, dx) mm: MRIC files (which store none) and old projects without
+    geometry whose series is gone.
+    """
+    if smooth < 0:
+        raise CtuiError(f"--smooth {smooth}: must be 0 or more iterations")
+    if decimate is not None and decimate < 4:
+        raise CtuiError(f"--decimate {decimate}: need at least 4 triangles")
+    if isinstance(source, Opened):
+        opened = source
+    else:
+        p = os.fspath(source)
+        opened = open_input(p, require_labels=True, spacing=spacing if not p.lower().endswith(".mric") else None,
+                            **load_options)
+    kind = opened.kind
+    method = method or ("contours" if kind == "mric" else defaults.MESH_METHOD)
+    if method not in ("marching-cubes", "contours"):
+        raise CtuiError(f"unknown method {method!r} (marching-cubes or contours)")
+    res = MeshResult({}, Mesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)), kind, method,
+                     notes=list(opened.notes))
+    if kind == "mric":
+        if method != "contours":
+            raise CtuiError("an MRIC file holds contours only: use --method contours", path=opened.path)
+        if iso is not None:
+            raise CtuiError("--iso applies to a series, not to an MRIC file", path=opened.path)
+        obj = objects if isinstance(objects, (int, np.integer)) or objects is None else objects[0]
+        mesh = connect_mric(opened.path, object_index=obj, spacing=spacing or (1.0, 1.0, 1.0), method=tiling)
+        if mesh.n_faces == 0:
+            raise CtuiError("no contour found" + (f" for object {obj}" if obj else ""), path=opened.path)
+        res.meshes = {0: mesh}
+    elif kind in ("project", "labels"):
+        if iso is not None:
+            raise CtuiError("--iso applies to a series; a project's objects are meshed from their labels",
+                            path=opened.path)
+        if terraced and method == "contours":
+            raise CtuiError("--terraced applies to marching cubes, not to --method contours")
+        assert opened.labels is not None and opened.geometry is not None
+        res.objects = opened.pick_objects(objects)
+        res.meshes = label_meshes(opened.labels, opened.geometry, res.objects, method=method, terraced=terraced,
+                                  tiling=tiling, progress=progress)
+    elif kind == "series":
+        res.meshes = {0: _series_mesh(opened, iso, method, tiling)}
+        res.iso = iso
+    else:
+        raise CtuiError(f"cannot mesh a {kind} file", path=opened.path)
+    parts = [res.meshes[k] for k in sorted(res.meshes)]
+    mesh = parts[0] if len(parts) == 1 and kind in ("series", "mric") else meshtools.merge(
+        parts, object_id=res.objects[0] if len(res.objects) == 1 else 0, meta={"method": method})
+    if smooth:
+        mesh = meshtools.smooth_taubin(mesh, iterations=smooth)
+    if decimate:
+        mesh = meshtools.decimate(mesh, decimate)
+    res.mesh = mesh
+    return res

@@ -1,0 +1,200 @@
+"""Open anything ctui reads: a series, a ``.ctui`` project, a label map, a mesh, an MRIC file.
+
+:func:`open_input` returns an :class:`Opened` carrying the volume (series), or the labels
+and their :class:`~ctui.engine.core.geometry.Geometry` (project, label map), or the mesh.
+A project stands on its own: its labels come with the geometry it recorded, so measure,
+mesh, render and drift work when the series has moved; the series is loaded only when
+asked for (``with_series``) or when an old project recorded no geometry, and a series
+whose voxels no longer match the project's hash is refused.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ctui.engine.actions import defaults
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.core.volume import Volume
+from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
+
+KINDS = ("series", "project", "labels", "mesh", "mric")
+
+
+def input_kind(path: str | os.PathLike) -> str:
+    """"project", "labels", "mesh", "mric" or "series" from the file name."""
+    low = os.fspath(path).lower()
+    if low.endswith(defaults.PROJECT_SUFFIXES):
+        return "project"
+    if low.endswith(defaults.MRIC_SUFFIXES):
+        return "mric"
+    if low.endswith(defaults.MESH_SUFFIXES):
+        return "mesh"
+    if low.endswith(defaults.LABEL_SUFFIXES) and not os.path.isdir(path):
+        return "labels"
+    return "series"
+
+
+@dataclass
+class Opened:
+    """What :func:`open_input` found.
+
+    kind : one of :data:`KINDS`; volume : the series (kind "series", or a project's source
+    when loaded); labels (z, y, x) uint8 and geometry : of a project or label map; mesh :
+    of a mesh file; project : the loaded Project; notes : things the user should know
+    (e.g. "source series not found: geometry from the project").
+    """
+
+    kind: str
+    path: str
+    volume: Volume | None = None
+    labels: np.ndarray | None = None
+    geometry: Geometry | None = None
+    mesh: Mesh | None = None
+    project: Project | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def object_ids(self) -> list[int]:
+        """Ids present in the labels, ascending."""
+        if self.labels is None:
+            return []
+        counts = np.bincount(np.asarray(self.labels, np.uint8).ravel(), minlength=256)
+        return [int(i) for i in np.flatnonzero(counts[1:]) + 1]
+
+    def pick_objects(self, requested: int | list[int] | None = None) -> list[int]:
+        """The requested ids (all present when None); CtuiError naming the file otherwise."""
+        present = self.object_ids
+        if not present:
+            raise CtuiError("no object in the label volume", path=self.path)
+        if requested is None:
+            return present
+        want = [int(requested)] if isinstance(requested, (int, np.integer)) else [int(v) for v in requested]
+        missing = [v for v in want if v not in present]
+        if missing:
+            raise CtuiError(f"no object {', '.join(map(str, missing))} (objects present: "
+                            f"{', '.join(map(str, present))})", path=self.path)
+        return want
+
+    def object_colors(self) -> dict[int, Any]:
+        objs = self.project.objects if self.project is not None else []
+        return {int(o["id"]): o.get("color") for o in objs or [] if isinstance(o, dict) and "id" in o}
+
+    @classmethod
+    def of_volume(cls, volume: Volume, labels: np.ndarray | None = None, *, path: str = "",
+                  project: Project | None = None) -> "Opened":
+        """What the TUI holds: a loaded series and (optionally) its label volume."""
+        return cls("project" if labels is not None else "series", path, volume=volume,
+                   labels=None if labels is None else np.asarray(labels), geometry=Geometry.of(volume),
+                   project=project)
+
+    def to_dict(self) -> dict:
+        d: dict[str, Any] = {"kind": self.kind, "input": os.path.basename(self.path), "notes": list(self.notes)}
+        if self.geometry is not None:
+            d["geometry"] = self.geometry.to_dict()
+        if self.labels is not None:
+            d["objects"] = self.object_ids
+        if self.volume is not None:
+            d["volume"] = self.volume.describe()
+        if self.mesh is not None:
+            d["mesh"] = {"triangles": int(self.mesh.n_faces), "vertices": int(self.mesh.n_vertices)}
+        return d
+
+
+def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series: bool | None = None,
+               require_labels: bool = False, spacing: Any = None, **load_options: Any) -> Opened:
+    """Open ``path`` (kind guessed from the name unless given).
+
+    ``load_options`` (and ``spacing``) go to :func:`ctui.engine.io.series.load` for a series;
+    for a project, ``spacing`` stands in for the geometry of an old project without one.
+    ``with_series`` (projects): True loads the source series (error when it is gone),
+    None loads it only when the project recorded no geometry, False never.
+    ``require_labels``: a project without a label volume is an error.
+    """
+    p = os.fspath(path)
+    if not p or not os.path.exists(p):
+        raise CtuiError("no such file or folder", path=p or "(empty path)")
+    kind = kind or input_kind(p)
+    if kind == "project":
+        return open_project(p, with_series=with_series, require_labels=require_labels, spacing=spacing)
+    if kind == "labels":
+        from ctui.engine.io.labels import load_labels
+
+        labels, vol = load_labels(p)
+        return Opened("labels", p, labels=np.asarray(labels), geometry=Geometry.of(vol))
+    if kind == "mesh":
+        from ctui.engine.io.meshes import load_mesh
+
+        return Opened("mesh", p, mesh=load_mesh(p))
+    if kind == "mric":
+        return Opened("mric", p)
+    if kind != "series":
+        raise ValueError(f"unknown input kind {kind!r}")
+    from ctui.engine.io.series import load
+
+    if spacing is not None:
+        load_options["spacing"] = spacing
+    return Opened("series", p, volume=load(p, **load_options))
+
+
+def series_available(project: Project) -> bool:
+    """True when the project names a source that exists (an empty path never does)."""
+    src = str(project.source_path or "").strip()
+    return bool(src) and os.path.exists(src)
+
+
+def load_source(project: Project, path: str) -> Volume:
+    """The project's source series, checked against the project (shape, voxel hash)."""
+    from ctui.engine.io.series import load
+
+    if not series_available(project):
+        raise CtuiError(f"the source series {project.source_path!r} is missing", path=path)
+    vol = load(project.source_path, **source_load_options(project))
+    check_source(project, vol, path)
+    return vol
+
+
+def check_source(project: Project, volume: Volume, path: str) -> None:
+    """CtuiError when ``volume`` is not the series the project was segmented on."""
+    if project.labels is not None and tuple(project.labels.shape) != tuple(volume.shape):
+        raise CtuiError(f"labels {tuple(project.labels.shape)} do not match the source series "
+                        f"{tuple(volume.shape)}", path=path)
+    if project.voxel_hash and voxel_hash(volume.data) != project.voxel_hash:
+        raise CtuiError(f"the series at {project.source_path} no longer matches the project (its voxels "
+                        "changed since the project was saved); put the original series back or open the "
+                        "project without it", path=path)
+
+
+def open_project(path: str, *, with_series: bool | None = None, require_labels: bool = False,
+                 spacing: tuple[float, float, float] | None = None) -> Opened:
+    """A project's labels with their geometry (from the project, else from its series;
+    ``spacing`` (dz, dy, dx) mm for an old project that recorded none and lost its series)."""
+    project = load_project(path)
+    if require_labels and project.labels is None:
+        raise CtuiError("the project holds no label volume (segment an object first)", path=path)
+    out = Opened("project", path, labels=project.labels, geometry=project.geometry, project=project)
+    need = with_series or (with_series is None and project.geometry is None)
+    if need and series_available(project):
+        out.volume = load_source(project, path)
+        if out.geometry is None:
+            out.geometry = Geometry.of(out.volume)
+    elif with_series:
+        raise CtuiError(f"the source series {project.source_path!r} is missing (this needs its grey levels)",
+                        path=path)
+    elif project.geometry is None and project.labels is not None and spacing is not None:
+        out.geometry = Geometry(tuple(project.labels.shape), spacing)
+        out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from --spacing "
+                         "(origin 0, identity direction)")
+    elif project.geometry is None:
+        if project.labels is not None:
+            raise CtuiError(f"the source series {project.source_path!r} is missing and the project records no "
+                            "geometry (an old project: give --spacing dz,dy,dx, or re-save it with its series)",
+                            path=path)
+    elif not series_available(project):
+        out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from the project")
+    return out

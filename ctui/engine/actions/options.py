@@ -1,0 +1,82 @@
+"""The one syntax of loader options (CLI flags, TUI prompts, batch files).
+
+Lists are comma-separated in (z, y, x) order: ``--shape 40,256,256`` (or ``256,256`` per
+slice), ``--spacing 2,0.5,0.5``, ``--crop z0,z1,y0,y1,x0,x1``, ``--downsample 2`` or
+``1,2,2``. :func:`load_options` turns the text into keyword arguments for
+:func:`ctui.engine.io.series.load`, with a one-line error naming the option.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ctui.engine.core.errors import CtuiError
+
+
+def _items(text: str, option: str, what: str) -> list[str]:
+    s = str(text).strip()
+    if "x" in s.lower():
+        raise CtuiError(f"{option} {text!r}: write {what} separated by commas (e.g. 40,256,256), not with 'x'")
+    return [v.strip() for v in s.split(",")]
+
+
+def parse_floats(text: Any, option: str, *, n: tuple[int, ...] = (3,), positive: bool = True) -> tuple[float, ...]:
+    """``"2,0.5,0.5"`` -> (2.0, 0.5, 0.5); a list/tuple is checked the same way."""
+    items = _items(text, option, "numbers") if isinstance(text, str) else list(text)
+    try:
+        vals = tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        raise CtuiError(f"{option} {text!r}: expected numbers separated by commas") from None
+    if len(vals) not in n:
+        raise CtuiError(f"{option} {text!r}: expected {' or '.join(map(str, n))} numbers")
+    if any(v != v or v in (float("inf"), float("-inf")) for v in vals) or (positive and min(vals) <= 0):
+        raise CtuiError(f"{option} {text!r}: expected {'positive ' if positive else ''}finite numbers")
+    return vals
+
+
+def parse_ints(text: Any, option: str, *, n: tuple[int, ...], minimum: int | None = 1,
+               allow_empty: bool = False) -> tuple[int | None, ...]:
+    """``"40,256,256"`` -> (40, 256, 256); empty items become None when ``allow_empty``."""
+    items = _items(text, option, "integers") if isinstance(text, str) else list(text)
+    out: list[int | None] = []
+    for v in items:
+        if allow_empty and (v is None or str(v).strip() == ""):
+            out.append(None)
+            continue
+        try:
+            out.append(int(str(v)))
+        except ValueError:
+            raise CtuiError(f"{option} {text!r}: expected integers separated by commas") from None
+    if len(out) not in n:
+        raise CtuiError(f"{option} {text!r}: expected {' or '.join(map(str, n))} integers")
+    if minimum is not None and any(v is not None and v < minimum for v in out):
+        raise CtuiError(f"{option} {text!r}: every value must be >= {minimum}")
+    return tuple(out)
+
+
+def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, dtype: Any = None,
+                 offset: Any = None, crop: Any = None, downsample: Any = None, resample: bool = True) -> dict:
+    """Keyword arguments for ``ctui.engine.io.series.load`` from option text."""
+    kw: dict[str, Any] = {}
+    if series not in (None, ""):
+        s = str(series).strip()
+        kw["series"] = int(s) if s.isdigit() and len(s) < 6 else s
+    if spacing not in (None, ""):
+        vals = parse_floats(spacing, "--spacing", n=(1, 3))
+        kw["spacing"] = vals * 3 if len(vals) == 1 else vals
+    if shape not in (None, ""):
+        kw["shape"] = parse_ints(shape, "--shape", n=(2, 3))
+    if dtype not in (None, ""):
+        kw["dtype"] = str(dtype)
+    if offset is not None:
+        if int(offset) < 0:
+            raise CtuiError(f"--offset {offset}: must be >= 0")
+        kw["offset"] = int(offset)
+    if crop not in (None, ""):
+        kw["crop"] = parse_ints(crop, "--crop", n=(6,), minimum=None, allow_empty=True)
+    if downsample not in (None, ""):
+        vals = parse_ints(downsample, "--downsample", n=(1, 3))
+        kw["downsample"] = vals[0] if len(vals) == 1 else vals
+    if not resample:
+        kw["resample"] = False
+    return kw

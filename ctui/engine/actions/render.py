@@ -1,0 +1,216 @@
+"""Render a view: :func:`build_scene` (a mesh file, a project's objects, a series' volume or
+isosurface) and :func:`render_view` (PNG, turntable GIF/APNG or fly-through), for
+``ctui render`` and the TUI's 3D view."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.actions import defaults
+from ctui.engine.actions.mesh import label_meshes
+from ctui.engine.actions.opened import Opened, open_input, open_project, series_available
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.io.project import load_project
+from ctui.engine.measure.centreline import centreline
+from ctui.engine.mesh.surface import isosurface
+from ctui.engine.render import (Light, Scene, SceneMesh, SceneVolume, SlicePlane, get_renderer, save_animation,
+                                save_flythrough, save_png, turntable_frames)
+from ctui.engine.render.transfer import resolve_preset
+
+VOLUME_MODES = ("mip", "minip", "dvr")
+SURFACE_MODES = ("surface", "wire", "transparent")
+
+
+@dataclass
+class RenderResult:
+    out: str
+    kind: str
+    mode: str
+    size: tuple[int, int]
+    frames: int = 1
+    flythrough_points: int = 0
+    notes: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"out": self.out, "kind": self.kind, "mode": self.mode, "size": list(self.size),
+                "frames": self.frames, "notes": list(self.notes)}
+
+    def summary(self) -> str:
+        w, h = self.size
+        if self.flythrough_points:
+            return f"wrote {self.out} ({self.frames} fly-through frames, {w}x{h}, path {self.flythrough_points} points)"
+        if self.frames > 1 or self.out.lower().endswith((".gif", ".apng")):
+            return f"wrote {self.out} ({self.frames} frames, {w}x{h}, mode {self.mode})"
+        return f"wrote {self.out} ({w}x{h}, mode {self.mode})"
+
+
+def _open(src: str, *, need_volume: bool, load_options: dict) -> Opened:
+    if os.path.isfile(src) and src.lower().endswith(defaults.MESH_SUFFIXES):
+        return open_input(src, kind="mesh")
+    if os.path.isfile(src) and src.lower().endswith(defaults.PROJECT_SUFFIXES):
+        available = series_available(load_project(src))
+        opened = open_project(src, with_series=True if (need_volume or available) else None, require_labels=True)
+        if opened.labels is None or not np.any(opened.labels):
+            raise CtuiError("project has no segmented objects to render", path=src)
+        return opened
+    return open_input(src, kind="series", **load_options)
+
+
+def _colour(c: Any) -> tuple[float, float, float] | None:
+    if isinstance(c, (list, tuple)) and len(c) == 3:
+        return tuple(float(v) / 255.0 if max(c) > 1 else float(v) for v in c)  # type: ignore[return-value]
+    return None
+
+
+def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = None,
+                 iso: float | None = None) -> list:
+    """The meshes a render of ``opened`` shows (objects of a project, a mesh, an isosurface)."""
+    if opened.kind == "mesh":
+        return [opened.mesh]
+    if opened.kind == "project":
+        assert opened.labels is not None and opened.geometry is not None
+        ids = opened.pick_objects(list(objects) if objects else None)
+        return [m for _, m in sorted(label_meshes(opened.labels, opened.geometry, ids).items())]
+    if mode in SURFACE_MODES:
+        vol = opened.volume
+        if iso is None:
+            raise CtuiError(f"--mode {mode} on a series needs --iso LEVEL (e.g. --iso 300 for bone)", path=opened.path)
+        m = isosurface(vol.data, iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
+        if m.n_faces == 0:
+            raise CtuiError(f"no surface at --iso {iso:g} (values range {vol.value_range()})", path=opened.path)
+        return [m]
+    return []
+
+
+def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[int] | None = None,
+                iso: float | None = None, opacity: float | None = None, azimuth: float = defaults.RENDER_AZIMUTH,
+                elevation: float = defaults.RENDER_ELEVATION, roll: float = 0.0, zoom: float = 1.0,
+                perspective: bool = False, light: Sequence[float] | None = None, shadows: bool = False,
+                antialias: str = "fxaa", wire_overlay: bool = False, window: Sequence[float] | None = None,
+                background: Sequence[float] | None = None, slice_plane: str | None = None,
+                preset: str | None = None) -> tuple[Scene, str]:
+    """(Scene, mode) for ``opened``; colours from the project's objects."""
+    kind = opened.kind
+    mode = mode or ("dvr" if kind == "series" and iso is None else "surface")
+    meshes = scene_meshes(opened, mode=mode, objects=objects, iso=iso)
+    volume = opened.volume
+    if mode in VOLUME_MODES and volume is None:
+        raise CtuiError(f"--mode {mode} needs a series (volume), not a {kind}", path=opened.path)
+    if not meshes and mode not in VOLUME_MODES:
+        raise CtuiError("nothing to render", path=opened.path)
+    scene = Scene()
+    colors = opened.object_colors()
+    for m in meshes:
+        item = SceneMesh(m)
+        c = _colour(colors.get(int(m.object_id)))
+        if c is not None:
+            item.color = c
+        if opacity is not None:
+            item.opacity = float(opacity)
+        scene.meshes.append(item)
+    if volume is not None:
+        scene.volume = SceneVolume.from_volume(volume)
+    scene.mode = mode
+    cam = scene.camera
+    cam.azimuth, cam.elevation, cam.roll, cam.zoom = azimuth, elevation, roll, zoom
+    if perspective:
+        cam.projection = "perspective"
+    if light is not None:
+        scene.light = Light(azimuth=light[0], elevation=light[1])
+    o = scene.options
+    o.shadows, o.antialias, o.wireframe_overlay = bool(shadows), antialias, bool(wire_overlay)
+    if window is not None:
+        o.window = tuple(window)
+    if background is not None:
+        o.background = tuple(v / 255.0 for v in background)
+    if slice_plane:
+        if volume is None:
+            raise CtuiError("--slice needs a series or a project whose source series loads", path=opened.path)
+        ax, _, idx = slice_plane.partition(":")
+        if ax.lower() not in ("x", "y", "z", "axial", "coronal", "sagittal"):
+            raise CtuiError(f"--slice {slice_plane}: axis must be z, y or x")
+        o.slice_plane = SlicePlane(axis=ax.lower(), index=int(idx) if idx else None)
+        if kind == "series" and mode in VOLUME_MODES:
+            o.slice_plane = None
+    if preset:
+        o.preset = resolve_preset(preset)
+    elif volume is not None:
+        o.preset = "ct-bone" if str(volume.modality).upper() == "CT" else "mr-default"
+    return scene, mode
+
+
+def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = None) -> np.ndarray:
+    """(n, 3) patient mm: 'auto' = the centreline of a project's object, else 'x,y,z;...'."""
+    if spec.strip().lower() == "auto":
+        ids = list(objects or [])
+        if opened.kind == "project" and not ids and len(opened.object_ids) == 1:
+            ids = opened.object_ids  # the project's only object
+        if opened.kind != "project" or opened.geometry is None or len(ids) != 1:
+            raise CtuiError("--flythrough auto needs a .ctui project and one --object (a tubular object)",
+                            path=opened.path)
+        g = opened.geometry
+        path = centreline(opened.labels == ids[0], spacing=g.spacing, origin=g.origin, direction=g.direction)
+        if path is None or len(path) < 2:
+            raise CtuiError(f"no centreline found for object {ids[0]}", path=opened.path)
+        return np.asarray(path, float)
+    try:
+        pts = np.array([[float(v) for v in p.split(",")] for p in spec.split(";") if p.strip()])
+    except ValueError:
+        pts = np.zeros((0, 0))
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.isfinite(pts).all():
+        raise CtuiError(f"bad --flythrough {spec!r} (want 'auto' or 'x,y,z;x,y,z;...' in mm)")
+    return pts
+
+
+def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
+                size: tuple[int, int] = defaults.RENDER_SIZE, turntable: int | None = None,
+                fps: float = defaults.ANIMATION_FPS, flythrough: str | None = None,
+                frames: int = defaults.FLY_FRAMES, fov: float = defaults.FLY_FOV_DEG,
+                load_options: dict | None = None, **scene_options: Any) -> RenderResult:
+    """Render ``source`` to ``out``: .png (one image; with ``turntable`` an APNG), .gif/.apng
+    (turntable), or with ``flythrough`` a .gif/.apng or a folder of PNG frames.
+
+    ``scene_options`` go to :func:`build_scene` (mode, objects, iso, camera, light...).
+    """
+    outp = Path(out)
+    w, h = (int(v) for v in size)
+    if not (1 <= w <= defaults.MAX_RENDER_SIDE and 1 <= h <= defaults.MAX_RENDER_SIDE):
+        raise CtuiError(f"--size {w}x{h}: width and height must be 1..{defaults.MAX_RENDER_SIDE}")
+    if turntable is not None and turntable < 1:
+        raise CtuiError("--turntable needs N >= 1")
+    op = scene_options.get("opacity")
+    if op is not None and not 0.0 <= op <= 1.0:
+        raise CtuiError("--opacity must be between 0 and 1")
+    if flythrough is not None and outp.suffix.lower() not in (".gif", ".apng", ""):
+        raise CtuiError("--flythrough writes a .gif/.apng or a folder of PNG frames", path=outp)
+    if outp.suffix.lower() not in (".png", ".gif", ".apng") and flythrough is None:
+        raise CtuiError("output must end in .png, .gif or .apng", path=outp)
+    if isinstance(source, Opened):
+        opened = source
+    else:
+        src = os.fspath(source)
+        if not os.path.exists(src):
+            raise CtuiError("no such file or folder", path=src)
+        need = scene_options.get("slice_plane") is not None or scene_options.get("mode") in VOLUME_MODES
+        opened = _open(src, need_volume=need, load_options=load_options or {})
+    scene, mode = build_scene(opened, **scene_options)
+    renderer = get_renderer()
+    res = RenderResult(os.fspath(outp), opened.kind, mode, (w, h), notes=list(opened.notes))
+    if flythrough is not None:
+        if frames < 2:
+            raise CtuiError("--frames must be at least 2")
+        path_mm = flythrough_path(flythrough, opened, scene_options.get("objects"))
+        save_flythrough(outp, scene, path_mm, frames, (w, h), fov_deg=fov, fps=fps, renderer=renderer)
+        res.frames, res.flythrough_points = frames, len(path_mm)
+    elif outp.suffix.lower() in (".gif", ".apng") or turntable is not None:
+        n = turntable or defaults.TURNTABLE_FRAMES
+        save_animation(outp, turntable_frames(scene, n, (w, h), renderer=renderer), fps=fps)
+        res.frames = n
+    else:
+        save_png(outp, renderer.render(scene, size=(w, h)))
+    return res
