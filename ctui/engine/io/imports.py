@@ -1,0 +1,319 @@
+"""Read any label file over a series: DICOM-SEG, RTSTRUCT, NIfTI / NRRD label maps.
+
+:func:`read_label_file` returns :class:`ImportedLabels`: a uint8 label map (z, y, x) on
+the series' grid (or on the file's own grid when no series is given and the file has
+one), one object per segment / ROI / label value with its name and colour, and the
+warnings met on the way.
+
+Geometry check
+--------------
+The file's voxel grid is mapped onto the series' grid through both affines. It is
+accepted when every file voxel lands on a series voxel: same spacing and orientation up
+to axis order and flips, an offset of whole voxels (a DICOM-SEG with frames only where
+the objects are, a label map cropped to a box, a flipped NIfTI), and nothing outside
+the series. Anything else is refused with a message that says how the grids differ and
+what to do (resample the label map onto the series, or pick the series it was drawn on).
+
+Overlapping segments
+--------------------
+A BINARY DICOM-SEG (or an RTSTRUCT) may hold overlapping segments. Each becomes one
+object (id = its segment / ROI number when all fit 1..255, else 1..S in order). The
+label map, one value per voxel, gives an overlapped voxel to the **later** segment, with
+a warning naming the pairs and voxel counts; ``masks`` keeps every overlapping segment's
+own full mask, so measuring an object (:meth:`ImportedLabels.mask`) uses all its voxels.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.core.colors import object_color
+from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.core.geometry import Geometry
+
+LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
+KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd")
+
+
+@dataclass
+class ImportedLabels:
+    """Labels read from a file, placed on a grid.
+
+    Attributes
+    ----------
+    labels : ndarray (z, y, x) uint8 on ``geometry`` (0 background).
+    objects : list of dict ``{"id", "name", "color" (r, g, b 0..255), "source_number"}``.
+    geometry : Geometry of ``labels`` (the series' when one was given).
+    kind : "dicom-seg", "rtstruct", "nifti" or "nrrd".
+    masks : {object id: bool (z, y, x)} full masks of objects that overlap others.
+    warnings : list of str.
+    path : the file read.
+    """
+
+    labels: np.ndarray
+    objects: list[dict]
+    geometry: Geometry
+    kind: str
+    masks: dict[int, np.ndarray] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    path: str = ""
+
+    def mask(self, object_id: int) -> np.ndarray:
+        """The object's full bool mask (z, y, x), overlaps included."""
+        m = self.masks.get(int(object_id))
+        return m if m is not None else self.labels == int(object_id)
+
+    def voxel_counts(self) -> dict[int, int]:
+        """{object id: voxels of its full mask}."""
+        return {int(o["id"]): int(np.count_nonzero(self.mask(o["id"]))) for o in self.objects}
+
+
+# =========================================================================== sniffing
+def label_kind(path: str | os.PathLike) -> str:
+    """'dicom-seg', 'rtstruct', 'nifti' or 'nrrd' for a label file; FormatError otherwise."""
+    p = Path(path)
+    name = p.name.lower()
+    if name.endswith((".nii", ".nii.gz")):
+        return "nifti"
+    if name.endswith((".nrrd", ".nhdr")):
+        return "nrrd"
+    if p.is_dir():
+        raise FormatError("is a folder: give the label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)", path=p)
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    try:
+        ds = pydicom.dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
+    except (InvalidDicomError, OSError, ValueError, EOFError, TypeError, AttributeError, KeyError) as exc:
+        raise FormatError(f"not a label file: expected DICOM-SEG, RTSTRUCT, .nii, .nii.gz or .nrrd "
+                          f"({' '.join(str(exc).split())[:120]})", path=p) from None
+    from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, SEG_SOP_CLASS
+
+    uid, modality = str(ds.get("SOPClassUID", "")), str(ds.get("Modality", ""))
+    if uid == SEG_SOP_CLASS or modality == "SEG":
+        return "dicom-seg"
+    if uid == RTSTRUCT_SOP_CLASS or modality == "RTSTRUCT":
+        return "rtstruct"
+    raise FormatError(f"a DICOM {modality or 'file'} is not a segmentation (expected a SEG or an RTSTRUCT)", path=p)
+
+
+def is_label_file(path: str | os.PathLike) -> bool:
+    """True for a DICOM-SEG/RTSTRUCT file or a NIfTI/NRRD name (cheap; no full read)."""
+    try:
+        label_kind(path)
+    except (FormatError, OSError):
+        return False
+    return True
+
+
+# =========================================================================== geometry
+def _fmt(v: Any) -> str:
+    return "(" + ", ".join(f"{float(x):.4g}" for x in np.ravel(v)) + ")"
+
+
+def describe_mismatch(src: Geometry, dst: Geometry) -> str:
+    """How the grid ``src`` (a label file) differs from ``dst`` (the series), in words."""
+    diffs = []
+    if tuple(src.shape) != tuple(dst.shape):
+        diffs.append(f"shape (z, y, x) {list(src.shape)} vs the series' {list(dst.shape)}")
+    if not np.allclose(sorted(src.spacing), sorted(dst.spacing), rtol=1e-3, atol=1e-4):
+        diffs.append(f"spacing (z, y, x) {_fmt(src.spacing)} mm vs {_fmt(dst.spacing)} mm")
+    if not np.allclose(np.abs(np.round(src.direction.T @ dst.direction, 3)).max(axis=1), 1.0, atol=1e-3):
+        diffs.append("orientation differs (the axes are not parallel to the series')")
+    off = np.asarray(src.origin) - np.asarray(dst.origin)
+    if np.abs(off).max() > 1e-3:
+        diffs.append(f"origin {_fmt(src.origin)} vs {_fmt(dst.origin)} mm (offset {_fmt(off)} mm)")
+    return "; ".join(diffs) or "the voxels do not line up"
+
+
+def _refuse(path: Any, src: Geometry, dst: Geometry, why: str) -> CtuiError:
+    return CtuiError(f"does not fit the series: {why}: {describe_mismatch(src, dst)}. Resample the label map onto "
+                     "the series (e.g. 3D Slicer 'Resample Image (BRAINS)' with the series as reference) or give the "
+                     "series it was drawn on (--series)", path=path)
+
+
+def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02) -> np.ndarray:
+    """Put ``arr`` ((..., z, y, x) on ``src``) onto the grid ``dst``: returns (..., *dst.shape).
+
+    Accepted: same voxel size and axes up to order and flips, whole-voxel offsets, and
+    nothing non-zero outside ``dst``. Raises CtuiError (with :func:`describe_mismatch`) otherwise.
+    """
+    m = np.linalg.inv(dst.affine) @ src.affine  # src (x, y, z, 1) -> dst (x, y, z, 1)
+    r = np.round(m[:3, :3])
+    if np.abs(m[:3, :3] - r).max() > tol or not np.array_equal(np.abs(r).sum(axis=0), np.ones(3)) \
+            or not np.array_equal(np.abs(r).sum(axis=1), np.ones(3)):
+        raise _refuse(path, src, dst, "voxel size or orientation differ")
+    t = m[:3, 3]
+    if np.abs(t - np.round(t)).max() > tol:
+        raise _refuse(path, src, dst, "the grids are shifted by a fraction of a voxel")
+    rz = r[::-1, ::-1]  # in (z, y, x) order
+    tz = np.round(t[::-1]).astype(int)
+    lead = arr.ndim - 3
+    axes = [int(np.flatnonzero(rz[i])[0]) for i in range(3)]
+    out_arr = np.transpose(arr, list(range(lead)) + [lead + a for a in axes])
+    starts = []
+    for i in range(3):
+        n = out_arr.shape[lead + i]
+        if rz[i, axes[i]] < 0:
+            out_arr = np.flip(out_arr, axis=lead + i)
+            starts.append(int(tz[i]) - (n - 1))
+        else:
+            starts.append(int(tz[i]))
+    out = np.zeros(arr.shape[:lead] + tuple(dst.shape), dtype=arr.dtype)
+    src_sl, dst_sl = [], []
+    for i in range(3):
+        n, N, s = out_arr.shape[lead + i], dst.shape[i], starts[i]
+        lo, hi = max(s, 0), min(s + n, N)
+        if hi <= lo:
+            raise _refuse(path, src, dst, "the label map lies entirely outside the series")
+        src_sl.append(slice(lo - s, hi - s))
+        dst_sl.append(slice(lo, hi))
+    lead_sl = (slice(None),) * lead
+    inside = out_arr[lead_sl + tuple(src_sl)]
+    if np.count_nonzero(inside) != np.count_nonzero(out_arr):
+        raise _refuse(path, src, dst, "labelled voxels lie outside the series")
+    out[lead_sl + tuple(dst_sl)] = inside
+    return out
+
+
+# =========================================================================== assembling
+def _ids(numbers: Sequence[int]) -> list[int]:
+    nums = [int(n) for n in numbers]
+    if nums and all(1 <= n <= 255 for n in nums) and len(set(nums)) == len(nums):
+        return nums
+    if len(nums) > 255:
+        raise CtuiError(f"{len(nums)} segments: ctui holds at most 255 objects")
+    return list(range(1, len(nums) + 1))
+
+
+def assemble(masks: Sequence[np.ndarray], numbers: Sequence[int], names: Sequence[str],
+             colors: Sequence[Any]) -> tuple[np.ndarray, list[dict], dict[int, np.ndarray], list[str]]:
+    """One label map from per-segment masks: later segments win overlaps (see module docstring).
+
+    Returns (labels uint8, objects, masks of overlapping objects, warnings).
+    """
+    ids = _ids(numbers)
+    shape = masks[0].shape if len(masks) else (1, 1, 1)
+    labels = np.zeros(shape, np.uint8)
+    cover = np.zeros(shape, np.uint8)  # how many segments claim each voxel (capped)
+    for m in masks:
+        cover += m & (cover < 255)
+    overlapping: dict[int, np.ndarray] = {}
+    warnings: list[str] = []
+    objects = []
+    for k, (m, oid) in enumerate(zip(masks, ids)):
+        labels[m] = oid
+        color = tuple(int(c) for c in colors[k]) if colors[k] is not None else object_color(oid)
+        objects.append({"id": oid, "name": names[k] or f"object {oid}", "color": list(color),
+                        "source_number": int(numbers[k])})
+    if cover.max(initial=0) > 1:
+        multi = cover > 1
+        for k, (m, oid) in enumerate(zip(masks, ids)):
+            if np.any(m & multi):
+                overlapping[oid] = np.ascontiguousarray(m)
+        pairs = []
+        for a in range(len(masks)):
+            for b in range(a + 1, len(masks)):
+                if ids[a] in overlapping and ids[b] in overlapping:
+                    n = int(np.count_nonzero(masks[a] & masks[b]))
+                    if n:
+                        pairs.append(f"{names[a] or ids[a]}/{names[b] or ids[b]} {n}")
+        warnings.append("overlapping segments (voxels): " + ", ".join(pairs) + "; the label map shows the later "
+                        "segment there, measurements use each segment's own mask")
+    return labels, objects, overlapping, warnings
+
+
+# =========================================================================== readers
+def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
+    from ctui.engine.io.dicomseg import read_seg
+
+    c = read_seg(p)
+    masks = c.masks
+    geom = c.geometry
+    if grid is not None:
+        masks = place_on_grid(masks, c.geometry, grid, path=p)
+        geom = grid
+    labels, objects, overlap, warnings = assemble(list(masks), [s.number for s in c.segments],
+                                                  [s.label for s in c.segments], [s.color for s in c.segments])
+    return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, warnings, str(p))
+
+
+def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
+    from ctui.engine.io.rtstruct import read_rtstruct, roi_mask
+
+    if grid is None:
+        raise CtuiError("an RTSTRUCT holds contours only: open it over the series it was drawn on "
+                        "(ctui open SERIES --labels FILE)", path=p)
+    c = read_rtstruct(p)
+    masks, warnings = [], []
+    for roi in c.rois:
+        m, off = roi_mask(roi, grid)
+        if off:
+            warnings.append(f"ROI {roi.name}: {off} contours are not on a slice of the series and were left out")
+        masks.append(m)
+    if not masks:
+        raise CtuiError("the RTSTRUCT holds no ROI contour", path=p)
+    if masks and all(not m.any() for m in masks):
+        raise CtuiError("no contour of the RTSTRUCT lies on a slice of the series: it was drawn on another series",
+                        path=p)
+    labels, objects, overlap, w = assemble(masks, [r.number for r in c.rois], [r.name for r in c.rois],
+                                           [r.color for r in c.rois])
+    return ImportedLabels(labels, objects, grid, "rtstruct", overlap, warnings + w, str(p))
+
+
+def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
+    from ctui.engine.io.labels import load_labels
+
+    lab, vol = load_labels(p)
+    geom = Geometry.of(vol)
+    if grid is not None:
+        lab = place_on_grid(lab, geom, grid, path=p)
+        geom = grid
+    ids = [int(i) for i in np.flatnonzero(np.bincount(lab.ravel(), minlength=256)) if i != 0]
+    names = _nrrd_names(p) if kind == "nrrd" else {}
+    objects = [{"id": i, "name": names.get(i, f"object {i}"), "color": list(object_color(i)), "source_number": i}
+               for i in ids]
+    return ImportedLabels(lab, objects, geom, kind, {}, [], str(p))
+
+
+def _nrrd_names(p: Path) -> dict[int, str]:
+    """Segment names of a 3D Slicer .seg.nrrd (Segment{i}_Name / _LabelValue), else {}."""
+    try:
+        import nrrd
+
+        with open(p, "rb") as fh:
+            header = nrrd.read_header(fh)
+    except Exception:  # noqa: BLE001 - names are a nicety; load_labels already validated the file
+        return {}
+    out = {}
+    for k, v in header.items():
+        if k.startswith("Segment") and k.endswith("_Name"):
+            pre = k[: -len("Name")]
+            try:
+                out[int(header.get(pre + "LabelValue", 0))] = str(v)
+            except (TypeError, ValueError):
+                continue
+    return out
+
+
+def read_label_file(path: str | os.PathLike, *, grid: Any = None) -> ImportedLabels:
+    """Read a label file, placed on ``grid`` (a Volume or Geometry of the series) when given.
+
+    Without ``grid`` the file's own geometry is used (DICOM-SEG, NIfTI, NRRD); an RTSTRUCT
+    needs one. Raises FormatError (unreadable file) or CtuiError (geometry mismatch, said how).
+    """
+    p = Path(path)
+    if not p.exists():
+        raise CtuiError("no such label file", path=p)
+    g = None if grid is None else Geometry.of(grid)
+    kind = label_kind(p)
+    if kind == "dicom-seg":
+        return _from_seg(p, g)
+    if kind == "rtstruct":
+        return _from_rtstruct(p, g)
+    return _from_labelmap(p, g, kind)
