@@ -13,7 +13,10 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from ctui.engine.core import limits as _limits
 from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.core.privacy import scrub_text, scrub_text_obj
+from ctui.engine.core.limits import fmt_bytes
 
 IMAGE_SUFFIXES = {".png", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
 _NATURAL = re.compile(r"(\d+)")
@@ -172,75 +175,38 @@ def make_plan(shape: Sequence[int], *, crop: Any = None, downsample: Any = None,
 
 # --------------------------------------------------------------------- memory
 def available_memory() -> int:
-    """Bytes of memory available now (psutil), or a large number when unknown."""
-    env = os.environ.get("CTUI_MEMORY_LIMIT")
-    if env:
-        try:
-            return int(float(env))
-        except ValueError:
-            pass
-    try:
-        import psutil
-
-        return int(psutil.virtual_memory().available)
-    except Exception:  # pragma: no cover
-        return 1 << 62
+    """Bytes this process may still allocate (:func:`ctui.engine.core.limits.available_memory`:
+    the smallest of free RAM, RLIMIT_AS headroom and the cgroup's memory.max headroom)."""
+    return _limits.available_memory()
 
 
-def fmt_bytes(n: float) -> str:
-    for unit in ("B", "KB", "MB", "GB", "TB"):
-        if abs(n) < 1024 or unit == "TB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024.0
-    return f"{n:.1f} TB"  # pragma: no cover
-
-
-def check_memory(nbytes: int, *, shape: Sequence[int], path: Any, limit: int | None = None) -> None:
+def check_memory(nbytes: int, *, shape: Sequence[int], path: Any, limit: int | None = None, what: str = "") -> None:
     """Raise a CtuiError offering crop/downsample when ``nbytes`` will not fit in memory.
 
-    ``limit``: bytes allowed (default: 90% of available memory).
+    ``limit``: bytes allowed (default: 90% of what :func:`available_memory` gives, which
+    respects RLIMIT_AS and the cgroup limit, not only free RAM).
     """
-    avail = available_memory() if limit is None else int(limit)
-    allowed = avail * 0.9 if limit is None else avail
-    if nbytes > allowed:
-        nz, ny, nx = (int(s) for s in shape)
-        raise CtuiError(
-            f"needs {fmt_bytes(nbytes)} for {nz}x{ny}x{nx} voxels but only {fmt_bytes(avail)} of memory is "
-            f"available; load a part with crop=(z0,z1,y0,y1,x0,x1) (--crop) or fewer voxels with "
-            f"downsample=N (--downsample N, or z,y,x strides)",
-            path=path,
-        )
+    nz, ny, nx = (int(s) for s in shape)
+    hint = ("load a part with crop=(z0,z1,y0,y1,x0,x1) (--crop) or fewer voxels with "
+            "downsample=N (--downsample N, or z,y,x strides)")
+    what = what or f"{nz}x{ny}x{nx} voxels"
+    if limit is None:
+        _limits.check_allocation(nbytes, what=what, path=path, hint=hint)
+        return
+    if nbytes > int(limit):
+        raise CtuiError(f"{what} needs {fmt_bytes(nbytes)} but only {fmt_bytes(int(limit))} of memory is "
+                        f"allowed (memory_limit); {hint}", path=path)
 
 
 # --------------------------------------------------------------------- privacy
 def scrub(text: str, identifiers: Iterable[str]) -> str:
-    """Replace any patient identifier (and its ^-separated parts, >= 3 chars) in ``text``."""
-    parts: set[str] = set()
-    for ident in identifiers:
-        ident = str(ident or "").strip()
-        if len(ident) >= 3:
-            parts.add(ident)
-            for p in re.split(r"[\^ ,]+", ident):
-                if len(p) >= 3:
-                    parts.add(p)
-    for p in sorted(parts, key=len, reverse=True):
-        text = re.sub(re.escape(p), "[removed]", text, flags=re.IGNORECASE)
-    return text
+    """Replace the whole-word tokens of patient identifiers in ``text`` (core.privacy.scrub_text)."""
+    return scrub_text(text, identifiers)
 
 
 def scrub_obj(obj: Any, identifiers: Iterable[str]) -> Any:
-    ids = [i for i in identifiers if i and len(str(i).strip()) >= 3]
-    if not ids:
-        return obj
-    if isinstance(obj, str):
-        return scrub(obj, ids)
-    if isinstance(obj, list):
-        return [scrub_obj(o, ids) for o in obj]
-    if isinstance(obj, tuple):
-        return tuple(scrub_obj(o, ids) for o in obj)
-    if isinstance(obj, dict):
-        return {k: scrub_obj(v, ids) for k, v in obj.items()}
-    return obj
+    """:func:`scrub` applied to every string in ``obj`` (core.privacy.scrub_text_obj)."""
+    return scrub_text_obj(obj, identifiers)
 
 
 # --------------------------------------------------------------------- parallel decode
