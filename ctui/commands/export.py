@@ -1,0 +1,55 @@
+"""``ctui export INPUT --format FORMAT --out PATH``: every export through one engine function."""
+
+from __future__ import annotations
+
+import argparse
+
+FORMATS = ("dicom-seg", "rtstruct", "nifti", "nrrd", "stl", "ply", "obj", "mric", "csv")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "export",
+        help="write a project's objects as DICOM-SEG, RTSTRUCT, NIfTI, NRRD, STL/PLY/OBJ, MRIC or CSV",
+        description="Export the objects of INPUT (a .ctui project, or a label file: DICOM-SEG, RTSTRUCT, "
+        ".nii, .nii.gz, .nrrd, placed on --series when given). dicom-seg and rtstruct reference the "
+        "source DICOM series' images (the project's recorded series, or --series); nifti and nrrd carry "
+        "the series' geometry; stl, ply and obj hold the object surfaces in patient mm; csv one row of "
+        "measurements per object. No patient name, ID or birth date is written unless --keep-identifiers.",
+        epilog="Examples: ctui export kidney.ctui --format dicom-seg --out kidney-seg.dcm\n"
+        "          ctui export labels.nii.gz --series scan/ --format rtstruct --out rt.dcm\n"
+        "          ctui export kidney.ctui --format csv --out volumes.csv",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", help="a .ctui project or a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)")
+    p.add_argument("--format", required=True, choices=FORMATS, help="output format")
+    p.add_argument("--out", required=True, metavar="PATH", help="file to write")
+    p.add_argument("--series", default=None, metavar="SERIES",
+                   help="the DICOM series the labels were drawn on (default: the project's source)")
+    p.add_argument("--series-uid", default=None, metavar="UID",
+                   help="SeriesInstanceUID (or index) when SERIES holds several")
+    p.add_argument("--object", type=int, action="append", default=None, metavar="N",
+                   help="export only object N (repeatable; default all)")
+    p.add_argument("--keep-identifiers", action="store_true",
+                   help="DICOM exports: keep the patient name, ID and birth date of the source series")
+    p.add_argument("--json", action="store_true", help="print a JSON report")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ctui.commands._progress import progress_bar
+    from ctui.engine.actions.export import export
+
+    with progress_bar(args, f"export {args.format}") as progress:
+        res = export(args.input, format=args.format, out=args.out, series=args.series, series_uid=args.series_uid,
+                     objects=args.object, keep_identifiers=args.keep_identifiers, progress=progress)
+    if args.json:
+        from ctui.engine.core.jsonio import dumps
+
+        print(dumps(res.to_dict(), indent=1))
+        return 0
+    names = ", ".join(f"{o['id']} {o['name']}" for o in res.objects)
+    print(f"wrote {res.path} ({res.format}; objects {names})")
+    for w in res.warnings:
+        print(f"warning: {w}")
+    return 0
