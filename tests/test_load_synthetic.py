@@ -269,9 +269,15 @@ def test_gantry_tilt_corrected(tmp_path):
     vol = load(tmp_path / "t")
     w = [w for w in vol.warnings if "tilt" in w]
     assert w and f"{np.degrees(np.arctan(2 / 2)):.2f}" in w[0]
+    # the grid grows to keep every pixel: 2 px per slice over 9 gaps
+    assert vol.shape == (nz, ny + step_px * (nz - 1), nx)
     # after correction the rod sits at the same pixels in every slice
-    cy = [np.average(yy, weights=(vol.data[k] > 300)) for k in range(nz)]
+    gy = np.mgrid[: vol.shape[1], : vol.shape[2]][0]
+    cy = [np.average(gy, weights=(vol.data[k] > 300)) for k in range(nz)]
     assert np.ptp(cy) < 0.3
+    # and where it is in patient space: row 20 of the first slice
+    y_mm = vol.index_to_mm((0, float(np.mean(cy)), 25.0))[1]
+    assert y_mm == pytest.approx(vol0.index_to_mm((0, 20.0, 25.0))[1], abs=0.3)
     assert vol.spacing[0] == pytest.approx(2.0)
 
 

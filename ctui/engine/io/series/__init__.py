@@ -262,7 +262,7 @@ def load(
     summaries = [dicom.series_summary(s) for s in ordered]
     chosen = dicom.pick_series(ordered, series, path_label)
     vol = dicom.load_series(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
-                            all_series=summaries, **common)
+                            spacing=spacing, all_series=summaries, **common)
     if len(ordered) > 1:
         idx = ordered.index(chosen)
         vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "

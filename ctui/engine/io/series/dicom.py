@@ -37,6 +37,7 @@ in the Volume; strings taken from headers are scrubbed of them.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -44,8 +45,8 @@ import numpy as np
 
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
-from ctui.engine.io.series._common import check_memory, make_plan, rel, run_parallel, scrub_obj, to_grey
-from ctui.engine.io.series.dicom_geometry import _dominant, _geometry, _resample_z, _tilt_correct, _uneven
+from ctui.engine.io.series._common import Plan, check_memory, make_plan, rel, run_parallel, scrub_obj, to_grey
+from ctui.engine.io.series.dicom_geometry import GridPlan, _dominant, _geometry, apply_grid, plan_grid
 from ctui.engine.io.series.dicom_headers import (
     MAX_COMPRESSION,
     Frame,
@@ -108,6 +109,125 @@ def pick_series(ordered: list[Series], series: Any, path: Any) -> Series:
     raise LoadError(f"no series with UID {key!r} ({len(ordered)} series found; `ctui info` lists them)", path=path)
 
 
+@dataclass
+class Prepared:
+    """A series ready to decode: sorted frames, the crop/downsample plan, the output dtype
+    and the regular grid (all from headers)."""
+
+    frames: list[Frame]
+    geo: dict[str, Any]
+    plan: Plan
+    full_shape: tuple[int, int, int]
+    zsel: list[int]
+    dtype: np.dtype
+    optimistic: bool
+    grid: GridPlan
+    warnings: list[str]
+    pixel_spacing: tuple[float, float]
+    dz_user: float | None = None
+
+
+def _skip_frame(skipped: list[dict[str, str]], f: Frame, base: Path | None, reason: str) -> None:
+    skipped.append({"file": rel(f.file, base) + (f" frame {f.frame}" if f.nframes > 1 else ""), "reason": reason})
+
+
+def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dict[str, str]], crop: Any = None,
+                   downsample: Any = None, resample: bool = True, spacing: Any = None,
+                   memory_limit: int | None = None, dtype: np.dtype | None = None) -> Prepared:
+    """Everything about a series that headers tell: order, geometry, output grid and
+    dtype; files left out go to ``skipped``. Checks the memory the load will need."""
+    frames = _dominant(s.frames, skipped, base)
+    usable = []
+    for f in frames:  # compressed files without a decoder: skip each with the reason
+        if f.compressed and _codec_missing(f.syntax):
+            _skip_frame(skipped, f, base, codec_message(f.syntax))
+        else:
+            usable.append(f)
+    if not usable:
+        reasons = {d["reason"] for d in skipped}
+        only_codec = [r for r in reasons if "pip install" in r]
+        raise LoadError(only_codec[0] if only_codec else "no loadable DICOM image in the series", path=path)
+    frames = usable
+    geo = _geometry(frames)
+    for i in geo.get("dropped_no_position", []):
+        _skip_frame(skipped, frames[i], base, "no ImagePositionPatient while the rest of the series has it")
+    for i in geo.get("outliers", []):
+        _skip_frame(skipped, frames[i], base, f"position {float(frames[i].ipp @ geo['normal']):.6g} mm along the "
+                    f"slice normal is far from the rest of the series (outlier)")
+    for i in geo.get("duplicates", []):
+        _skip_frame(skipped, frames[i], base, "same position as another slice of the series")
+    sorted_frames = [frames[i] for i in geo["order"]]
+    f0 = sorted_frames[0]
+    full_shape = (len(sorted_frames), f0.rows, f0.cols)
+    plan = make_plan(full_shape, crop=crop, downsample=downsample, path=path)
+    zsel = list(range(*plan.z.indices(full_shape[0])))
+    if dtype is None:
+        dtype, optimistic = _out_dtype([sorted_frames[k] for k in zsel])
+    else:
+        optimistic = False
+    warnings = list(geo["warnings"])
+    dy, dx = f0.pixel_spacing or (None, None)
+    if dy is None:
+        dy = dx = 1.0
+        warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
+    zs, ys, xs = plan.steps()
+    dz_user = None
+    if spacing is not None:
+        from ctui.engine.io.series.stacks import parse_spacing
+
+        dz_user = parse_spacing(spacing, path)[0] * zs
+    out_shape = plan.out_shape(full_shape)
+    grid = plan_grid(geo, zsel, dy=dy * ys, dx=dx * xs, ny=out_shape[1], nx=out_shape[2], dz_user=dz_user,
+                     resample=resample)
+    final = grid.out_shape(len(zsel))
+    # the decoded stack plus the largest regridded copy are alive at once
+    nbytes = (int(np.prod(out_shape)) + (int(np.prod(final)) if final != out_shape else 0)) * dtype.itemsize
+    check_memory(nbytes, shape=final, path=path, limit=memory_limit)
+    return Prepared(frames=sorted_frames, geo=geo, plan=plan, full_shape=full_shape, zsel=zsel, dtype=dtype,
+                    optimistic=optimistic, grid=grid, warnings=warnings, pixel_spacing=(dy, dx), dz_user=dz_user)
+
+
+def _decode_frame(f: Frame, dst: np.ndarray, ysl: slice, xsl: slice, full_plane: bool, optimistic: bool,
+                  overflow: list, k: int) -> str | None:
+    """Decode one frame into ``dst`` (its output slice); None or the reason it failed."""
+    if full_plane and _fast_ok(f, dst.dtype):
+        return _decode_native_into(f, dst, optimistic, overflow, k)
+    try:
+        raw = _decode_native(f) if not f.compressed else _decode_pydicom(f)
+    except _Skip as sk:
+        return str(sk)
+    if raw.shape[:2] != (f.rows, f.cols):
+        return f"decoded size {raw.shape[:2]} differs from the header's {f.rows}x{f.cols}"
+    if raw.ndim == 3:
+        raw = to_grey(raw)
+    if f.photometric == "MONOCHROME1" and not raw.dtype.kind == "f":
+        # inverted grey: white is the minimum; flip so that higher = brighter
+        raw = (-raw.astype(np.int32) - 1) if f.signed else (2**f.bits_stored - 1) - raw.astype(np.int32)
+    sub = raw[ysl, xsl]
+    if dst.dtype.kind == "f":
+        v = sub.astype(np.float32)
+        if f.slope != 1.0:
+            v *= np.float32(f.slope)
+        if f.intercept != 0.0:
+            v += np.float32(f.intercept)
+        dst[...] = v
+    elif f.slope == 1 and f.intercept == 0 and not optimistic and sub.dtype.newbyteorder("=") == dst.dtype:
+        dst[...] = sub
+    else:
+        v = sub.astype(np.int64 if sub.dtype.itemsize >= 4 else np.int32)
+        if f.slope != 1:
+            v *= int(f.slope)
+        if f.intercept:
+            v += int(f.intercept)
+        if optimistic:
+            info = np.iinfo(dst.dtype)
+            if v.size and (v.min() < info.min or v.max() > info.max):
+                overflow.append(k)
+                return None
+        dst[...] = v
+    return None
+
+
 def load_series(
     s: Series,
     *,
@@ -119,98 +239,28 @@ def load_series(
     downsample: Any = None,
     progress: Callable[[int, int], Any] | None = None,
     resample: bool = True,
+    spacing: Any = None,
     memory_limit: int | None = None,
     all_series: list[dict[str, Any]] | None = None,
     _dtype: np.dtype | None = None,
 ) -> Volume:
-    """Decode one series into a Volume (see the module docstring)."""
+    """Decode one series into a Volume (see the module docstring).
+
+    ``spacing``: (dz, dy, dx) or a number; its dz is the step of the regular grid an
+    unevenly spaced or tilted series is resampled onto (default: the smallest regular
+    gap). In-plane spacing always comes from the header.
+    """
     n_skipped_at_entry = len(skipped)
-    frames = _dominant(s.frames, skipped, base)
-    # compressed files without a decoder: skip each with the reason
-    usable = []
-    for f in frames:
-        if f.compressed and _codec_missing(f.syntax):
-            skipped.append({"file": rel(f.file, base), "reason": codec_message(f.syntax)})
-        else:
-            usable.append(f)
-    if not usable:
-        reasons = {d["reason"] for d in skipped}
-        only_codec = [r for r in reasons if "pip install" in r]
-        raise LoadError(only_codec[0] if only_codec else "no loadable DICOM image in the series", path=path)
-    frames = usable
-    geo = _geometry(frames)
-    for i in geo.get("dropped_no_position", []):
-        f = frames[i]
-        skipped.append({"file": rel(f.file, base), "reason": "no ImagePositionPatient while the rest of the series has it"})
-    warnings = list(geo["warnings"])
-    order = geo["order"]
-    dup_set = set(range(len(frames))) - set(order) - set(geo.get("dropped_no_position", []))
-    for i in sorted(dup_set):
-        f = frames[i]
-        skipped.append({"file": rel(f.file, base) + (f" frame {f.frame}" if f.nframes > 1 else ""),
-                        "reason": "same position as another slice of the series"})
-    sorted_frames = [frames[i] for i in order]
+    prep = prepare_series(s, path=path, base=base, skipped=skipped, crop=crop, downsample=downsample,
+                          resample=resample, spacing=spacing, memory_limit=memory_limit, dtype=_dtype)
+    sorted_frames, plan, zsel = prep.frames, prep.plan, prep.zsel
     f0 = sorted_frames[0]
-    full_shape = (len(sorted_frames), f0.rows, f0.cols)
-    plan = make_plan(full_shape, crop=crop, downsample=downsample, path=path)
-    out_shape = plan.out_shape(full_shape)
-    zsel = list(range(*plan.z.indices(full_shape[0])))
-    dtype, optimistic = (_dtype, False) if _dtype is not None else _out_dtype([sorted_frames[k] for k in zsel])
-    extra = 0
-    if resample and geo["uneven"] and geo["positions"] is not None:
-        span = geo["positions"][zsel[-1]] - geo["positions"][zsel[0]]
-        extra = int(round(span / (geo["dz"] * plan.steps()[0]))) + 1
-    nbytes = int(np.prod(out_shape)) * dtype.itemsize
-    check_memory(nbytes + extra * out_shape[1] * out_shape[2] * 4, shape=out_shape, path=path, limit=memory_limit)
-
-    out = np.empty(out_shape, dtype=dtype)
-    ysl, xsl = plan.y, plan.x
-    overflow = []
-
+    out = np.empty(plan.out_shape(prep.full_shape), dtype=prep.dtype)
+    overflow: list[int] = []
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
 
     def work(k: int, zi: int) -> str | None:
-        f = sorted_frames[zi]
-        if full_plane and _fast_ok(f, out.dtype):
-            return _decode_native_into(f, out[k], optimistic, overflow, k)
-        try:
-            raw = _decode_native(f) if not f.compressed else _decode_pydicom(f)
-        except _Skip as sk:
-            return str(sk)
-        if raw.shape[:2] != (f.rows, f.cols):
-            return f"decoded size {raw.shape[:2]} differs from the header's {f.rows}x{f.cols}"
-        if raw.ndim == 3:
-            raw = to_grey(raw)
-        if f.photometric == "MONOCHROME1" and not raw.dtype.kind == "f":
-            # inverted grey: white is the minimum; flip so that higher = brighter
-            bs = f.bits_stored
-            if f.signed:
-                raw = (-raw.astype(np.int32) - 1)
-            else:
-                raw = (2**bs - 1) - raw.astype(np.int32)
-        sub = raw[ysl, xsl]
-        if out.dtype.kind == "f":
-            v = sub.astype(np.float32)
-            if f.slope != 1.0:
-                v *= np.float32(f.slope)
-            if f.intercept != 0.0:
-                v += np.float32(f.intercept)
-            out[k] = v
-        elif f.slope == 1 and f.intercept == 0 and not optimistic and sub.dtype.newbyteorder("=") == out.dtype:
-            out[k] = sub
-        else:
-            v = sub.astype(np.int64 if sub.dtype.itemsize >= 4 else np.int32)
-            if f.slope != 1:
-                v *= int(f.slope)
-            if f.intercept:
-                v += int(f.intercept)
-            if optimistic:
-                info = np.iinfo(out.dtype)
-                if v.size and (v.min() < info.min or v.max() > info.max):
-                    overflow.append(k)
-                    return None
-            out[k] = v
-        return None
+        return _decode_frame(sorted_frames[zi], out[k], plan.y, plan.x, full_plane, prep.optimistic, overflow, k)
 
     failures = run_parallel(zsel, work, progress=progress)
     if overflow:
@@ -218,93 +268,98 @@ def load_series(
         del out
         del skipped[n_skipped_at_entry:]
         return load_series(s, path=path, base=base, skipped=skipped, ids=ids, crop=crop, downsample=downsample,
-                           progress=progress, resample=resample, memory_limit=memory_limit,
+                           progress=progress, resample=resample, spacing=spacing, memory_limit=memory_limit,
                            all_series=all_series, _dtype=np.dtype(np.int32))
     bad = {k for k, _ in failures}
     for k, reason in failures:
-        f = sorted_frames[zsel[k]]
-        skipped.append({"file": rel(f.file, base) + (f" frame {f.frame}" if f.nframes > 1 else ""), "reason": reason})
+        _skip_frame(skipped, sorted_frames[zsel[k]], base, reason)
     keep_k = [k for k in range(len(zsel)) if k not in bad]
     if not keep_k:
         raise LoadError("no slice of the series could be decoded" + (f" ({failures[0][1]})" if failures else ""), path=path)
-    positions = geo["positions"][zsel] if geo["positions"] is not None else None
+    warnings = prep.warnings
+    grid = prep.grid
     if bad:
-        # drop failed slices in place (no second full-size array)
+        # drop failed slices in place (no second full-size array), then plan the grid again
         for j, k in enumerate(keep_k):
             if j != k:
                 out[j] = out[k]
         out = out[: len(keep_k)]
-        if positions is not None:
-            positions = positions[keep_k]
-            warnings.append(f"{len(bad)} slices could not be decoded and are missing: the gaps are interpolated")
-        else:
-            warnings.append(f"{len(bad)} slices could not be decoded and are missing from the volume")
-    zsel = [zsel[k] for k in keep_k]
+        zsel = [zsel[k] for k in keep_k]
+        dy, dx = prep.pixel_spacing
+        zs, ys, xs = plan.steps()
+        grid = plan_grid(prep.geo, zsel, dy=dy * ys, dx=dx * xs, ny=out.shape[1], nx=out.shape[2],
+                         dz_user=prep.dz_user, resample=resample)
+        warnings.append(f"{len(bad)} slices could not be decoded and are missing"
+                        + (": the gaps are interpolated" if grid.positions is not None else " from the volume"))
+
+    def check(nbytes: int, what: str) -> None:
+        check_memory(nbytes, shape=(1, 1, 1), path=path, limit=memory_limit, what=what)
+
+    out = apply_grid(out, grid, check=check)
+    return _volume(out, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series)
+
+
+def _grid_origin(prep: Prepared, grid: GridPlan, zsel: list[int]) -> np.ndarray:
+    """Patient position (x, y, z) of voxel (0, 0, 0) of the output grid."""
+    geo, plan = prep.geo, prep.plan
+    dy, dx = prep.pixel_spacing
     zs, ys, xs = plan.steps()
-    dy, dx = f0.pixel_spacing or (None, None)
-    if dy is None:
-        dy = dx = 1.0
-        warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
+    y0, x0 = plan.starts(prep.full_shape)[1:]
     row, col, normal = geo["row"], geo["col"], geo["normal"]
-    y0, x0 = plan.starts(full_shape)[1:]
-    dz = geo["dz"] * zs
-    # --- gantry tilt: shift slices in-plane onto the orthogonal grid
-    meta: dict[str, Any] = {"format": "dicom", "transfer_syntax": f0.syntax, "rescale": [f0.slope, f0.intercept],
-                            "photometric": f0.photometric}
-    if geo["tilt_shifts"] is not None:
-        offs = geo["tilt_shifts"][zsel]
-        _tilt_correct(out, offs, row, col, dy * ys, dx * xs)
-        warnings.append(f"gantry tilt {geo['tilt_deg']:.2f} deg: slices shifted in-plane onto an orthogonal grid "
-                        f"along the slice normal (linear interpolation)")
-        meta["gantry_tilt_deg"] = round(geo["tilt_deg"], 4)
-    # --- uneven spacing: resample along the normal
-    if positions is not None and len(positions) > 1:
-        gaps = np.diff(positions)
-        dz = float(np.median(gaps))
-        if _uneven(gaps):
-            msg = f"uneven slice spacing (gaps {gaps.min():.3g} to {gaps.max():.3g} mm)"
-            if resample:
-                out = _resample_z(out, positions, dz)
-                warnings.append(msg + f": resampled to a regular {dz:.4g} mm grid along the slice normal (linear)")
-                meta["resampled"] = True
-            else:
-                warnings.append(msg + ": kept as is (resample=False); slice_positions gives each slice's position")
     origin = geo["origin"] if geo["origin"] is not None else np.zeros(3)
     origin = np.asarray(origin, float) + x0 * dx * row + y0 * dy * col
-    if positions is not None:
-        origin = origin + (positions[0] - geo["positions"][0]) * normal
+    origin = origin - grid.pad_yx[0] * dy * ys * col - grid.pad_yx[1] * dx * xs * row
+    if grid.positions is not None:
+        origin = origin + (grid.positions[0] - geo["positions"][0]) * normal
     elif zsel[0]:
         origin = origin + zsel[0] * geo["dz"] * normal
-    direction = np.column_stack([row, col, normal])
-    modality = f0.modality
+    return origin
+
+
+def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *, s: Series, path: Any,
+            skipped: list[dict[str, str]], ids: set[str], all_series: list[dict[str, Any]] | None) -> Volume:
+    f0 = prep.frames[0]
+    plan = prep.plan
+    dy, dx = prep.pixel_spacing
+    zs, ys, xs = plan.steps()
+    warnings = prep.warnings + grid.warnings
+    meta: dict[str, Any] = {"format": "dicom", "transfer_syntax": f0.syntax, "rescale": [f0.slope, f0.intercept],
+                            "photometric": f0.photometric, **grid.meta}
+    dz = grid.dz if grid.positions is not None else prep.geo["dz"] * zs
     window = f0.window
     if window is None:
         from ctui.engine.core.windows import auto_window
 
-        window = auto_window(out, modality=modality)
+        window = auto_window(out, modality=f0.modality)
     if f0.photometric == "MONOCHROME1":
         warnings.append("MONOCHROME1 (inverted grey) image: values inverted so that higher is brighter")
-    if not plan.is_full(full_shape):
-        meta["crop_downsample"] = {"start_zyx": list(plan.starts(full_shape)), "step_zyx": list(plan.steps()),
-                                   "full_shape_zyx": list(full_shape)}
-    desc = scrub_obj(f0.description, ids)  # header text: scrubbed of patient identifiers
-    n_files = len(s.files)
-    source = f"DICOM {modality} series" + (f" '{desc}'" if desc else "") + f", {n_files} file{'s' * (n_files != 1)}, from {path}"
+    if not plan.is_full(prep.full_shape):
+        meta["crop_downsample"] = {"start_zyx": list(plan.starts(prep.full_shape)), "step_zyx": list(plan.steps()),
+                                   "full_shape_zyx": list(prep.full_shape)}
     vol = Volume(
         data=out,
         spacing=(dz, dy * ys, dx * xs),
-        origin=tuple(origin),
-        direction=direction,
-        modality=modality,
+        origin=tuple(_grid_origin(prep, grid, zsel)),
+        direction=np.column_stack([prep.geo["row"], prep.geo["col"], prep.geo["normal"]]),
+        modality=f0.modality,
         window=tuple(window),
-        source=source,
+        source=describe_source(s, f0, path, ids),
         series=all_series or [],
         skipped=skipped,
         warnings=warnings,
-        slice_positions=positions,
+        slice_positions=grid.positions,
         meta=meta,
     )
-    # the series list holds header text (descriptions); paths given by the user are kept as given
+    # the series list holds header text (descriptions): scrubbed of the headers' own identifiers
     vol.series = scrub_obj(vol.series, ids)
     return vol
 
+
+def describe_source(s: Series, f0: Frame, path: Any, ids: set[str]) -> str:
+    """"DICOM CT series 'desc', N files, from PATH" with the headers' patient identifiers
+    (name, ID, birth date...) scrubbed from the description and the path."""
+    n_files = len(s.files)
+    desc = f0.description
+    text = (f"DICOM {f0.modality} series" + (f" '{desc}'" if desc else "")
+            + f", {n_files} file{'s' * (n_files != 1)}, from {path}")
+    return scrub_obj(text, ids)
