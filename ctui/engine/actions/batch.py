@@ -1,0 +1,349 @@
+"""Batch jobs on Dask: :func:`run_batch` (``ctui batch MANIFEST.csv --out RESULTS.csv``).
+
+Manifest: a CSV with one row per job and the columns
+
+=============  ==========================================================================
+series         series folder/file (anything ``ctui open`` loads); required
+seed           "X,Y,Z" voxel (column, row, slice); required
+range          "LO:HI" in-range values (HU for CT); required
+method         "fill" (threshold fill + slice propagation, default) or "3d" (one 3D fill)
+background     "X,Y,Z[;X,Y,Z]" voxels that must stay outside the object (the object is cut
+               back to what stays connected to the seed without them)
+filter         filter steps "NAME[:key=value,...]" separated by ";" (as ``ctui segment --filter``)
+outdir         folder for the job's project and mesh (default: ``<RESULTS>-outputs``)
+sections       "auto": cross-sections along the automatic centreline as well
+name           job name (default: the series' folder name); outputs are ``<name>-<key>``
+=============  ==========================================================================
+
+Each job loads its series, segments one object, measures it (voxel and mesh volume,
+area; sections when asked) and writes ``<name>-<key>.ctui`` and ``<name>-<key>.stl`` to its
+outdir; ``key`` hashes the job's inputs. Jobs run on a ``dask.distributed`` cluster: a
+:class:`distributed.LocalCluster` of ``workers`` processes by default, or the scheduler at
+``scheduler`` (``tcp://HOST:PORT``). Rows are written to RESULTS.csv (atomically, the
+whole file) as jobs finish (``as_completed``); a failed job gets ``status`` "failed" and
+its one-line error, and the others go on. A second run skips the jobs whose row says "ok"
+and whose outputs are still there.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ctui.engine.core.atomic import write_text
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.progress import Progress, report
+
+MANIFEST_COLUMNS = ("series", "seed", "range", "method", "background", "filter", "outdir", "sections", "name")
+RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
+                  "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
+                  "slices", "project", "mesh", "seconds")
+METHODS = ("fill", "3d")
+
+
+@dataclass
+class Job:
+    """One manifest row, parsed. ``key``: a hash of the inputs naming the outputs."""
+
+    row: int
+    series: str
+    seed: tuple[int, int, int]
+    range: tuple[float, float]
+    method: str = "fill"
+    background: list[tuple[int, int, int]] = field(default_factory=list)
+    filters: list[str] = field(default_factory=list)
+    outdir: str = ""
+    sections: bool = False
+    name: str = ""
+    error: str = ""  # a manifest error: the job is reported failed without running
+
+    @property
+    def key(self) -> str:
+        text = "|".join(map(str, (os.path.abspath(self.series), self.seed, self.range, self.method, self.background,
+                                  self.filters, self.sections)))
+        return hashlib.sha1(text.encode("utf-8", "surrogateescape")).hexdigest()[:10]
+
+    @property
+    def stem(self) -> str:
+        return f"{self.name}-{self.key}"
+
+    def outputs(self) -> tuple[str, str]:
+        return (os.path.join(self.outdir, self.stem + ".ctui"), os.path.join(self.outdir, self.stem + ".stl"))
+
+
+# =========================================================================== manifest
+def _xyz(text: str, what: str) -> tuple[int, int, int]:
+    parts = [v for v in str(text).replace(" ", "").split(",") if v != ""]
+    try:
+        x, y, z = (int(float(v)) for v in parts)
+    except ValueError:
+        raise CtuiError(f"{what} {text!r}: expected X,Y,Z (column,row,slice)") from None
+    return x, y, z
+
+
+def _range(text: str) -> tuple[float, float]:
+    lo, sep, hi = str(text).partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        a, b = float(lo), float(hi)
+    except ValueError:
+        raise CtuiError(f"range {text!r}: expected LO:HI, e.g. 150:300") from None
+    if a > b:
+        raise CtuiError(f"range {text!r}: LO is above HI")
+    return a, b
+
+
+def _job(n: int, row: dict, base: Path, default_outdir: str) -> Job:
+    get = {k: str(row.get(k) or "").strip() for k in MANIFEST_COLUMNS}
+    series = get["series"]
+    if series and not os.path.isabs(series):
+        series = str(base / series)
+    outdir = get["outdir"] or default_outdir
+    if not os.path.isabs(outdir):
+        outdir = str(base / outdir)
+    name = get["name"] or (Path(series.rstrip("/")).name if series else f"row{n}")
+    job = Job(n, series, (0, 0, 0), (0.0, 0.0), outdir=outdir, name="".join(c if c.isalnum() or c in "._-" else "_"
+                                                                             for c in name)[:60] or f"row{n}")
+    try:
+        if not series:
+            raise CtuiError("no series")
+        job.seed = _xyz(get["seed"], "seed")
+        job.range = _range(get["range"])
+        job.method = (get["method"] or "fill").lower()
+        if job.method not in METHODS:
+            raise CtuiError(f"method {get['method']!r}: one of {', '.join(METHODS)}")
+        job.background = [_xyz(v, "background") for v in get["background"].split(";") if v.strip()]
+        job.filters = [v.strip() for v in get["filter"].split(";") if v.strip()]
+        job.sections = get["sections"].lower() in ("auto", "yes", "true", "1")
+    except CtuiError as exc:
+        job.error = str(exc)
+    return job
+
+
+def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[Job]:
+    """Parse MANIFEST.csv (relative paths are relative to its folder). CtuiError when unreadable."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise CtuiError(f"cannot read ({exc.strerror or exc})", path=p) from None
+    reader = csv.DictReader(io.StringIO(text))
+    cols = [c.strip().lower() for c in reader.fieldnames or []]
+    missing = [c for c in ("series", "seed", "range") if c not in cols]
+    if missing:
+        raise CtuiError(f"the manifest lacks the column(s) {', '.join(missing)} (columns: series, seed, range, "
+                        "optional method, background, filter, outdir, sections, name)", path=p)
+    reader.fieldnames = cols
+    return [_job(n, row, p.parent.resolve(), default_outdir) for n, row in enumerate(reader, start=1)]
+
+
+# =========================================================================== one job
+def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
+    """(labels uint8, pipeline dict, propagation dict) of one object from the job's seed."""
+    from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
+    from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+    from ctui.engine.segment.selection import Segmentation
+
+    nz, ny, nx = volume.shape
+    for x, y, z in [job.seed, *job.background]:
+        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+            raise CtuiError(f"seed {x},{y},{z} is outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
+    try:
+        pipeline = Pipeline([parse_filter_spec(s) for s in job.filters], domain="hu")
+    except ValueError as exc:
+        raise CtuiError(f"filter: {exc}") from None
+    x, y, z = job.seed
+    seg = Segmentation(volume.shape)
+    oid = seg.add_object(job.name, object_id=1)
+    res = seg.fill(pipeline.final_slice(volume, z), x, y, z, object_id=oid, low=job.range[0], high=job.range[1])
+    if not res.accepted:
+        raise CtuiError(f"seed {x},{y},{z}: {res.reason}")
+    settings = PropagationSettings(low=job.range[0], high=job.range[1], mode="3d" if job.method == "3d" else "slice")
+    prop = propagate_object(seg, volume, pipeline, oid, z, settings)
+    prop.accept(seg)
+    labels = seg.labels
+    if job.background:
+        labels = _cut_background(labels, job)
+    return labels, pipeline.to_dict(), settings.to_dict()
+
+
+def _cut_background(labels: np.ndarray, job: Job) -> np.ndarray:
+    """Remove background voxels (and what only they connected) from the object."""
+    from scipy import ndimage
+
+    mask = labels == 1
+    for x, y, z in job.background:
+        mask[z, y, x] = False
+    comp, _ = ndimage.label(mask)
+    x, y, z = job.seed
+    keep = comp == comp[z, y, x] if comp[z, y, x] else mask
+    return keep.astype(np.uint8)
+
+
+def run_job(job: Job) -> dict:
+    """Run one job (on a Dask worker); returns its RESULTS row. Never raises: a failure is a row."""
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {"job": job.key, "name": job.name, "series": job.series, "seed": ",".join(map(str, job.seed)),
+                           "range": f"{job.range[0]:g}:{job.range[1]:g}", "method": job.method}
+    try:
+        if job.error:
+            raise CtuiError(job.error)
+        row.update(_run(job))
+        row["status"] = "ok"
+    except Exception as exc:  # noqa: BLE001 - one job's failure must not stop the batch
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        row.update(status="failed", error=msg if isinstance(exc, CtuiError) else f"{type(exc).__name__}: {msg}")
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
+def _run(job: Job) -> dict:
+    from ctui.engine.actions.measure import measure_object
+    from ctui.engine.actions.opened import Opened
+    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.io.meshes import save_mesh
+    from ctui.engine.io.series import load
+
+    if not os.path.exists(job.series):
+        raise CtuiError("no such series folder or file", path=job.series)
+    volume = load(job.series)
+    labels, pipeline, propagation = _segment(volume, job)
+    project = new_project(volume, source_path=job.series, labels=labels, pipeline=pipeline, propagation=propagation,
+                          objects=[{"id": 1, "name": job.name, "color": [230, 60, 60], "seeds": [list(job.seed)]}])
+    opened = Opened.of_volume(volume, labels, path=job.series, project=project)
+    m = measure_object(opened, object=1, path="auto" if job.sections else None)
+    os.makedirs(job.outdir, exist_ok=True)
+    proj_path, mesh_path = job.outputs()
+    save_project(proj_path, project)
+    mesh = m.stats.get("mesh") if m.stats else None
+    if mesh is None:
+        raise CtuiError("the object gave no surface")
+    save_mesh(mesh_path, mesh)
+    zs = np.flatnonzero((labels == 1).any(axis=(1, 2)))
+    areas = [s["area_mm2"] for s in m.sections if s.get("area_mm2") is not None]
+    return {"voxels": int(np.count_nonzero(labels == 1)), "volume_voxels_ml": _r(m.volume_ml.get("voxels")),
+            "volume_mesh_ml": _r(m.volume_ml.get("mesh")), "area_mm2": _r(m.area_mm2, 3),
+            "path_length_mm": _r(m.path_length_mm, 3), "section_area_min_mm2": _r(min(areas), 3) if areas else None,
+            "section_area_max_mm2": _r(max(areas), 3) if areas else None,
+            "slices": f"{zs[0]}:{zs[-1]}" if zs.size else "", "project": proj_path, "mesh": mesh_path, "error": ""}
+
+
+def _r(v: Any, nd: int = 6) -> Any:
+    return None if v is None else round(float(v), nd)
+
+
+# =========================================================================== results
+def read_results(path: str | os.PathLike) -> dict[str, dict]:
+    """{job key: row} of an existing RESULTS.csv ({} when absent or unreadable)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError:
+        return {}
+    return {r["job"]: r for r in csv.DictReader(io.StringIO(text)) if r.get("job")}
+
+
+def write_results(path: str | os.PathLike, rows: list[dict]) -> None:
+    """Write all rows (RESULT_COLUMNS) atomically: a reader never sees a half-written file."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=RESULT_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: "" if r.get(k) is None else r.get(k) for k in RESULT_COLUMNS})
+    write_text(path, buf.getvalue())
+
+
+def _done(row: dict | None) -> bool:
+    return bool(row) and row.get("status") == "ok" and all(
+        row.get(k) and os.path.exists(row[k]) for k in ("project", "mesh"))
+
+
+@dataclass
+class BatchResult:
+    """``rows`` in manifest order; ``ran``, ``skipped``, ``failed`` counts; ``results`` path."""
+
+    results: str
+    rows: list[dict]
+    ran: int = 0
+    skipped: int = 0
+    failed: int = 0
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {"results": self.results, "jobs": len(self.rows), "ran": self.ran, "skipped": self.skipped,
+                "failed": self.failed, "seconds": round(self.seconds, 3)}
+
+
+def _client(scheduler: str | None, workers: int | None, processes: bool) -> tuple[Any, Any]:
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as exc:
+            raise CtuiError(f"cannot reach the Dask scheduler at {scheduler} ({' '.join(str(exc).split())[:120]})") \
+                from None
+    cluster = LocalCluster(n_workers=max(1, int(workers or 1)), threads_per_worker=1, processes=processes,
+                           dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler: str | None = None,
+              workers: int | None = None, processes: bool = True, progress: Progress | None = None,
+              job_fn: Callable[[Job], dict] = run_job) -> BatchResult:
+    """Run every job of ``manifest`` on Dask, writing ``out`` (RESULTS.csv) as jobs finish.
+
+    ``scheduler``: "tcp://HOST:PORT" of a running dask.distributed scheduler; else a
+    LocalCluster of ``workers`` (default 1) workers, processes unless ``processes=False``.
+    """
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    out_s = os.fspath(out)
+    default_outdir = str(Path(out_s).with_suffix("")) + "-outputs"
+    jobs = read_manifest(manifest, default_outdir=default_outdir)
+    if not jobs:
+        raise CtuiError("the manifest holds no job", path=manifest)
+    previous = read_results(out_s)
+    rows: dict[int, dict] = {}
+    todo = []
+    for j in jobs:
+        if _done(previous.get(j.key)):
+            rows[j.row] = previous[j.key]
+        else:
+            todo.append(j)
+    res = BatchResult(out_s, [], skipped=len(rows))
+    order = lambda: [rows[j.row] for j in jobs if j.row in rows]  # noqa: E731
+    write_results(out_s, order())
+    report(progress, len(rows), len(jobs), f"{len(rows)} done before")
+    if todo:
+        client, cluster = _client(scheduler, workers, processes)
+        try:
+            futures = {client.submit(job_fn, j, pure=False, key=f"ctui-job-{j.key}-{j.row}"): j for j in todo}
+            for fut in as_completed(futures):
+                j = futures[fut]
+                try:
+                    row = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a worker died or the job could not be sent
+                    row = {"job": j.key, "name": j.name, "series": j.series, "status": "failed",
+                           "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
+                rows[j.row] = row
+                res.ran += 1
+                res.failed += row.get("status") != "ok"
+                write_results(out_s, order())
+                report(progress, len(rows), len(jobs), f"{j.name}: {row.get('status')}")
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    res.rows = order()
+    res.seconds = time.perf_counter() - t0
+    return res
