@@ -18,7 +18,7 @@ import sys
 from ctui import __version__
 
 OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
-COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure")
+COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure", "export", "batch")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,6 +37,11 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         mod.register(sub)
+    for name, sp in sub.choices.items():  # one privacy switch on every command that reports or writes
+        if name != "open" and "--keep-identifiers" not in sp._option_string_actions:
+            sp.add_argument("--keep-identifiers", action="store_true",
+                            help="show the input's path in reports (folder names often carry the patient's "
+                                 "name; default: shown as <input>)")
     return parser
 
 
@@ -55,6 +60,17 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    stdout = sys.stdout
+    if args.command != "open" and not getattr(args, "keep_identifiers", False):
+        _hide_input_paths(args)
+    try:
+        return _run(args)
+    finally:
+        if isinstance(sys.stdout, _PathHidingStdout):
+            sys.stdout = stdout
+
+
+def _run(args: argparse.Namespace) -> int:
     from ctui.engine.core.errors import CtuiError
 
     try:
@@ -77,6 +93,29 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ctui {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     return int(rc or 0)
+
+
+class _PathHidingStdout:
+    """stdout with the command's input path(s) shown as ``<input>`` (reports only show the
+    path when asked: --keep-identifiers). Error messages on stderr still name the file."""
+
+    def __init__(self, stream, hide) -> None:
+        self._stream, self._hide = stream, hide
+
+    def write(self, text: str) -> int:
+        self._stream.write(self._hide(text))
+        return len(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _hide_input_paths(args: argparse.Namespace) -> None:
+    from ctui.engine.core.privacy import path_hider
+
+    paths = [getattr(args, k, None) for k in ("path", "input")]
+    if any(paths):
+        sys.stdout = _PathHidingStdout(sys.stdout, path_hider(paths))
 
 
 def _broken_pipe() -> int:

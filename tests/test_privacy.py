@@ -36,7 +36,8 @@ SHAPE = (16, 48, 48)  # z, y, x
 CENTRE = (8, 24, 24)
 
 
-def write_series(folder: Path, *, broken: bool = True) -> Path:
+def write_series(folder: Path, *, broken: bool = True, secrets: dict | None = None, description: str = "privacy test",
+                 study_description: str | None = None, private_text: str | None = None) -> Path:
     from pydicom.dataset import Dataset, FileMetaDataset
     from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian
 
@@ -56,10 +57,16 @@ def write_series(folder: Path, *, broken: bool = True) -> Path:
         ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
         ds.StudyInstanceUID = "1.2.826.0.1.3680043.8.498.78"
         ds.SeriesInstanceUID = "1.2.826.0.1.3680043.8.498.79"
-        for kw, v in SECRETS.items():
+        for kw, v in (SECRETS if secrets is None else secrets).items():
             setattr(ds, kw, v)
         ds.Modality = "CT"
-        ds.SeriesDescription = "privacy test"
+        ds.SeriesDescription = description
+        if study_description is not None:
+            ds.StudyDescription = study_description
+        if private_text is not None:  # a private block, as scanners write: creator + free text
+            block = ds.private_block(0x0011, "ZYX PRIVATE", create=True)
+            block.add_new(0x01, "LO", private_text)
+            block.add_new(0x02, "LT", f"operator note: {private_text}")
         ds.InstanceNumber = k + 1
         ds.ImagePositionPatient = [-30.0, -40.0, 2.0 * k]
         ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
@@ -195,3 +202,98 @@ def test_every_command_and_export_is_clean(series, tmp_path):
     assert not failures, failures
     assert "p.ctui" in produced and "m.nii.gz" in produced and "c.mric" in produced
     assert "p.ctui.autosave" in produced
+
+
+# --------------------------------------------------------------------- names in folder, descriptions, private tags
+NAME = "Zyxwv^Qwerty"
+FOLDER = "Zyxwv_Qwerty_1970"
+NAMED = {"PatientName": NAME, "PatientID": "QX44719", "PatientBirthDate": "19700101"}
+NAMED_NEEDLES = ["Zyxwv", "Qwerty", "QX44719", "19700101", "1970-01-01", FOLDER]
+
+
+def test_scrub_text_whole_words_of_own_identifiers_only():
+    from ctui.engine.core.privacy import identifier_tokens, scrub_text
+
+    ids = [NAME, "QX44719", "19700101", "ANN^HEAD"]
+    assert scrub_text("CT Zyxwv Qwerty abdomen", ids) == "CT [removed] [removed] abdomen"
+    assert scrub_text(f"/data/{FOLDER}/ct", ids) == "/data/[removed]_[removed]_1970/ct"
+    assert scrub_text("zyxwv^QWERTY qx44719 b.19700101", ids) == "[removed]^[removed] [removed] b.[removed]"
+    # harmless words are kept: substrings, common words, short tokens
+    assert scrub_text("SCANNER HEAD 3 mm, Annotated", ids) == "SCANNER HEAD 3 mm, Annotated"
+    assert scrub_text("Zyxwvish Qwertys", ids) == "Zyxwvish Qwertys"
+    assert "HEAD" not in identifier_tokens(["ANN^HEAD"]) and "ANN" in identifier_tokens(["ANN^HEAD"])
+    assert identifier_tokens(["LI^BO", "123"]) == []  # too short to scrub without garbling text
+
+
+def test_hide_path():
+    from ctui.engine.core.privacy import hide_path
+
+    assert hide_path(f"DICOM CT series, 3 files, from /x/{FOLDER}", [f"/x/{FOLDER}/"]) == "DICOM CT series, 3 files, from <input>"
+
+
+@pytest.fixture(scope="module")
+def named_series(tmp_path_factory) -> Path:
+    return write_series(tmp_path_factory.mktemp("named") / FOLDER, broken=False, secrets=NAMED,
+                        description=f"CT {NAME.replace('^', ' ')} abdomen", study_description=f"Qwerty study 1970",
+                        private_text=f"{NAME} 19700101")
+
+
+def test_named_series_carries_the_name(named_series):
+    assert find_strings([named_series], ["Zyxwv", "QX44719", "19700101"])
+    blob = b"".join(f.read_bytes() for f in named_series.iterdir())
+    assert b"operator note: Zyxwv^Qwerty" in blob and b"Qwerty study" in blob and b"CT Zyxwv Qwerty" in blob
+
+
+def _project_without_source_path(p: Path) -> bytes:
+    """The project's bytes with its source_path value cut out: the project is the one
+    output that references the series by path (it must reopen it)."""
+    import zipfile
+
+    with zipfile.ZipFile(p) as zf:
+        d = json.loads(zf.read("project.json"))
+        rest = b"".join(zf.read(n) for n in zf.namelist() if n != "project.json")
+    d.pop("source_path", None)
+    if isinstance(d.get("source"), dict):
+        d["source"].pop("path", None)
+    return json.dumps(d).encode() + rest
+
+
+def test_named_series_reaches_no_output(named_series, tmp_path, capsys, monkeypatch):
+    from ctui.cli import main
+    from ctui.engine.render import egl_available
+
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    s = str(named_series)
+    seed = f"{CENTRE[2]},{CENTRE[1]},{CENTRE[0]}"
+    o = lambda name: str(out / name)  # noqa: E731
+    plan = [
+        ["info", s], ["info", s, "--json"],
+        ["segment", s, "--seed", seed, "--range", "200:400", "--project", o("p.ctui"), "--mask", o("m.nii.gz"),
+         "--mric", o("c.mric"), "--json"],
+        ["segment", s, "--seed", seed, "--range", "200:400", "--mask", o("m.seg.nrrd")],
+        ["drift", s, "--seed", seed, "--range", "200:400", "--json", "--plot", o("drift.png")],
+        ["drift", o("p.ctui"), "--json"],
+        ["mesh", o("p.ctui"), "--out", o("obj.stl"), "--json"],
+        ["mesh", o("p.ctui"), "--out", o("obj.ply"), "--ascii"],
+        ["mesh", s, "--iso", "150", "--out", o("iso.obj"), "--json"],
+        ["measure", o("p.ctui"), "--json", "--path", "auto", "--csv", o("sec.csv"), "--plot", o("sec.png")],
+        ["measure", o("m.nii.gz"), "--json"],
+    ]
+    if egl_available():
+        plan += [["render", s, "--mode", "mip", "--out", o("mip.png"), "--size", "64x48"],
+                 ["render", o("obj.stl"), "--out", o("r.png"), "--size", "64x48"]]
+    texts, failures = [], []
+    for argv in plan:
+        rc = main(argv)
+        r = capsys.readouterr()
+        texts += [r.out, r.err]
+        if rc != 0:
+            failures.append(f"ctui {' '.join(argv)} -> {rc}: {r.err.strip()[-300:]}")
+    assert not failures, failures
+    files = [f for f in out.iterdir() if not f.name.endswith(".ctui")]
+    leaks = find_strings(files + [tmp_path / "autosave"], NAMED_NEEDLES, texts=texts)
+    projects = [_project_without_source_path(f) for f in out.iterdir() if f.name.endswith(".ctui")]
+    leaks += find_strings([], NAMED_NEEDLES, texts=[b.decode("latin-1") for b in projects])
+    assert leaks == [], leaks

@@ -2,9 +2,17 @@
 
 ctui never writes patient identifiers (name, ID, birth date, accession number,
 institution...) into any output. This module holds the list of identifying DICOM
-keywords, :func:`scrub` to drop them from metadata dicts before they are stored, and
+keywords, :func:`scrub` to drop them from metadata dicts before they are stored,
+:func:`scrub_text` to remove a series' own identifiers from free text taken from its
+headers (SeriesDescription, StudyDescription, private tags' text) or from its folder
+name, :func:`hide_path` to keep a source path out of reports, and
 :func:`find_strings` to search output files (including gzip streams and zip members)
 for given strings, which the privacy tests use.
+
+``scrub_text`` replaces whole words only: the tokens of the identifiers (a PN
+"DOE^JOHN" gives "DOE" and "JOHN"), at least 3 letters (4 digits for numbers), never a
+common word of series descriptions ("HEAD", "CHEST", "CONTRAST"...). The old scrubber
+replaced any substring ("ANN" inside "SCANNER"), which garbled harmless text.
 """
 
 from __future__ import annotations
@@ -12,6 +20,7 @@ from __future__ import annotations
 import gzip
 import io
 import os
+import re
 import zipfile
 from pathlib import Path
 from typing import Any, Iterable
@@ -53,6 +62,111 @@ def scrub(obj: Any) -> Any:
     if isinstance(obj, tuple):
         return tuple(scrub(v) for v in obj)
     return obj
+
+
+#: Words that may appear in a name or an ID but are common in descriptions and
+#: never scrubbed on their own (upper-case compared).
+COMMON_WORDS: frozenset[str] = frozenset(
+    """
+    ABDOMEN ABD AND ANON ANONYMOUS AXIAL BODY BONE BRAIN CARDIAC CENTER CENTRE CHEST CLINIC CONTRAST
+    CORONAL DEFAULT DEMO DEPT DOCTOR DYNAMIC FEMALE FOR HEAD HOSPITAL KNEE LEFT LIVER LUNG MALE MEDICAL
+    NAME NECK NONE NULL OTHER PATIENT PELVIS PHANTOM POST PRE RADIOLOGY RIGHT SAGITTAL SCAN SCOUT SERIES
+    SOFT SPINE STUDY TEST THE THORAX TISSUE UNKNOWN VENOUS WITH WITHOUT
+    """.split()
+)
+_SPLIT = re.compile(r"[^0-9A-Za-z\u00C0-\uFFFF]+")
+_REPLACEMENT = "[removed]"
+
+
+def identifier_tokens(identifiers: Iterable[Any]) -> list[str]:
+    """The words of ``identifiers`` that :func:`scrub_text` removes, longest first.
+
+    Each identifier's tokens (split at anything but letters and digits): at least 3
+    characters (4 when all digits), not in :data:`COMMON_WORDS`.
+    """
+    out: set[str] = set()
+    for ident in identifiers:
+        for tok in _SPLIT.split(str(ident or "")):
+            if len(tok) < (4 if tok.isdigit() else 3) or tok.upper() in COMMON_WORDS:
+                continue
+            out.add(tok)
+    return sorted(out, key=lambda t: (-len(t), t))
+
+
+def _pattern(identifiers: Iterable[Any]) -> re.Pattern | None:
+    toks = identifier_tokens(identifiers)
+    if not toks:
+        return None
+    # whole words: not preceded/followed by a letter or digit ('_' separates, as in folder names)
+    alt = "|".join(re.escape(t) for t in toks)
+    return re.compile(rf"(?<![0-9A-Za-z\u00C0-\uFFFF])(?:{alt})(?![0-9A-Za-z\u00C0-\uFFFF])", re.IGNORECASE)
+
+
+def scrub_text(text: str, identifiers: Iterable[Any]) -> str:
+    """``text`` with every whole-word token of ``identifiers`` replaced by "[removed]".
+
+    >>> scrub_text("CT DOE JOHN head, scanner ANN", ["DOE^JOHN", "ANN"])
+    'CT [removed] [removed] head, scanner [removed]'
+    >>> scrub_text("SCANNER HEAD", ["ANN^HEAD"])
+    'SCANNER HEAD'
+    """
+    pat = _pattern(identifiers)
+    return str(text) if pat is None else pat.sub(_REPLACEMENT, str(text))
+
+
+def scrub_text_obj(obj: Any, identifiers: Iterable[Any]) -> Any:
+    """:func:`scrub_text` applied to every string in ``obj`` (dicts' values, lists, tuples)."""
+    pat = _pattern(identifiers)
+    if pat is None:
+        return obj
+
+    def walk(o: Any) -> Any:
+        if isinstance(o, str):
+            return pat.sub(_REPLACEMENT, o)
+        if isinstance(o, list):
+            return [walk(v) for v in o]
+        if isinstance(o, tuple):
+            return tuple(walk(v) for v in o)
+        if isinstance(o, dict):
+            return {k: walk(v) for k, v in o.items()}
+        return o
+
+    return walk(obj)
+
+
+def _path_forms(paths: Iterable[Any]) -> list[str]:
+    forms: set[str] = set()
+    for p in paths:
+        if p is None or isinstance(p, bool) or str(p) == "":
+            continue
+        if isinstance(p, (list, tuple)):
+            forms |= set(_path_forms(p))
+            continue
+        s = os.fspath(p)
+        for f in (s, s.rstrip("/"), os.path.abspath(s), os.path.realpath(s)):
+            if len(f) > 1 and f not in (os.sep, "."):
+                forms.add(f)
+    return sorted(forms, key=len, reverse=True)
+
+
+def path_hider(paths: Iterable[Any], *, label: str = "<input>"):
+    """A function ``text -> text`` replacing each of ``paths`` (as given, absolute and
+    resolved) by ``label`` where it stands as a whole path (followed by nothing, a
+    separator, a quote, a space or punctuation, not by more name characters).
+
+    Reports print through this unless the user asks for paths (``--keep-identifiers``):
+    folder names are often the patient's name.
+    """
+    forms = _path_forms(paths)
+    if not forms:
+        return lambda text: text
+    pat = re.compile("(?:" + "|".join(re.escape(f) for f in forms) + r")(?![\w-]|\.\w)")
+    return lambda text: pat.sub(label, text)
+
+
+def hide_path(text: str, paths: Iterable[Any], *, label: str = "<input>") -> str:
+    """``text`` with each of ``paths`` replaced by ``label`` (see :func:`path_hider`)."""
+    return path_hider(paths, label=label)(str(text))
 
 
 def _variants(s: str) -> list[bytes]:
@@ -112,6 +226,8 @@ def find_strings(paths: Iterable[str | os.PathLike], needles: Iterable[str], *, 
         check("<text>", t.encode("utf-8", errors="replace"))
     for p in paths:
         p = Path(p)
+        if not p.exists():
+            continue
         files = [f for f in p.rglob("*") if f.is_file()] if p.is_dir() else [p]
         for f in files:
             check(str(f), f.read_bytes())
