@@ -86,7 +86,7 @@ def test_leak_guard_stops_at_one_pixel_bridge():
     seg = Segmentation(vol.shape)
     p = Pipeline()
     assert seg.fill(p.final_slice(vol, 4), 25, 48, 4, low=50, high=150).accepted
-    prop = propagate_object(seg, vol, p, 1, 4, PropagationSettings(low=50, high=150, leak_factor=2.0))
+    prop = propagate_object(seg, vol, p, 1, 4, PropagationSettings(low=50, high=150, leak_factor=2.0, neck_mm=0))
     assert prop.leaks and prop.leaks[0]["slice"] == 12 and prop.leaks[0]["direction"] == "forward"
     assert prop.slices == (0, 11)
     assert "leak guard at slice 12" in prop.stops["forward"]
@@ -104,11 +104,39 @@ def test_leak_guard_confine_continues_past_bridge():
     seg = Segmentation(vol.shape)
     p = Pipeline()
     seg.fill(p.final_slice(vol, 4), 25, 48, 4, low=50, high=150)
-    prop = propagate_object(seg, vol, p, 1, 4, PropagationSettings(low=50, high=150, on_leak="confine"))
+    prop = propagate_object(seg, vol, p, 1, 4, PropagationSettings(low=50, high=150, leak_factor=2.5, on_leak="confine",
+                                                                          neck_mm=0))
     assert prop.slices == (0, vol.shape[0] - 1)
     assert prop.leaks and "confined" in prop.leaks[0]["action"]
     prop.accept(seg)
     assert not (seg.labels[:, 20:80, 45:90] == 1).any()
+
+
+@pytest.mark.parametrize("mode", ["slice", "3d"])
+def test_neck_cut_default_goes_past_bridge(mode):
+    """The default leak guard cuts the one-pixel bridge and follows the disk through every slice."""
+    vol, disk = _bridge_volume(12)
+    seg = Segmentation(vol.shape)
+    p = Pipeline()
+    seg.fill(p.final_slice(vol, 4), 25, 48, 4, low=50, high=150)
+    prop = propagate_object(seg, vol, p, 1, 4, PropagationSettings(low=50, high=150, mode=mode))
+    assert prop.slices == (0, vol.shape[0] - 1) and not prop.leaks
+    prop.accept(seg)
+    assert not (seg.labels[:, 20:80, 40:90] == 1).any()
+    # the disk itself is whole on every slice; on the bridge slice at most a stub of the bridge is added
+    assert (seg.labels[:, disk] == 1).all()
+    assert seg.voxels(1) - vol.shape[0] * disk.sum() <= 4
+
+
+@pytest.mark.parametrize("mode", ["slice", "3d"])
+def test_neighbourhood_zero_and_slice_limit(mode):
+    vol, disk = _bridge_volume(None)
+    p = Pipeline()
+    prop = propagate(vol, p, disk, 10, PropagationSettings(low=50, high=150, neighbourhood=0, mode=mode))
+    assert prop.slices == (0, vol.shape[0] - 1)  # did not stop at the seed slice
+    lim = propagate(vol, p, disk, 10, PropagationSettings(low=50, high=150, slices=(6, 15), mode=mode))
+    assert lim.slices == (6, 15) and lim.voxels == 10 * disk.sum()
+    assert all("slice limit" in v for v in lim.stops.values())
 
 
 def test_3d_mode_matches_slice_mode_without_leaks():

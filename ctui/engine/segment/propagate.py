@@ -5,14 +5,26 @@ slice, each next slice is filled with the in-range connected regions (of the
 pipeline's final view) that touch the previous slice's object, grown by
 ``neighbourhood`` pixels. Propagation in a direction stops when
 
-* the object ends (fewer than ``min_area`` pixels), or the series ends;
-* the leak guard fires: the area grows by more than ``leak_factor`` times the
-  previous slice's area (and by at least ``leak_min_pixels``), e.g. when a one-pixel
-  bridge opens into a neighbouring structure. The leaking slice is not included, and
-  the stop is reported (``Proposal.leaks``). With ``on_leak="confine"`` the leaking
-  slice is instead retried restricted to the previous object grown by
-  ``neighbourhood`` pixels, and propagation goes on if that passes the guard;
+* the object ends (fewer than ``min_area`` pixels), the series ends, or the slice
+  limit ``slices=(A, B)`` (inclusive, slices numbered from 0) is reached;
 * it is cancelled (``cancel`` event set, or the progress callback returns False).
+
+Leak guard, first line (default, both modes): **neck cutting**
+(:mod:`ctui.engine.segment.necks`). Each slice's region keeps only what joins the
+previous slice's object through a neck at least ``neck_mm`` wide (opening by a ball
+of that diameter in mm, the kept core grown back by one radius inside the region), so
+a bridge into a neighbour of the same values is cut however slowly the leak grows. A
+section thinner than the neck everywhere (an organ's tapering pole) is kept within
+the previous object's neighbourhood. ``Proposal.necks`` lists the slices where
+something was cut off. ``neck_mm=0`` turns it off.
+
+Second line, slice mode only (3D mode only with ``neck_mm=0``): the **area guard**
+stops when the area grows by more than ``leak_factor`` times the previous slice's
+area (and by at least ``leak_min_pixels``, from a section of at least that many
+pixels): an object running into a wide structure along the slice axis, which no neck
+separates. The leaking slice is not included and the stop is reported
+(``Proposal.leaks``); with ``on_leak="confine"`` the slice is retried restricted to
+the previous object grown by ``neighbourhood`` pixels. ``leak_factor=None`` turns it off.
 
 Only a crop around the previous object is filtered and filled (grown when the region
 touches the crop's edge), so one object through 300 slices of 512x512 takes well
@@ -21,8 +33,9 @@ under a second.
 3D mode (``mode="3d"``): the in-range mask of every slice in the chosen direction(s)
 is flood-filled at once in 3D (:func:`fill3d`, a numba scanline fill; 6-connected for
 connectivity 4, in-plane 8 plus the slice above/below for connectivity 8), keeping
-what is connected to the seed slice's object; the leak guard is then applied to the
-per-slice areas of that component.
+what is connected to the seed slice's object, then the necks narrower than
+``neck_mm`` are cut in 3D (a ball in mm: anisotropic voxels handled). No other
+cut-off.
 
 The result is a :class:`Proposal` (pending: the label volume is untouched) the TUI can
 show, then :meth:`Proposal.accept` (one undo step) or simply drop (reject).
@@ -42,6 +55,8 @@ from typing import Any, Callable, Generator
 import cv2
 import numpy as np
 
+from ctui.engine.segment.fill3d import fill3d
+from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
 from ctui.engine.segment.selection import Segmentation, in_range, seeded_components
 
 DIRECTIONS = ("both", "forward", "backward")
@@ -57,13 +72,15 @@ class PropagationSettings:
     connectivity: int = 8
     neighbourhood: int = 2
     min_area: int = 5
-    leak_factor: float = 2.5
+    leak_factor: float | None = 2.5  # slice mode's area guard (None: off); 3D mode uses it only with neck_mm=0
     leak_min_pixels: int = 64
     on_leak: str = "stop"  # "stop" | "confine"
     confine: bool = False  # always restrict each slice to the previous object grown by `neighbourhood`
     mode: str = "slice"  # "slice" | "3d"
     overwrite: bool = False  # claim voxels of other objects
     max_slices: int | None = None  # per direction
+    neck_mm: float = DEFAULT_NECK_MM  # follow the object only through necks at least this wide (0: off)
+    slices: tuple[int, int] | None = None  # propagate only within slices A..B (inclusive, numbered from 0)
 
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
@@ -76,8 +93,15 @@ class PropagationSettings:
             raise ValueError(f"on_leak must be 'stop' or 'confine', got {self.on_leak!r}")
         if self.low > self.high:
             raise ValueError(f"range low {self.low:g} > high {self.high:g}")
-        if self.leak_factor <= 1:
+        if self.leak_factor is not None and self.leak_factor <= 1:
             raise ValueError("leak_factor must be > 1")
+        if self.neck_mm < 0:
+            raise ValueError("neck_mm must be >= 0")
+        if self.slices is not None:
+            a, b = (int(v) for v in self.slices)
+            if a > b:
+                raise ValueError(f"slice range {a}:{b} is empty (A > B)")
+            self.slices = (a, b)
         self.neighbourhood = int(self.neighbourhood)
         if self.neighbourhood < 0:
             raise ValueError("neighbourhood must be >= 0")
@@ -123,6 +147,7 @@ class Proposal:
     settings: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     accepted: bool = False
+    necks: list[int] = field(default_factory=list)  # slices where the neck cut removed something
 
     @property
     def voxels(self) -> int:
@@ -208,8 +233,9 @@ def _disk(r: int) -> np.ndarray:
 
 
 def _grow(mask: np.ndarray, r: int) -> np.ndarray:
+    """bool mask grown by ``r`` pixels (always bool: a uint8 0/1 mask used as an index picks rows 0/1)."""
     if r <= 0:
-        return mask
+        return mask.astype(bool, copy=False)
     return cv2.dilate(mask.astype(np.uint8), _disk(r)).astype(bool)
 
 
@@ -227,6 +253,25 @@ class _SliceFiller:
         self.reach = pipeline.reach()
         self.t = timings
         self.ny, self.nx = volume.data.shape[1:]
+        sp = tuple(float(v) for v in getattr(volume, "spacing", (1.0, 1.0, 1.0)))
+        self.spacing_yx = (sp[1], sp[2])
+        self.cut = ""  # neck-cut status of the last fill: "", "cut", "thin", "lost"
+
+    def _cut_necks(self, comp: np.ndarray, prev: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """Keep what joins the previous object through necks >= neck_mm, plus what lies on the previous
+        object's footprint: that part continues the object along the slice axis, whatever its in-plane
+        width (a tapering pole, a partial-volume rim). Not the footprint grown by ``neighbourhood``:
+        a neck's stub would creep that many pixels a slice along the neck into the neighbour."""
+        self.cut = ""
+        if self.s.neck_mm <= 0 or not comp.any():
+            return comp
+        t0 = time.perf_counter()
+        out, _status = cut_necks_2d(comp, prev, neck_mm=self.s.neck_mm, spacing_yx=self.spacing_yx,
+                                    connectivity=self.s.connectivity)
+        out = seeded_components(out | (comp & prev), out | (prev & comp), connectivity=self.s.connectivity)
+        self.cut = "cut" if np.count_nonzero(out) < np.count_nonzero(comp) else ""
+        self.t["necks"] = self.t.get("necks", 0.0) + (time.perf_counter() - t0)
+        return out
 
     def fill(self, z: int, prev: tuple[int, int, np.ndarray], *, confine: bool) -> tuple[int, int, np.ndarray]:
         py0, px0, pm = prev
@@ -257,6 +302,7 @@ class _SliceFiller:
             if not touches or (y0 == 0 and x0 == 0 and y1 == self.ny and x1 == self.nx):
                 break
             margin = max(margin * 4, max(self.ny, self.nx))  # region leaves the crop: take the whole slice
+        comp = self._cut_necks(comp, prevc.astype(bool), near)
         bb = _bbox(comp)
         if bb is None:
             return y0, x0, np.zeros((0, 0), bool)
@@ -295,9 +341,8 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
     prop.masks[z] = start
     prop.areas[z] = int(start[2].sum())
     dirs = [d for d in ("forward", "backward") if s.direction in (d, "both")]
-    total = sum((nz - 1 - z) if d == "forward" else z for d in dirs)
-    if s.max_slices is not None:
-        total = sum(min(s.max_slices, (nz - 1 - z) if d == "forward" else z) for d in dirs)
+    lo, hi = slice_limits(s, z, nz)
+    total = sum((hi - z) if d == "forward" else (z - lo) for d in dirs)
     if s.mode == "3d":
         result = yield from _iter_3d(volume, pipeline, start_mask, z, s, prop, dirs, labels, object_id, cancel, total)
         prop.timings["total"] = time.perf_counter() - t_start
@@ -308,49 +353,29 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
         step = 1 if d == "forward" else -1
         prev = start
         zz = z + step
-        count = 0
         while True:
-            if not 0 <= zz < nz:
-                prop.stops[d] = "series ends"
-                break
-            if s.max_slices is not None and count >= s.max_slices:
-                prop.stops[d] = "max slices"
+            if not lo <= zz <= hi:
+                prop.stops[d] = _limit_reason(s, zz, nz)
                 break
             if cancel is not None and cancel.is_set():
                 prop.cancelled = True
                 prop.stops[d] = "cancelled"
                 break
             cur = filler.fill(zz, prev, confine=s.confine)
+            if filler.cut:
+                prop.necks.append(int(zz))
             tb = time.perf_counter()
+            cur, status = _area_guard(filler, s, prop, zz, d, prev, cur)
             area = int(cur[2].sum())
-            prev_area = int(prev[2].sum())
-            status = "ok"
-            if area >= s.min_area and area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels:
-                leak = {"slice": int(zz), "area": area, "previous_area": prev_area, "direction": d, "action": "stopped"}
-                if s.on_leak == "confine" and not s.confine:
-                    cur = filler.fill(zz, prev, confine=True)
-                    area = int(cur[2].sum())
-                    if area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels:
-                        leak["action"] = "stopped (confined fill still too large)"
-                        status = "leak"
-                    else:
-                        leak["action"] = f"confined to the previous object's neighbourhood ({area} px)"
-                        status = "confined"
-                else:
-                    status = "leak"
-                prop.leaks.append(leak)
-                if status == "leak":
-                    prop.stops[d] = f"leak guard at slice {zz}"
             if status != "leak" and area < s.min_area:
                 status = "end"
                 prop.stops[d] = f"object ends at slice {zz}"
             done += 1
-            count += 1
             if status in ("ok", "confined"):
                 prop.masks[zz] = cur
                 prop.areas[zz] = area
             prop.timings["bookkeeping"] = prop.timings.get("bookkeeping", 0.0) + (time.perf_counter() - tb)
-            yield Progress(z=int(zz), area=area if status != "leak" else area, direction=d, done=done, total=total, status=status)
+            yield Progress(z=int(zz), area=area, direction=d, done=done, total=total, status=status)
             if status in ("leak", "end"):
                 break
             prev = cur
@@ -359,136 +384,57 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
     return prop
 
 
-def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
-    """Voxels of ``inrange`` (bool (nz, ny, nx)) connected to ``start_mask`` (bool (ny, nx)) on slice ``z``.
-
-    Connectivity in 3D: 6 for ``connectivity=4``; in-plane 8 plus the voxel above and
-    below for ``connectivity=8``. A numba scanline flood fill (runs along x, so memory
-    is read in order) visits only the component: on 300x512x512 it took 0.15 s on a
-    70%-noisy block and a few ms on solid objects, against about 0.4 s for
-    ``scipy.ndimage.label`` of the whole mask (equal results: tests/test_propagate.py).
-    A plain voxel-by-voxel depth-first numba fill was slower than scipy (cache misses)
-    and was dropped. scipy is the fallback when numba is missing.
-    """
-    inr = np.ascontiguousarray(inrange, dtype=bool)
-    start = start_mask.astype(bool) & inr[z]
-    kernel = _scanline_kernel()
-    if kernel is None:  # pragma: no cover - numba is a declared dependency
-        from scipy import ndimage
-
-        lab, n = ndimage.label(inr, structure=_structure(connectivity))
-        keep = np.zeros(n + 1, bool)
-        keep[np.unique(lab[z][start])] = True
-        keep[0] = False
-        return keep[lab]
-    yx = np.argwhere(start)
-    seeds = np.column_stack([np.full(len(yx), z), yx]).astype(np.int32)
-    out = np.zeros(inr.shape, np.uint8)
-    kernel(inr.view(np.uint8), seeds, out, connectivity == 8)
-    return out.view(bool)
+def slice_limits(s: PropagationSettings, z: int, nz: int) -> tuple[int, int]:
+    """First and last slice (inclusive) propagation may reach from seed slice ``z``."""
+    lo, hi = 0, nz - 1
+    if s.slices is not None:
+        lo, hi = max(lo, s.slices[0]), min(hi, s.slices[1])
+    if s.max_slices is not None:
+        lo, hi = max(lo, z - s.max_slices), min(hi, z + s.max_slices)
+    return min(lo, z), max(hi, z)
 
 
-def _scanline_fill_py(inr, seeds, out, eight):  # pragma: no cover - compiled by numba
-    nz, ny, nx = inr.shape
-    cap = max(seeds.shape[0] * 2, 4096)
-    stack = np.empty((cap, 3), np.int32)
-    top = 0
-    for i in range(seeds.shape[0]):
-        stack[top, 0] = seeds[i, 0]
-        stack[top, 1] = seeds[i, 1]
-        stack[top, 2] = seeds[i, 2]
-        top += 1
-    e = 1 if eight else 0
-    while top > 0:
-        top -= 1
-        z = stack[top, 0]
-        y = stack[top, 1]
-        x = stack[top, 2]
-        if inr[z, y, x] == 0 or out[z, y, x] != 0:
-            continue
-        xl = x
-        while xl > 0 and inr[z, y, xl - 1] != 0 and out[z, y, xl - 1] == 0:
-            xl -= 1
-        xr = x
-        while xr < nx - 1 and inr[z, y, xr + 1] != 0 and out[z, y, xr + 1] == 0:
-            xr += 1
-        for xx in range(xl, xr + 1):
-            out[z, y, xx] = 1
-        for k in range(4):
-            if k == 0:
-                zz = z
-                yy = y - 1
-                a = xl - e
-                b = xr + e
-            elif k == 1:
-                zz = z
-                yy = y + 1
-                a = xl - e
-                b = xr + e
-            elif k == 2:
-                zz = z - 1
-                yy = y
-                a = xl
-                b = xr
-            else:
-                zz = z + 1
-                yy = y
-                a = xl
-                b = xr
-            if zz < 0 or zz >= nz or yy < 0 or yy >= ny:
-                continue
-            if a < 0:
-                a = 0
-            if b > nx - 1:
-                b = nx - 1
-            inseg = False
-            for xx in range(a, b + 1):
-                if inr[zz, yy, xx] != 0 and out[zz, yy, xx] == 0:
-                    if not inseg:
-                        if top >= stack.shape[0]:
-                            bigger = np.empty((stack.shape[0] * 2, 3), np.int32)
-                            bigger[:top] = stack[:top]
-                            stack = bigger
-                        stack[top, 0] = zz
-                        stack[top, 1] = yy
-                        stack[top, 2] = xx
-                        top += 1
-                        inseg = True
-                else:
-                    inseg = False
+def _limit_reason(s: PropagationSettings, zz: int, nz: int) -> str:
+    if not 0 <= zz < nz:
+        return "series ends"
+    if s.slices is not None and not s.slices[0] <= zz <= s.slices[1]:
+        return f"slice limit {s.slices[0]}:{s.slices[1]}"
+    return "max slices"
 
 
-_SCAN: list = []
-
-
-def _scanline_kernel():
-    """The numba-compiled scanline fill (compiled once, cached on disk), or None."""
-    if not _SCAN:
-        try:
-            from numba import njit
-
-            _SCAN.append(njit(cache=True, nogil=True)(_scanline_fill_py))
-        except ImportError:  # pragma: no cover
-            _SCAN.append(None)
-    return _SCAN[0]
-
-
-def _structure(connectivity: int) -> np.ndarray:
-    st = np.zeros((3, 3, 3), bool)
-    st[1] = True if connectivity == 8 else np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
-    st[0, 1, 1] = st[2, 1, 1] = True
-    return st
+def _area_guard(filler: _SliceFiller, s: PropagationSettings, prop: Proposal, zz: int, d: str,
+                prev: tuple[int, int, np.ndarray], cur: tuple[int, int, np.ndarray]) -> tuple[tuple[int, int, np.ndarray], str]:
+    """The optional area leak guard (``leak_factor``): (slice result, "ok" | "leak" | "confined")."""
+    if s.leak_factor is None:
+        return cur, "ok"
+    area = int(cur[2].sum())
+    prev_area = int(prev[2].sum())
+    if not (area >= s.min_area and area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels
+            and prev_area >= s.leak_min_pixels):  # a small pole section may grow fast: not a leak
+        return cur, "ok"
+    leak = {"slice": int(zz), "area": area, "previous_area": prev_area, "direction": d, "action": "stopped"}
+    status = "leak"
+    if s.on_leak == "confine" and not s.confine:
+        cur = filler.fill(zz, prev, confine=True)
+        area = int(cur[2].sum())
+        if area > s.leak_factor * prev_area and area - prev_area >= s.leak_min_pixels:
+            leak["action"] = "stopped (confined fill still too large)"
+        else:
+            leak["action"] = f"confined to the previous object's neighbourhood ({area} px)"
+            status = "confined"
+    prop.leaks.append(leak)
+    if status == "leak":
+        prop.stops[d] = f"leak guard at slice {zz}"
+    return cur, status
 
 
 def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: PropagationSettings, prop: Proposal,
              dirs: list[str], labels: np.ndarray | None, object_id: int, cancel: threading.Event | None,
              total: int) -> Generator[Progress, None, Proposal]:
     nz = volume.data.shape[0]
-    z0 = 0 if "backward" in dirs else z
-    z1 = nz if "forward" in dirs else z + 1
-    if s.max_slices is not None:
-        z0 = max(z0, z - s.max_slices) if "backward" in dirs else z0
-        z1 = min(z1, z + s.max_slices + 1) if "forward" in dirs else z1
+    lo, hi = slice_limits(s, z, nz)
+    z0 = lo if "backward" in dirs else z
+    z1 = hi + 1 if "forward" in dirs else z + 1
     t0 = time.perf_counter()
     window = pipeline.window_for(volume)
     inr = np.zeros((z1 - z0,) + volume.data.shape[1:], bool)
@@ -503,44 +449,61 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
         else:
             img = pipeline.final_region(volume, zz, 0, volume.data.shape[1], 0, volume.data.shape[2], window=window)
         inr[zz - z0] = in_range(img, s.low, s.high).astype(bool)
+        if labels is not None and not s.overwrite:  # per slice: no full-volume temporaries
+            lab = labels[zz]
+            if lab.any():
+                inr[zz - z0] &= (lab == 0) | (lab == object_id)
         if zz != z:
             done += 1
             yield Progress(z=zz, area=-1, direction="3d-threshold", done=done, total=total)
-    if labels is not None and not s.overwrite:
-        for k in range(z1 - z0):  # per slice: no full-volume temporaries
-            lab = labels[z0 + k]
-            if lab.any():
-                inr[k] &= (lab == 0) | (lab == object_id)
-    inr[z - z0] = start_mask.astype(bool)
+    start = start_mask.astype(bool)
+    inr[z - z0] = start
     t1 = time.perf_counter()
-    comp = fill3d(inr, z - z0, start_mask.astype(bool), connectivity=s.connectivity)
+    comp = fill3d(inr, z - z0, start, connectivity=s.connectivity)
+    del inr
     t2 = time.perf_counter()
-    prop.timings["filter"] = t1 - t0
-    prop.timings["fill"] = t2 - t1
+    if s.neck_mm > 0:
+        yx = np.argwhere(start)
+        seeds = np.column_stack([np.full(len(yx), z - z0), yx])
+        comp, status = cut_necks_3d(comp, seeds, neck_mm=s.neck_mm, spacing=tuple(volume.spacing),
+                                    connectivity=s.connectivity)
+        comp[z - z0] = start  # the seed slice stays as drawn
+        if status == "cut":
+            prop.necks.append(int(z))
+    t3 = time.perf_counter()
+    prop.timings.update(filter=t1 - t0, fill=t2 - t1, necks=t3 - t2)
     areas = np.count_nonzero(comp, axis=(1, 2))
     for d in dirs:
-        step = 1 if d == "forward" else -1
-        zz = z + step
-        prev_area = int(areas[z - z0])
-        prop.stops[d] = "series ends"
-        while z0 <= zz < z1:
-            a = int(areas[zz - z0])
-            if a < s.min_area:
-                prop.stops[d] = f"object ends at slice {zz}"
-                break
-            if a > s.leak_factor * prev_area and a - prev_area >= s.leak_min_pixels:
-                prop.leaks.append({"slice": int(zz), "area": a, "previous_area": prev_area, "direction": d, "action": "stopped"})
-                prop.stops[d] = f"leak guard at slice {zz}"
-                break
-            m = comp[zz - z0]
-            bb = _bbox(m)
-            assert bb is not None
-            prop.masks[zz] = (bb[0], bb[2], m[bb[0]:bb[1], bb[2]:bb[3]].copy())
-            prop.areas[zz] = a
-            prev_area = a
-            zz += step
-    prop.timings["bookkeeping"] = time.perf_counter() - t2
+        _collect_3d(prop, comp, areas, s, z, z0, z1, d)
+    prop.timings["bookkeeping"] = time.perf_counter() - t3
     return prop
+
+
+def _collect_3d(prop: Proposal, comp: np.ndarray, areas: np.ndarray, s: PropagationSettings, z: int, z0: int,
+                z1: int, d: str) -> None:
+    """Copy the 3D component's slices from the seed slice in direction ``d`` into the proposal."""
+    nz = prop.shape[0]
+    step = 1 if d == "forward" else -1
+    zz = z + step
+    prev_area = int(areas[z - z0])
+    prop.stops[d] = _limit_reason(s, z1 if step > 0 else z0 - 1, nz)
+    while z0 <= zz < z1:
+        a = int(areas[zz - z0])
+        if a < s.min_area:
+            prop.stops[d] = f"object ends at slice {zz}"
+            break
+        if (s.leak_factor is not None and s.neck_mm <= 0 and a > s.leak_factor * prev_area
+                and a - prev_area >= s.leak_min_pixels):
+            prop.leaks.append({"slice": int(zz), "area": a, "previous_area": prev_area, "direction": d, "action": "stopped"})
+            prop.stops[d] = f"leak guard at slice {zz}"
+            break
+        m = comp[zz - z0]
+        bb = _bbox(m)
+        assert bb is not None
+        prop.masks[zz] = (bb[0], bb[2], m[bb[0]:bb[1], bb[2]:bb[3]].copy())
+        prop.areas[zz] = a
+        prev_area = a
+        zz += step
 
 
 def propagate(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settings: PropagationSettings, *,

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from ctui.engine.core.colors import MAX_OBJECTS, object_color
+from ctui.engine.segment.necks import cut_necks_2d
 
 
 @dataclass
@@ -303,7 +304,8 @@ class Segmentation:
 
     def fill(self, image: np.ndarray, x: int, y: int, z: int, *, object_id: int | None = None,
              tolerance: float | None = None, low: float | None = None, high: float | None = None,
-             connectivity: int = 8, min_area: int = 5, overwrite: bool = False) -> FillResult:
+             connectivity: int = 8, min_area: int = 5, overwrite: bool = False, neck_mm: float = 0.0,
+             spacing_yx: tuple[float, float] = (1.0, 1.0)) -> FillResult:
         """Threshold flood fill on slice ``z`` from seed (x, y) into ``object_id``.
 
         Parameters
@@ -315,6 +317,9 @@ class Segmentation:
         connectivity : 8 (default) or 4
         min_area : fills with fewer pixels are rejected (reason given)
         overwrite : also claim pixels of other objects
+        neck_mm : when > 0, keep only what joins the seed through necks at least this wide
+            (mm, with the pixel size ``spacing_yx`` (dy, dx)): a fill that runs through a bridge
+            into a neighbour of the same values stops at the bridge
 
         Returns
         -------
@@ -325,6 +330,12 @@ class Segmentation:
             raise IndexError(f"seed ({x}, {y}, {z}) outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
         lo, hi = fill_range(float(image[y, x]), tolerance=tolerance, low=low, high=high)
         mask = threshold_fill(image, x, y, low=lo, high=hi, connectivity=connectivity)
+        if neck_mm > 0 and mask.any():
+            seed = np.zeros(mask.shape, bool)
+            seed[y, x] = True
+            cut, status = cut_necks_2d(mask, seed, neck_mm=neck_mm, spacing_yx=spacing_yx, connectivity=connectivity)
+            if status in ("ok", "cut"):
+                mask = cut
         area = int(mask.sum())
         if area == 0:
             return FillResult(False, 0, f"seed value {float(image[y, x]):g} is outside the range [{lo:g}, {hi:g}]", mask, (lo, hi))
