@@ -36,106 +36,78 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    import json
+def _source(args: argparse.Namespace):
+    """(Opened with labels, seg or None, pipeline or None, settings) for the drift check."""
     import os
 
-    import numpy as np
+    from ctui.engine.actions.opened import Opened, open_input
+    from ctui.engine.core.errors import CtuiError
 
-    from ctui.commands.segment import _err, build_pipeline, load_volume, make_project, segment_volume
-    from ctui.engine.segment.drift import analyze_drift, corrections_from_report, plot_drift
+    from ctui.commands.segment import load_volume, segment_volume
 
+    if args.path.endswith((".ctui", ".ctui.autosave")):
+        if not os.path.exists(args.path):
+            raise CtuiError("no such file", path=args.path)
+        return open_input(args.path, kind="project", require_labels=True,
+                          with_series=True if args.estimate == "phase" else None), None, None, []
+    volume = load_volume(args.path, series=args.series)
+    if args.labels:
+        from ctui.engine.io.labels import load_labels
+
+        labels, _geom = load_labels(args.labels)
+        if labels.shape != volume.data.shape:
+            raise CtuiError(f"label shape {labels.shape} does not match the series {volume.data.shape}",
+                            path=args.labels)
+        return Opened.of_volume(volume, labels, path=args.path), None, None, []
+    if args.seed:
+        seg, pipeline, settings, _ = segment_volume(volume, args)
+        return Opened.of_volume(volume, seg.labels, path=args.path), seg, pipeline, settings
+    raise CtuiError("give a .ctui project, --labels FILE, or --seed X,Y,Z with --range/--tolerance")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ctui.engine.actions.drift import drift_check
+    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.core.errors import CtuiError
     from ctui.engine.core.atomic import check_outputs
+    from ctui.engine.core.jsonio import dumps
+
+    from ctui.commands.segment import build_pipeline
 
     check_outputs({"--project": args.project, "--plot": args.plot}, inputs=[args.path, args.labels])
-    if args.fit_window < 3:
-        raise _err("--fit-window must be >= 3")
-    if args.threshold is not None and args.threshold <= 0:
-        raise _err("--threshold must be > 0")
-    project = None
-    seg = pipeline = None
-    settings: list[dict] = []
-    if args.path.endswith(".ctui"):
-        from ctui.engine.io.project import load_project
-
-        if not os.path.exists(args.path):
-            raise _err(f"{args.path}: no such file")
-        project = load_project(args.path)
-        if project.labels is None:
-            raise _err(f"{args.path}: the project holds no label volume")
-        labels = project.labels
-        source = project.source_path
-        volume = load_volume(source, series=(project.source_options or {}).get("series")) if source and os.path.exists(source) else None
-        if volume is not None and volume.data.shape != labels.shape:
-            raise _err(f"{args.path}: labels {labels.shape} do not match the source series {volume.data.shape}")
-    else:
-        volume = load_volume(args.path, series=args.series)
-        if args.labels:
-            from ctui.engine.io.labels import load_labels
-
-            labels, _geom = load_labels(args.labels)
-            if labels.shape != volume.data.shape:
-                raise _err(f"{args.labels}: label shape {labels.shape} does not match the series {volume.data.shape}")
-        elif args.seed:
-            seg, pipeline, settings, _ = segment_volume(volume, args)
-            labels = seg.labels
-        else:
-            raise _err("give a .ctui project, --labels FILE, or --seed X,Y,Z with --range/--tolerance")
-    ids = None
-    if args.objects:
-        try:
-            ids = [int(v) for v in args.objects.split(",") if v.strip()]
-        except ValueError:
-            raise _err(f"--objects {args.objects!r}: expected ids like 1,3") from None
-    spacing = None if volume is not None else (1.0, 1.0, 1.0)
-    if volume is None and project is not None:
-        spacing = tuple((project.meta or {}).get("spacing_zyx_mm", (1.0, 1.0, 1.0)))
-    report = analyze_drift(labels, volume, spacing=spacing, object_ids=ids, threshold_mm=args.threshold,
-                           method=args.fit, window=args.fit_window)
-    if args.estimate == "phase" and volume is None:
-        raise _err("--estimate phase needs the source series")
-    corrections = corrections_from_report(report, estimate=args.estimate, volume=volume)
-    written = []
-    if args.plot:
-        plot_drift(report, args.plot)
-        written.append(args.plot)
-    drift_dict = {"threshold_mm": report.threshold_mm, "flagged": report.flagged, "corrections": corrections,
-                  "method": args.fit, "estimate": args.estimate, "applied": False}
+    try:
+        ids = [int(v) for v in args.objects.split(",") if v.strip()] if args.objects else None
+    except ValueError:
+        raise CtuiError(f"--objects {args.objects!r}: expected ids like 1,3") from None
+    opened, seg, pipeline, settings = _source(args)
+    res = drift_check(opened, objects=ids, threshold_mm=args.threshold, fit=args.fit, fit_window=args.fit_window,
+                      estimate=args.estimate, plot=args.plot)
+    written = [args.plot] if args.plot else []
     if args.project:
-        from ctui.engine.io.project import save_project
-
+        project = opened.project
         if project is not None:
-            project.drift = drift_dict
+            project.drift = res.project_drift()
             save_project(args.project, project)
         else:
-            if volume is None:
-                raise _err("--project needs the source series")
-            if pipeline is None:
-                pipeline = build_pipeline(args)
-            if seg is None:
-                from ctui.engine.segment.selection import Segmentation
-
-                seg = Segmentation(labels.shape, labels=np.ascontiguousarray(labels, dtype=np.uint8))
-            save_project(args.project, make_project(args.path, volume, seg, pipeline, settings, series=args.series, drift=drift_dict))
+            pipeline = pipeline or build_pipeline(args)
+            prop = dict(settings[0]) if settings else {}
+            if len(settings) > 1:
+                prop["per_object"] = settings
+            project = new_project(opened.volume, source_path=args.path,
+                                  source_options={"series": args.series} if args.series else {},
+                                  labels=opened.labels, objects=seg.object_list() if seg is not None else [],
+                                  pipeline=pipeline.to_dict(), propagation=prop, drift=res.project_drift())
+            save_project(args.project, project)
         written.append(args.project)
     if args.json:
-        out = report.to_dict()
-        per_slice = []
-        for o in report.objects:
-            for k, z in enumerate(o.slices):
-                per_slice.append({"object_id": o.object_id, "slice": int(z),
-                                  "centroid_mm": [round(float(v), 3) for v in o.centroid_mm[k]],
-                                  "deviation_mm": round(float(o.distance_mm[k]), 3), "flagged": int(z) in o.flagged})
-        print(json.dumps({"path": args.path, "threshold_mm": report.threshold_mm, "flagged": report.flagged,
-                          "corrections": corrections, "centroids": per_slice, "objects": out["objects"],
-                          "written": written}, indent=1))
-    else:
-        for o in report.objects:
-            print(f"object {o.object_id}: slices {int(o.slices[0])}..{int(o.slices[-1])}, "
-                  f"max deviation {float(o.distance_mm.max()):.2f} mm, flagged {o.flagged or 'none'}")
-        print(f"flagged slices (> {report.threshold_mm:.2f} mm): {report.flagged or 'none'}")
-        for c in corrections:
-            print(f"  slice {c['slice']}: shift dx {c['dx']:+.2f} px, dy {c['dy']:+.2f} px to realign")
-        for w in written:
-            print(f"wrote {w}")
+        print(dumps({**res.to_dict(), "written": written}, indent=1, ndigits=None))
+        return 0
+    for o in res.report.objects:
+        print(f"object {o.object_id}: slices {int(o.slices[0])}..{int(o.slices[-1])}, "
+              f"max deviation {float(o.distance_mm.max()):.2f} mm, flagged {o.flagged or 'none'}")
+    print(f"flagged slices (> {res.threshold_mm:.2f} mm): {res.flagged or 'none'}")
+    for c in res.corrections:
+        print(f"  slice {c['slice']}: shift dx {c['dx']:+.2f} px, dy {c['dy']:+.2f} px to realign")
+    for w in written:
+        print(f"wrote {w}")
     return 0

@@ -19,36 +19,15 @@ def add_load_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_kwargs(args: argparse.Namespace) -> dict:
-    """Keyword arguments for ctui.engine.io.series.load from the options above."""
-    from ctui.engine.core.errors import CtuiError
+    """Keyword arguments for ctui.engine.io.series.load from the options above (one syntax:
+    comma-separated z,y,x lists; :func:`ctui.engine.actions.options.load_options`)."""
+    from ctui.engine.actions.options import load_options
 
-    kw: dict = {}
-    if getattr(args, "series", None) not in (None, ""):
-        s = str(args.series).strip()
-        kw["series"] = int(s) if s.isdigit() and len(s) < 6 else s
-    for name in ("spacing", "shape", "dtype", "offset"):
-        v = getattr(args, name, None)
-        if v is not None:
-            kw[name] = v
-    crop = getattr(args, "crop", None)
-    if crop:
-        parts = crop.split(",")
-        if len(parts) != 6:
-            raise CtuiError(f"--crop needs six values z0,z1,y0,y1,x0,x1 (empty for an edge), got {crop!r}")
-        try:
-            kw["crop"] = tuple(int(v) if v.strip() else None for v in parts)
-        except ValueError:
-            raise CtuiError(f"--crop values must be integers, got {crop!r}") from None
-    ds = getattr(args, "downsample", None)
-    if ds:
-        try:
-            vals = [int(v) for v in ds.split(",")]
-        except ValueError:
-            raise CtuiError(f"--downsample must be N or sz,sy,sx integers, got {ds!r}") from None
-        kw["downsample"] = vals[0] if len(vals) == 1 else tuple(vals)
-    if getattr(args, "no_resample", False):
-        kw["resample"] = False
-    return kw
+    return load_options(series=getattr(args, "series", None), spacing=getattr(args, "spacing", None),
+                        shape=getattr(args, "shape", None), dtype=getattr(args, "dtype", None),
+                        offset=getattr(args, "offset", None), crop=getattr(args, "crop", None),
+                        downsample=getattr(args, "downsample", None),
+                        resample=not getattr(args, "no_resample", False))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,30 +44,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def orientation_name(direction) -> str:
-    """'axial', 'coronal', 'sagittal' or 'oblique' from the slice normal (direction[:, 2])."""
-    n = [abs(float(v)) for v in (direction[0][2], direction[1][2], direction[2][2])]
-    k = max(range(3), key=lambda i: n[i])
-    name = ("sagittal", "coronal", "axial")[k]
-    return name if n[k] > 0.995 else f"oblique (near {name})"
-
-
 def run(args: argparse.Namespace) -> int:
-    import json
-
-    from ctui.engine.io.series import load
+    from ctui.engine.actions.info import describe_series
+    from ctui.engine.core.jsonio import dumps
 
     path = args.path[0] if len(args.path) == 1 else list(args.path)
-    vol = load(path, **load_kwargs(args))
-    d = vol.describe()
-    d["orientation"] = orientation_name(vol.direction)
-    d["value_range"] = [float(v) for v in d["value_range"]]
-    if vol.slice_positions is not None:
-        d["slice_positions_mm"] = [round(float(v), 4) for v in vol.slice_positions]
-    d["meta"] = {k: v for k, v in vol.meta.items() if isinstance(v, (str, int, float, bool, list, dict))}
+    vol, d = describe_series(path, **load_kwargs(args))
     if args.json:
-        print(json.dumps(d, indent=1, default=str))
+        print(dumps(d, indent=1, ndigits=None))
         return 0
+    print("\n".join(_lines(vol, d)))
+    return 0
+
+
+def _lines(vol, d: dict) -> list[str]:
     nz, ny, nx = vol.shape
     dz, dy, dx = vol.spacing
     lines = [
@@ -119,8 +88,7 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"  ... and {len(vol.skipped) - 50} more (--json lists all)")
     for w in vol.warnings:
         lines.append(f"warning     {w}")
-    print("\n".join(lines))
-    return 0
+    return lines
 
 
 def _vec(v) -> str:
