@@ -213,7 +213,8 @@ def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, seri
         prop["per_object"] = settings
     return Project(source_path=os.path.abspath(path), source_options={"series": series} if series else {},
                    pipeline=pipeline.to_dict(), labels=seg.labels, objects=seg.object_list(), propagation=prop,
-                   drift=drift or {}, window=tuple(volume.window) if volume.window else None, meta={})
+                   drift=drift or {}, window=tuple(volume.window) if volume.window else None,
+                   meta={}).set_source(volume)  # geometry + identity: the project stands on its own
 
 
 def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: list[dict]) -> list[str]:

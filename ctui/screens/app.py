@@ -480,7 +480,7 @@ def project_from_session(s: Session):
         drift=dict(s.drift_info or {}),
         window=tuple(s.window),
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view},
-    )
+    ).set_source(s.volume, data=getattr(s, "original_data", None))  # geometry + identity (of the voxels as loaded)
 
 
 def session_from_project(proj, volume, path: str) -> Session:

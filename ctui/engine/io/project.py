@@ -133,9 +133,10 @@ class Project:
             d["labels"] = {"member": LABELS_MEMBER, "shape": [int(s) for s in self.labels.shape], "dtype": "uint8"}
         return to_jsonable(d, ndigits=None, strict=True)
 
-    def set_source(self, volume: Any) -> "Project":
-        """Record ``volume``'s geometry, modality, series UID and voxel hash; returns self."""
-        for key, value in source_identity(volume).items():
+    def set_source(self, volume: Any, *, data: np.ndarray | None = None) -> "Project":
+        """Record ``volume``'s geometry, modality, series UID and voxel hash (of ``data``
+        when given: the voxels as loaded, before a drift correction); returns self."""
+        for key, value in source_identity(volume, data=data).items():
             setattr(self, key, value)
         return self
 
@@ -173,14 +174,15 @@ def voxel_hash(data: np.ndarray) -> str:
 _HASHES: dict[int, tuple[Any, str]] = {}
 
 
-def source_identity(volume: Any) -> dict:
-    """The fields of :class:`Project` that tie it to ``volume`` (a Volume)."""
+def source_identity(volume: Any, *, data: np.ndarray | None = None) -> dict:
+    """The fields of :class:`Project` that tie it to ``volume`` (a Volume; ``data``: its
+    voxels as loaded, when ``volume.data`` has been changed since)."""
     uid = None
     idx = (volume.meta or {}).get("series_index")
     if isinstance(idx, int) and 0 <= idx < len(volume.series or []):
         uid = str(volume.series[idx].get("uid") or "") or None
     return {"geometry": Geometry.of(volume), "modality": str(volume.modality or "") or None, "series_uid": uid,
-            "voxel_hash": voxel_hash(volume.data)}
+            "voxel_hash": voxel_hash(volume.data if data is None else data)}
 
 
 def source_load_options(project: Project) -> dict:
