@@ -15,8 +15,10 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, ProgressBar, Static
 
+from ctui.engine.actions.opened import check_source, series_available
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io import project
+from ctui.engine.io.project import source_load_options
 from ctui.engine.segment import pipeline, selection
 from ctui.screens.graphics import colour_advice
 from ctui.screens.guard import GuardMixin
@@ -204,7 +206,11 @@ class CtuiApp(App):
     def load_project_worker(self, path: str) -> None:
         try:
             proj = project.load_project(path)
-            vol = load_volume(proj.source_path, **(proj.source_options or {}))
+            if not series_available(proj):  # an empty source path must not load the current folder
+                raise CtuiError(f"the source series {proj.source_path or '(none)'} is missing; ctui measure, mesh "
+                                "and render work from the project alone", path=path)
+            vol = load_volume(proj.source_path, **source_load_options(proj))
+            check_source(proj, vol, path)  # a series whose voxels changed is refused
             sess = session_from_project(proj, vol, path)
         except CtuiError as exc:
             self.call_from_thread(self._load_failed, path, [str(exc)])
