@@ -21,6 +21,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
+from ctui.engine.io.imports import is_label_file, read_label_file
 from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
 
 KINDS = ("series", "project", "labels", "mesh", "mric")
@@ -36,6 +37,8 @@ def input_kind(path: str | os.PathLike) -> str:
     if low.endswith(defaults.MESH_SUFFIXES):
         return "mesh"
     if low.endswith(defaults.LABEL_SUFFIXES) and not os.path.isdir(path):
+        return "labels"
+    if os.path.isfile(path) and is_label_file(path):  # a DICOM-SEG or RTSTRUCT file
         return "labels"
     return "series"
 
@@ -58,6 +61,12 @@ class Opened:
     mesh: Mesh | None = None
     project: Project | None = None
     notes: list[str] = field(default_factory=list)
+    masks: dict[int, np.ndarray] = field(default_factory=dict)  # full masks of overlapping imported segments
+
+    def mask(self, object_id: int) -> np.ndarray:
+        """Object ``object_id``'s bool mask (z, y, x): its own full mask where imported segments overlap."""
+        m = self.masks.get(int(object_id))
+        return m if m is not None else np.asarray(self.labels) == int(object_id)
 
     @property
     def object_ids(self) -> list[int]:
@@ -65,7 +74,8 @@ class Opened:
         if self.labels is None:
             return []
         counts = np.bincount(np.asarray(self.labels, np.uint8).ravel(), minlength=256)
-        return [int(i) for i in np.flatnonzero(counts[1:]) + 1]
+        ids = {int(i) for i in np.flatnonzero(counts[1:]) + 1}
+        return sorted(ids | {int(k) for k, m in self.masks.items() if m.any()})  # + segments hidden by overlaps
 
     def pick_objects(self, requested: int | list[int] | None = None) -> list[int]:
         """The requested ids (all present when None); CtuiError naming the file otherwise."""
@@ -107,7 +117,8 @@ class Opened:
 
 
 def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series: bool | None = None,
-               require_labels: bool = False, spacing: Any = None, **load_options: Any) -> Opened:
+               require_labels: bool = False, spacing: Any = None, labels: str | os.PathLike | None = None,
+               **load_options: Any) -> Opened:
     """Open ``path`` (kind guessed from the name unless given).
 
     ``load_options`` (and ``spacing``) go to :func:`ctui.engine.io.series.load` for a series;
@@ -115,7 +126,11 @@ def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series:
     ``with_series`` (projects): True loads the source series (error when it is gone),
     None loads it only when the project recorded no geometry, False never.
     ``require_labels``: a project without a label volume is an error.
+    ``labels``: a label file (DICOM-SEG, RTSTRUCT, NIfTI, NRRD) opened over the series
+    ``path``: :func:`open_with_labels`. A label file as ``path`` opens on its own geometry.
     """
+    if labels is not None:
+        return open_with_labels(path, labels, spacing=spacing, **load_options)
     p = os.fspath(path)
     if not p or not os.path.exists(p):
         raise CtuiError("no such file or folder", path=p or "(empty path)")
@@ -123,10 +138,9 @@ def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series:
     if kind == "project":
         return open_project(p, with_series=with_series, require_labels=require_labels, spacing=spacing)
     if kind == "labels":
-        from ctui.engine.io.labels import load_labels
-
-        labels, vol = load_labels(p)
-        return Opened("labels", p, labels=np.asarray(labels), geometry=Geometry.of(vol))
+        imp = read_label_file(p)
+        return Opened("labels", p, labels=imp.labels, geometry=imp.geometry, notes=list(imp.warnings),
+                      project=Project(labels=imp.labels, objects=imp.objects), masks=imp.masks)
     if kind == "mesh":
         from ctui.engine.io.meshes import load_mesh
 
@@ -198,3 +212,29 @@ def open_project(path: str, *, with_series: bool | None = None, require_labels: 
     elif not series_available(project):
         out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from the project")
     return out
+
+
+def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, spacing: Any = None,
+                     **load_options: Any) -> Opened:
+    """A series with a label file placed on its grid (``ctui open|measure|mesh|render SERIES --labels FILE``).
+
+    The label file's geometry must match the series' (a CtuiError says how it differs); its
+    segments / ROIs / values become objects with their names and colours (``project.objects``).
+    """
+    from ctui.engine.io.series import load
+
+    s, lp = os.fspath(series), os.fspath(labels)
+    for q in (s, lp):
+        if not q or not os.path.exists(q):
+            raise CtuiError("no such file or folder", path=q or "(empty path)")
+    if input_kind(s) != "series":
+        raise CtuiError("--labels goes with a series (folder or DICOM file), not a project or label file", path=s)
+    if spacing is not None:
+        load_options["spacing"] = spacing
+    volume = load(s, **load_options)
+    imp = read_label_file(lp, grid=volume)
+    project = Project(source_path=os.path.abspath(s), source_options=dict(load_options), labels=imp.labels,
+                      objects=imp.objects, window=tuple(volume.window) if volume.window else None)
+    project.set_source(volume)
+    return Opened("labels", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
+                  notes=list(imp.warnings), masks=imp.masks)
