@@ -12,13 +12,21 @@ printed as one line on stderr with exit status 2.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 
 from ctui import __version__
 
 OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
 COMMANDS = ("open", "info", "demo", "segment", "drift", "mesh", "render", "measure", "export", "batch")
+
+
+def _command_modules() -> tuple:
+    """The subcommand modules, in COMMANDS order (each imports nothing heavy at top level)."""
+    from ctui.commands import batch, demo, drift, export, info, measure, mesh, open, render, segment
+
+    mods = {"open": open, "info": info, "demo": demo, "segment": segment, "drift": drift, "mesh": mesh,
+            "render": render, "measure": measure, "export": export, "batch": batch}
+    return tuple(mods[name] for name in COMMANDS)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,13 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"ctui {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
-        try:
-            mod = importlib.import_module(f"ctui.commands.{name}")
-        except ModuleNotFoundError as exc:  # a command not written yet
-            if exc.name != f"ctui.commands.{name}":
-                raise
-            continue
+    for mod in _command_modules():
         mod.register(sub)
     for name, sp in sub.choices.items():  # one privacy switch on every command that reports or writes
         if name != "open" and "--keep-identifiers" not in sp._option_string_actions:
@@ -43,10 +45,6 @@ def build_parser() -> argparse.ArgumentParser:
                             help="show the input's path in reports (folder names often carry the patient's "
                                  "name; default: shown as <input>)")
     return parser
-
-
-class _UsageError(Exception):
-    pass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,28 +69,38 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ctui.engine.core.errors import CtuiError
-
     try:
         rc = args.func(args)
         sys.stdout.flush()  # a closed pipe shows up here, not at exit
     except BrokenPipeError:
         return _broken_pipe()
-    except CtuiError as exc:
-        print(f"ctui {args.command}: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"ctui {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except MemoryError:
-        print(f"ctui {args.command}: not enough memory for this input (MemoryError); try --crop or --downsample",
-              file=sys.stderr)
-        return 2
-    except OSError as exc:  # an input or output the command did not wrap: still one line naming the file
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"ctui {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 2
+    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - mapped below, or re-raised
+        fault = error_line(exc)
+        if fault is None:
+            raise
+        message, code = fault
+        print(f"ctui {args.command}: {message}", file=sys.stderr)
+        return code
     return int(rc or 0)
+
+
+def error_line(exc: BaseException) -> tuple[str, int] | None:
+    """The one mapping from an error to the CLI's one-line message and exit status
+    (None: a bug, shown as a traceback). CtuiError (user errors, from the engine and the
+    commands; names the file and the fault) -> 2; Ctrl+C -> 130; out of memory and
+    unwrapped OS errors -> 2."""
+    from ctui.engine.core.errors import CtuiError
+
+    if isinstance(exc, CtuiError):
+        return str(exc), 2
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted", 130
+    if isinstance(exc, MemoryError):
+        return "not enough memory for this input (MemoryError); try --crop or --downsample", 2
+    if isinstance(exc, OSError):  # an input or output the command did not wrap: still one line naming the file
+        where = f"{exc.filename}: " if exc.filename else ""
+        return " ".join(f"{where}{exc.strerror or exc}".split()), 2
+    return None
 
 
 class _PathHidingStdout:
