@@ -194,8 +194,8 @@ async def test_command_palette_lists_actions_and_help_lists_keys():
         titles = [c.title for c in app.get_system_commands(app.screen)]
         for want in ("Propagate", "Fill", "Filters", "3D", "Measure", "Export", "Drift", "Save project", "Undo", "Redo"):
             assert any(want in t for t in titles), (want, titles)
-        # run one from the palette machinery: "2x2 views"
-        cmd = next(c for c in app.get_system_commands(app.screen) if c.title == "2x2 views")
+        # run one from the palette machinery: "2x2 pipeline views"
+        cmd = next(c for c in app.get_system_commands(app.screen) if c.title == "2x2 pipeline views")
         await cmd.callback()
         await pilot.pause()
         assert app.workspace.grid_mode

@@ -91,14 +91,14 @@ class DriftScreen(GuardMixin, Screen):
             for o in rep.objects:
                 for z in o.flagged[:12]:
                     i = list(o.slices).index(z)
-                    lines.append(f" obj {o.object_id} slice {z + 1}: {o.distance_mm[i]:.1f} mm")
+                    lines.append(f" obj {o.object_id} slice {z}: {o.distance_mm[i]:.1f} mm")
         else:
             lines.append("no slice beyond the threshold")
         corr = self.corrections()
         lines += ["", f"[b]Correction[/b] ({self.estimate} estimate)"]
         if corr:
             for c in corr[:12]:
-                lines.append(f" slice {c['slice'] + 1}: dx {c['dx']:+.2f} dy {c['dy']:+.2f} px")
+                lines.append(f" slice {c['slice']}: dx {c['dx']:+.2f} dy {c['dy']:+.2f} px")
             lines.append("[green]applied[/green] (u undoes)")
         else:
             lines.append(" none applied (a applies)")

@@ -13,6 +13,8 @@ from ctui.engine.io import labels as labelio
 from ctui.engine.io import meshes as meshio
 from ctui.engine.io import mric
 from ctui.engine.mesh import meshtools, surface
+from ctui.screens.session import safe_cwd
+from ctui.screens.ws_jobs import run_job
 
 KINDS = [
     ("mesh-stl", "Mesh of the current object: STL", ".stl"),
@@ -35,8 +37,8 @@ def default_name(session, suffix: str, kind: str) -> str:
     elif kind.startswith("mesh"):
         stem += f"-object{session.current}"
     elif kind == "image":
-        stem += f"-slice{session.z + 1}"
-    return str(Path.cwd() / f"{stem}{suffix}")
+        stem += f"-slice{session.z}"
+    return str(safe_cwd() / f"{stem}{suffix}")
 
 
 def export_mesh(session, path: str, object_id: int):
@@ -81,7 +83,9 @@ def export_mric(session, path: str):
     from ctui.engine.core.windows import apply_window
 
     image = apply_window(session.volume.data[session.z], session.window)
-    return mric.write_mric(path, slices, width=nx, height=ny, image=image)
+    v = session.volume  # the sidecar <name>.mric.json keeps the true voxel size
+    return mric.write_mric(path, slices, width=nx, height=ny, image=image, spacing=v.spacing, origin=v.origin,
+                           direction=v.direction)
 
 
 def export_image(rgb: np.ndarray, path: str):
@@ -136,17 +140,12 @@ def export_dialog(ws) -> None:
                 return
             path = str(Path(path.strip()).expanduser())
 
-            def work() -> None:
-                try:
-                    msg = run_export(ws, kind, path)
-                except Exception as exc:  # a clear notification, the work stays in memory
-                    app.call_from_thread(app.notify, f"Export failed: {exc}", severity="error", timeout=10)
-                    return
+            def work() -> str:
+                msg = run_export(ws, kind, path)
                 ws.last_export = path
-                app.call_from_thread(app.notify, msg, timeout=5)
-                app.call_from_thread(ws.set_status, msg)
+                return msg
 
-            app.run_worker(work, thread=True, group="export", name=f"export {kind}")
+            run_job(ws, work, what="Export", name=f"export {kind}")
 
         app.push_screen(PromptScreen(f"Export to ({suffix})", default_name(ws.s, suffix, kind)), got_path)
 

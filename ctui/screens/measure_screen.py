@@ -119,7 +119,7 @@ class MeasureScreen(GuardMixin, Screen):
         self.query_one(DataTable).add_row(
             f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"), f("volume_pv_ml"),
             f("volume_difference_percent", "{:+.2f}"), f("area_mm2", "{:.0f}"), str(st.get("mesh_closed", "-")), axes,
-            f"{rng[0] + 1}..{rng[1] + 1}" if rng else "-", key=str(oid))
+            f"{rng[0]}..{rng[1]}" if rng else "-", key=str(oid))
         warn = list(st.get("warnings") or [])
         if warn:
             self.app.notify(f"Object {oid}: {'; '.join(warn)}", severity="warning", timeout=6)

@@ -204,7 +204,7 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         if select is not None and self.p.steps:
             ol.highlighted = min(max(select, 0), len(self.p.steps) - 1)
         dom = "HU values" if self.p.domain == "hu" else "windowed 8-bit values"
-        self.query_one("#pe-title", Label).update(f"[b]Filter pipeline[/b] ({dom}), slice {self.s.z + 1}")
+        self.query_one("#pe-title", Label).update(f"[b]Filter pipeline[/b] ({dom}), slice {self.s.z}")
 
     def _index(self) -> int | None:
         ol = self.query_one("#pe-steps", OptionList)

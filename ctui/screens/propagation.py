@@ -1,6 +1,7 @@
 """Propagation from the workspace: a thread worker driving
 ``ctui.engine.segment.propagate.propagate_object`` with a progress bar and cancel (Escape),
-then a pending proposal shown on the slices until accepted (``a``) or rejected (``x``)."""
+then a pending proposal shown (hatched, outlined in yellow) on every plane until accepted
+(``a``) or rejected (``x``). The worker talks to the workspace through messages."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from textual.worker import get_current_worker
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.segment import propagate
+from ctui.screens.messages import JobDone, JobFailed, JobProgress
 
 
 class PropagationRun:
@@ -26,8 +28,8 @@ class PropagationRun:
 
 
 def settings_for(session, direction: str):
-    """PropagationSettings from the current object's fill range (or the session's)."""
-    prop = propagate
+    """PropagationSettings from the current object's fill range (or the session's) and
+    the session's slice limits (``s`` stops at a slice, ``i`` sets a range)."""
     s = session
     info = s.seg.objects.get(s.current) if s.seg is not None else None
     st = dict(info.settings) if info is not None else {}
@@ -37,8 +39,27 @@ def settings_for(session, direction: str):
         lo, hi = s.range_
     else:
         raise CtuiError(f"object {s.current} has no fill yet: press Enter on it first")
-    return prop.PropagationSettings(low=lo, high=hi, direction=direction, mode=s.prop_mode,
-                                    connectivity=int(st.get("connectivity", s.connectivity)))
+    kw = {}
+    lim = s.limits.slices
+    if lim is not None:
+        if not lim[0] <= s.z <= lim[1]:
+            raise CtuiError(f"slice {s.z} is outside the limits {lim[0]}..{lim[1]} (i changes them)")
+        fields = propagate.PropagationSettings.__dataclass_fields__
+        if "slices" in fields:
+            kw["slices"] = (int(lim[0]), int(lim[1]))
+        else:
+            kw["max_slices"] = max(lim[1] - s.z, s.z - lim[0])
+    return propagate.PropagationSettings(low=lo, high=hi, direction=direction, mode=s.prop_mode,
+                                         connectivity=int(st.get("connectivity", s.connectivity)), **kw)
+
+
+def clip_to_slices(proposal, limits: tuple[int, int] | None) -> None:
+    """Drop the proposal's slices outside ``limits`` (first, last) in place."""
+    if limits is None:
+        return
+    for z in [z for z in proposal.masks if not limits[0] <= z <= limits[1]]:
+        proposal.masks.pop(z, None)
+        proposal.areas.pop(z, None)
 
 
 def start_propagation(ws, direction: str) -> None:
@@ -53,61 +74,45 @@ def start_propagation(ws, direction: str) -> None:
     try:
         settings = settings_for(s, direction)
         if not (s.seg.labels[s.z] == s.current).any():
-            raise CtuiError(f"object {s.current} has no pixels on slice {s.z + 1}: fill it here first (Enter)")
+            raise CtuiError(f"object {s.current} has no pixels on slice {s.z}: fill it here first (Enter)")
     except (CtuiError, ValueError) as exc:
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
     ws._prop = run
-    nz = s.shape[0]
-    ws.show_progress(f"Propagating object {s.current} {direction}", 0, nz)
-    app.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
+    ws.show_progress(f"Propagating object {s.current} {direction}", 0, s.shape[0])
+    ws.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
 
 
 def _work(run: PropagationRun, settings) -> None:
+    """The worker: progress and the result go to the workspace as messages."""
     ws = run.ws
-    app = ws.app
     s = ws.s
     worker = get_current_worker()
-    prop = propagate
     last = [0.0]
 
     def progress(ev) -> bool:
-        if worker.is_cancelled or run.event.is_set():
-            return False
+        if worker.is_cancelled or run.event.is_set() or not ws.is_attached:
+            return False  # cancelled, or the app is gone
         now = time.perf_counter()
         if now - last[0] > 0.05:
             last[0] = now
-            try:
-                app.call_from_thread(ws.show_progress, f"Propagating {ev.direction}: slice {ev.z + 1}", ev.done, max(ev.total, 1))
-            except Exception:
-                return False  # app gone
+            ws.post_message(JobProgress(f"Propagating {ev.direction}: slice {ev.z}", ev.done, max(ev.total, 1)))
         return True
 
     try:
         with s._lock:
-            proposal = prop.propagate_object(s.seg, s.volume, s.pipeline, s.current, s.z, settings,
-                                             progress=progress, cancel=run.event)
+            proposal = propagate.propagate_object(s.seg, s.volume, s.pipeline, s.current, s.z, settings,
+                                                  progress=progress, cancel=run.event)
+        clip_to_slices(proposal, s.limits.slices)
     except Exception as exc:
-        try:
-            app.call_from_thread(_failed, ws, str(exc))
-        except Exception:
-            pass
+        ws.post_message(JobFailed("Propagation", str(exc)))
         return
     run.proposal = proposal
-    try:
-        app.call_from_thread(_finished, ws, run)
-    except Exception:
-        pass
+    ws.post_message(JobDone("propagation", run))
 
 
-def _failed(ws, msg: str) -> None:
-    ws._prop = None
-    ws.show_progress(None)
-    ws.app.notify(f"Propagation failed: {msg}", severity="error")
-
-
-def _finished(ws, run: PropagationRun) -> None:
+def finished(ws, run: PropagationRun) -> None:
     ws._prop = None
     ws.show_progress(None)
     p = run.proposal
@@ -115,8 +120,8 @@ def _finished(ws, run: PropagationRun) -> None:
     rng = p.slices
     secs = time.perf_counter() - run.started
     extra = "; ".join(p.warnings())
-    where = f"slices {rng[0] + 1}..{rng[1] + 1}" if rng else "no slices"
-    ws.set_status(f"Proposal: {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
+    where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
+    ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
     if p.warnings():
         ws.app.notify(extra, severity="warning", timeout=8)
     ws.refresh_view()

@@ -1,16 +1,16 @@
 """The TUI's working state and its (thin) calls into the engine.
 
 A :class:`Session` holds the loaded volume, the slice pipeline, the segmentation, the
-cursor and the view settings. Every computation is an engine call
+cursor, the view and the editing settings. Every computation is an engine call
 (``ctui.engine.io.series``, ``pipeline``, ``selection``, ``propagate``, ``drift``,
-``project``...); engine modules are imported lazily so the app still starts while a
-module is missing, and the action that needs it reports that as a notification.
+``project``...).
 """
 
 from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,8 +20,17 @@ from ctui.engine.core.windows import CT_PRESETS, apply_window
 from ctui.engine.io import phantom
 from ctui.engine.io import series as loaders
 from ctui.engine.segment import pipeline, selection
+from ctui.screens.edittools import EditLimits
 
 VIEWS = ("original", "overlay", "intermediate", "final")
+
+
+def safe_cwd() -> Path:
+    """The working directory, or the home directory when it has been deleted meanwhile."""
+    try:
+        return Path.cwd()
+    except OSError:  # FileNotFoundError: the folder ctui started in is gone
+        return Path.home()
 
 
 def sample_source() -> str:
@@ -58,6 +67,11 @@ class Session:
     seg: Any = None
     drift_info: dict | None = None
     original_data: Any = None  # volume data before a drift correction
+    plane: str = "axial"  # "axial" | "sagittal" | "coronal" (ctui.screens.planes)
+    edit_mode: str = "add"  # fill/paint mode: "add" | "replace" | "subtract"
+    brush: int = 3  # brush/eraser radius, pixels of the finest in-plane spacing
+    tool: str | None = None  # "brush" / "eraser" while the pen is down (moving paints)
+    limits: EditLimits = field(default_factory=EditLimits)  # where edits and propagation may write
     _lock: Any = field(default_factory=threading.RLock)
 
     def __post_init__(self) -> None:
@@ -87,6 +101,10 @@ class Session:
     def position_mm(self) -> tuple[float, float, float]:
         p = self.volume.index_to_mm((self.z, self.y, self.x))
         return float(p[0]), float(p[1]), float(p[2])
+
+    @property
+    def zyx(self) -> tuple[int, int, int]:
+        return int(self.z), int(self.y), int(self.x)
 
     def value(self) -> float:
         return float(self.volume.data[self.z, self.y, self.x])

@@ -27,7 +27,7 @@ async def goto_voxel(pilot, app, z: int, y: int, x: int) -> None:
     """Move to slice z (``g`` + number + Enter) and the cursor to (x, y) with
     shift+h/j/k/l (10 px) and h/j/k/l (1 px)."""
     s = app.session
-    await pilot.press("g", *list(str(z + 1)), "enter")
+    await pilot.press("g", *list(str(z)), "enter")
     dx, dy = x - s.x, y - s.y
     keys = (["L"] if dx > 0 else ["H"]) * (abs(dx) // 10) + (["l"] if dx > 0 else ["h"]) * (abs(dx) % 10)
     keys += (["J"] if dy > 0 else ["K"]) * (abs(dy) // 10) + (["j"] if dy > 0 else ["k"]) * (abs(dy) % 10)

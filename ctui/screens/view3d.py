@@ -123,7 +123,7 @@ class View3DScreen(GuardMixin, Screen):
             lines += [f"azimuth {c.azimuth:g}°", f"elev.   {c.elevation:g}°", f"zoom    {c.zoom:.2f}",
                       f"light   {lt.azimuth:g}°, {lt.elevation:g}°",
                       f"shadows {'on' if self.scene.options.shadows else 'off'}",
-                      f"slice   {'z ' + str(self.scene.options.slice_plane.index + 1) if self.scene.options.slice_plane else 'off'}"]
+                      f"slice   {'z ' + str(self.scene.options.slice_plane.index) if self.scene.options.slice_plane else 'off'}"]
         if self.meshes:
             lines.append("")
             lines.append("[b]Objects[/b]")

@@ -1,0 +1,324 @@
+"""The workspace's segmentation keys: fill, brush, eraser, modes, limits, islands,
+fill between slices, objects, undo/redo (a mixin of :class:`WorkspaceScreen`).
+
+Every change is one undo step of the engine's ``Segmentation``; the screen only asks
+and reports."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError
+from ctui.screens import edittools as et
+from ctui.screens.planes import plane_view
+
+EDIT_ERRORS = (CtuiError, ValueError, IndexError)
+
+
+class EditMixin:
+    """Segmentation actions; the host screen provides ``s``, ``app``, ``refresh_view``,
+    ``update_panel``, ``set_status`` and ``labels_changed``."""
+
+    # ------------------------------------------------------------------ guards
+    def _need_seg(self) -> bool:
+        if self.s.seg is None or self.s.pipeline is None:
+            self.app.notify("The selection engine is not available in this build", severity="error")
+            return False
+        return True
+
+    def _busy(self) -> bool:
+        """Label edits wait while a propagation reads the labels (Escape cancels it)."""
+        if self._prop is not None:
+            self.app.notify("A propagation is running: wait for it or press Escape to cancel", severity="warning", timeout=3)
+            return True
+        return False
+
+    def _editable(self) -> bool:
+        return not self._busy() and self._need_seg()
+
+    def _edited(self, msg: str) -> None:
+        self.labels_changed()
+        self.set_status(msg)
+        self.refresh_view()
+
+    # ------------------------------------------------------------------ fill
+    def action_fill(self) -> None:
+        if not self._editable():
+            return
+        s = self.s
+        if s.plane != "axial":
+            self.app.notify("Fill works on axial slices: press 1 for the axial view", severity="warning", timeout=3)
+            return
+        try:
+            with s._lock:
+                image = s.pipeline.final_slice(s.volume, s.z)
+            kw = {"low": s.range_[0], "high": s.range_[1]} if s.range_ else {"tolerance": s.tolerance}
+            n, reason, (lo, hi) = et.fill_slice(s.seg, image, s.x, s.y, s.z, object_id=s.current, mode=s.edit_mode,
+                                                connectivity=s.connectivity, limits=s.limits, data=s.volume.data, **kw)
+        except EDIT_ERRORS as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        if reason:
+            self.app.notify(f"Fill rejected: {reason}", severity="warning")
+            return
+        verb = {"add": "Filled", "replace": "Replaced with", "subtract": "Subtracted"}[s.edit_mode]
+        self._edited(f"{verb} {n} px, object {s.current} (range {lo:g}..{hi:g}); p propagates, u undoes")
+
+    # ------------------------------------------------------------------ brush / eraser
+    def dab(self, tool: str, zyx: tuple[int, int, int] | None = None) -> int:
+        """One brush (or eraser) dab at ``zyx`` (the cursor) on the current plane; returns voxels changed."""
+        s = self.s
+        pv = plane_view(s.volume, s.plane)
+        zyx = s.zyx if zyx is None else zyx
+        mask, off = et.brush_mask(pv, zyx[pv.normal], (zyx[pv.cols], zyx[pv.rows]), s.brush, s.shape, s.volume.spacing)
+        mask = et.limit_mask(mask, off, s.volume.data, s.limits)
+        if tool == "eraser":
+            return s.seg.erase(mask, offset=off, object_id=s.current)
+        s.seg.add_object(object_id=s.current)
+        return et.apply_mask(s.seg, mask, off, s.current, s.edit_mode, label=f"paint object {s.current}")
+
+    def action_dab(self) -> None:
+        if not self._editable():
+            return
+        tool = self.s.tool or "brush"
+        try:
+            n = self.dab(tool)
+        except EDIT_ERRORS as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {self.s.brush} px); u undoes")
+
+    def action_pen(self, tool: str) -> None:
+        """b / E: put the brush (eraser) down, so moving the cursor paints (erases); again lifts it."""
+        s = self.s
+        if s.tool == tool:
+            s.tool = None
+            self.set_status(f"{tool.capitalize()} lifted")
+            self.update_panel()
+            return
+        s.tool = tool
+        self.action_dab()
+        self.set_status(f"{tool.capitalize()} down ({s.brush} px, {s.edit_mode}): move to paint; "
+                        f"{'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
+
+    def stroke(self, start: tuple[int, int, int], end: tuple[int, int, int]) -> None:
+        """Dabs from ``start`` to ``end`` (a cursor move with the pen down), as undo steps of one dab each."""
+        steps = max(abs(a - b) for a, b in zip(start, end))
+        pts = [tuple(int(round(a + (b - a) * t)) for a, b in zip(start, end))
+               for t in np.linspace(0.0, 1.0, steps + 1)[1:]] if steps else []
+        n = 0
+        try:
+            for p in dict.fromkeys(pts):
+                n += self.dab(self.s.tool, p)  # type: ignore[arg-type]
+        except EDIT_ERRORS as exc:
+            self.app.notify(str(exc), severity="error")
+        if n:
+            self.labels_changed()
+
+    def action_brush_size(self, d: int) -> None:
+        self.s.brush = int(min(max(self.s.brush + d, 0), 50))
+        self.set_status(f"Brush radius {self.s.brush} px")
+        self.update_panel()
+
+    def action_edit_mode(self) -> None:
+        s = self.s
+        s.edit_mode = et.MODES[(et.MODES.index(s.edit_mode) + 1) % len(et.MODES)]
+        what = {"add": "fill/paint add to the object (other objects kept)",
+                "replace": "fill replaces the object on the slice, paint claims other objects",
+                "subtract": "fill/paint remove from the object"}[s.edit_mode]
+        self.app.notify(f"Mode {s.edit_mode}: {what}", timeout=3)
+        self.update_panel()
+
+    # ------------------------------------------------------------------ limits
+    def action_limits(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+        nz = s.shape[0]
+
+        def done(val: str | None) -> None:
+            if val is None:
+                return
+            try:
+                s.limits = et.parse_limits(val, nz)
+            except CtuiError as exc:
+                self.app.notify(str(exc), severity="error")
+                return
+            self.set_status(f"Edit and propagation limits: {s.limits.describe()}")
+            self.update_panel()
+
+        cur = " ".join(([f"slices {s.limits.slices[0]}:{s.limits.slices[1]}"] if s.limits.slices else [])
+                       + ([f"hu {s.limits.values[0]:g}:{s.limits.values[1]:g}"] if s.limits.values else []))
+        self.app.push_screen(PromptScreen(f"Limits: 'slices A:B' (0..{nz - 1}) and/or 'hu LO:HI' (empty: none)", cur), done)
+
+    def action_stop_slice(self) -> None:
+        """s: propagation and edits stop at this slice, on the side of the object it lies on."""
+        s = self.s
+        nz = s.shape[0]
+        rng = s.seg.slice_range(s.current) if s.seg is not None else None
+        mid = (rng[0] + rng[1]) / 2 if rng else nz / 2
+        a, b = s.limits.slices or (0, nz - 1)
+        if s.z >= mid:
+            b = s.z
+        else:
+            a = s.z
+        s.limits.slices = (min(a, b), max(a, b))
+        self.set_status(f"Stop at slice {s.z}: edits and propagation limited to slices {s.limits.slices[0]}..{s.limits.slices[1]} (i edits)")
+        self.update_panel()
+
+    # ------------------------------------------------------------------ whole-object tools
+    def _object_tool(self, fn, done_msg: str, *args) -> None:
+        if not self._editable():
+            return
+        try:
+            n = fn(self.s.seg, self.s.current, *args)
+        except EDIT_ERRORS as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        self._edited(done_msg.format(n=n, obj=self.s.current))
+
+    def action_keep_largest(self) -> None:
+        self._object_tool(et.keep_largest_island, "Kept the largest island of object {obj}: {n} voxels removed (u undoes)")
+
+    def action_remove_islands(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        def done(val: str | None) -> None:
+            if not val:
+                return
+            try:
+                n = int(val.strip())
+                if n < 1:
+                    raise ValueError
+            except ValueError:
+                self.app.notify("Give a number of voxels (e.g. 100)", severity="error")
+                return
+            self._object_tool(et.remove_small_islands, "Removed {n} voxels of islands of object {obj} (u undoes)", n)
+
+        self.app.push_screen(PromptScreen("Remove islands smaller than N voxels", "100"), done)
+
+    def action_fill_between(self) -> None:
+        if not self._editable():
+            return
+        try:
+            n = et.fill_between_slices(self.s.seg, self.s.current, limits=self.s.limits)
+        except EDIT_ERRORS as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        self._edited(f"Filled between slices: {n} voxels added to object {self.s.current} (u undoes)")
+
+    def action_tools(self) -> None:
+        from ctui.screens.dialogs import ChoiceScreen
+
+        options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels"),
+                   ("fill_between", "Fill between slices (F)"), ("edit_mode", "Mode add / replace / subtract (R)"),
+                   ("limits", "Limits: slice range and HU range (i)"), ("stop_slice", "Stop at this slice (s)")]
+
+        def done(choice: str | None) -> None:
+            if choice:
+                getattr(self, f"action_{choice}")()
+
+        self.app.push_screen(ChoiceScreen(f"Edit object {self.s.current}", options), done)
+
+    # ------------------------------------------------------------------ fill settings
+    def action_tolerance(self, d: int) -> None:
+        s = self.s
+        if s.range_ is not None:
+            lo, hi = s.range_
+            step = max((hi - lo) * 0.05, 1.0)
+            s.range_ = (lo - d * step, hi + d * step) if hi - lo + 2 * d * step > 0 else s.range_
+        else:
+            step = 5.0 if s.tolerance < 50 else 10.0
+            s.tolerance = max(0.0, s.tolerance + d * step)
+        self.update_panel()
+
+    def action_range_edit(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        def done(val: str | None) -> None:
+            if val is None:
+                return
+            val = val.strip()
+            try:
+                if ":" in val or ".." in val:
+                    lo, hi = [float(p) for p in val.replace("..", ":").split(":")]
+                    self.s.range_ = (min(lo, hi), max(lo, hi))
+                else:
+                    self.s.tolerance = abs(float(val))
+                    self.s.range_ = None
+            except ValueError:
+                self.app.notify("Give a tolerance (e.g. 60) or a range LO:HI (e.g. 150:400)", severity="error")
+                return
+            self.update_panel()
+
+        cur = f"{self.s.range_[0]:g}:{self.s.range_[1]:g}" if self.s.range_ else f"{self.s.tolerance:g}"
+        self.app.push_screen(PromptScreen("Tolerance (±T around the seed value) or range LO:HI", cur), done)
+
+    def action_prop_mode(self) -> None:
+        self.s.prop_mode = "3d" if self.s.prop_mode == "slice" else "slice"
+        self.app.notify(f"Propagation: {'one 3D flood fill' if self.s.prop_mode == '3d' else 'slice by slice'}", timeout=2)
+        self.update_panel()
+
+    def action_connectivity(self) -> None:
+        self.s.connectivity = 4 if self.s.connectivity == 8 else 8
+        self.update_panel()
+
+    # ------------------------------------------------------------------ objects
+    def action_new_object(self) -> None:
+        if not self._need_seg():
+            return
+        try:
+            self.s.current = self.s.seg.add_object()
+        except ValueError as exc:
+            self.app.notify(str(exc), severity="error")
+            return
+        self.s.dirty = True
+        self.update_panel()
+
+    def action_rename_object(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+        if not self._need_seg():
+            return
+        s.seg.add_object(object_id=s.current)
+        info = s.seg.objects[s.current]
+
+        def done(val: str | None) -> None:
+            if val and val.strip():
+                info.name = val.strip()[:40]
+                s.dirty = True
+                self.update_panel()
+
+        self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+
+    def action_clear_object(self) -> None:
+        from ctui.screens.dialogs import ConfirmScreen
+
+        s = self.s
+        if not self._editable():
+            return
+
+        def done(ok: bool) -> None:
+            if ok:
+                n = s.seg.clear_object(s.current)
+                self._edited(f"Cleared {n} voxels of object {s.current} (u undoes)")
+
+        self.app.push_screen(ConfirmScreen(f"Erase every voxel of object {s.current}? (u undoes)", "Erase", "Keep"), done)
+
+    def action_cycle_object(self) -> None:
+        if self.s.seg is None:
+            return
+        ids = sorted(self.s.seg.objects) or [1]
+        self.s.current = ids[(ids.index(self.s.current) + 1) % len(ids)] if self.s.current in ids else ids[0]
+        self.update_panel()
+
+    def action_undo(self, redo: bool = False) -> None:
+        if self._busy() or self.s.seg is None:
+            return
+        label = self.s.seg.redo() if redo else self.s.seg.undo()
+        verb = "Redone" if redo else "Undone"
+        self.app.notify(f"{verb}: {label}" if label else f"Nothing to {verb[:-2].lower()}", timeout=2)
+        if label:
+            self.labels_changed()
+            self.refresh_view()

@@ -1,0 +1,54 @@
+"""Long jobs of the workspace as thread workers that post messages (progress, result,
+failure) to the screen: the 3D cell of the 2x2 layout, exports. Each is cancellable
+(Escape) through its Worker; a late answer to a closed screen is dropped."""
+
+from __future__ import annotations
+
+from functools import partial
+
+from textual.worker import Worker, get_current_worker
+
+from ctui.engine import render
+from ctui.screens.messages import JobDone, JobFailed, JobProgress
+
+
+def render_cell(ws, size: tuple[int, int]) -> Worker:
+    """Surfaces of the objects (or a MIP when there are none) rendered at ``size`` for the 3D cell."""
+    return ws.run_worker(partial(_render_cell, ws, size), thread=True, exclusive=True, group="cell3d", name="3D cell")
+
+
+def _render_cell(ws, size: tuple[int, int]) -> None:
+    from ctui.screens.view3d import build_meshes
+
+    worker = get_current_worker()
+    ws.post_message(JobProgress("3D: building surfaces", 0, 2))
+    try:
+        meshes = build_meshes(ws.s, "marching-cubes")
+        if worker.is_cancelled:
+            return
+        ws.post_message(JobProgress(f"3D: rendering {len(meshes)} surface(s)", 1, 2))
+        scene = render.Scene.from_meshes(list(meshes.values()))
+        if not meshes:
+            scene.set_volume(ws.s.volume)
+            scene.mode = "mip"
+        img = render.get_renderer().submit(scene, size).result()
+    except Exception as exc:  # no EGL, no objects: the cell says so, no error toast on every edit
+        ws.post_message(JobDone("3d", None, caption=f"3d: {str(exc).splitlines()[0][:60] if str(exc) else type(exc).__name__}"))
+        return
+    if not worker.is_cancelled:
+        ws.post_message(JobDone("3d", img, caption=f"3d: {len(meshes)} object(s), r opens the 3D view"))
+
+
+def run_job(ws, fn, *, what: str, name: str) -> Worker:
+    """Run ``fn()`` (returns a message) in a thread; its text becomes a notification and the status line."""
+    def body() -> None:
+        ws.post_message(JobProgress(f"{what} ...", 0, None))
+        try:
+            msg = fn()
+        except Exception as exc:  # a clear notification, the work stays in memory
+            ws.post_message(JobFailed(what, str(exc)))
+            return
+        ws.post_message(JobDone("message", msg))
+
+    ws._job = ws.run_worker(body, thread=True, group="job", name=name)
+    return ws._job

@@ -1,0 +1,388 @@
+"""The workspace's keys (every binding, named in the ``?`` help), its navigation and
+view actions (a mixin of :class:`ctui.screens.workspace.WorkspaceScreen`) and the
+side panel's text."""
+
+from __future__ import annotations
+
+import numpy as np
+from rich.text import Text
+from textual.binding import Binding
+
+from ctui.screens import planes
+from ctui.screens.imageview import ImageView
+from ctui.screens.session import VIEWS
+
+BINDINGS = [
+    Binding("left,h", "move(-1,0)", "Cursor left", show=False),
+    Binding("right,l", "move(1,0)", "Cursor right", show=False),
+    Binding("up,k", "move(0,-1)", "Cursor up", show=False),
+    Binding("down,j", "move(0,1)", "Cursor down", show=False),
+    Binding("shift+left,H", "move(-10,0)", "Cursor left 10", show=False),
+    Binding("shift+right,L", "move(10,0)", "Cursor right 10", show=False),
+    Binding("shift+up,K", "move(0,-10)", "Cursor up 10", show=False),
+    Binding("shift+down,J", "move(0,10)", "Cursor down 10", show=False),
+    Binding("ctrl+left", "pan(-1,0)", "Pan left", show=False),
+    Binding("ctrl+right", "pan(1,0)", "Pan right", show=False),
+    Binding("ctrl+up", "pan(0,-1)", "Pan up", show=False),
+    Binding("ctrl+down", "pan(0,1)", "Pan down", show=False),
+    Binding("pageup", "slice(1)", "Slice +1"),
+    Binding("pagedown", "slice(-1)", "Slice -1"),
+    Binding("home", "slice_to('first')", "First slice", show=False),
+    Binding("end", "slice_to('last')", "Last slice", show=False),
+    Binding("g", "goto", "Go to slice", show=False),
+    Binding("1", "plane('axial')", "Axial view", show=False),
+    Binding("2", "plane('sagittal')", "Sagittal view", show=False),
+    Binding("3", "plane('coronal')", "Coronal view", show=False),
+    Binding("0", "ortho", "2x2: axial, sagittal, coronal, 3D", show=False),
+    Binding("w", "window_cycle", "Window preset", show=False),
+    Binding("W", "window_set", "Set window C/W", show=False),
+    Binding("plus,equals_sign", "zoom(1)", "Zoom in", show=False),
+    Binding("minus", "zoom(-1)", "Zoom out", show=False),
+    Binding("v", "view_cycle", "View"),
+    Binding("V", "grid", "2x2 pipeline views", show=False),
+    Binding("f", "filters", "Filters"),
+    Binding("enter", "fill", "Fill"),
+    Binding("space", "dab", "Paint a brush dab", show=False),
+    Binding("b", "pen('brush')", "Brush down/up (moving paints)", show=False),
+    Binding("E", "pen('eraser')", "Eraser down/up (moving erases)", show=False),
+    Binding("comma", "brush_size(-1)", "Brush smaller", show=False),
+    Binding("full_stop", "brush_size(1)", "Brush larger", show=False),
+    Binding("R", "edit_mode", "Mode add/replace/subtract", show=False),
+    Binding("i", "limits", "Limits: slice range, HU range", show=False),
+    Binding("s", "stop_slice", "Stop at this slice", show=False),
+    Binding("I", "keep_largest", "Keep largest island", show=False),
+    Binding("X", "remove_islands", "Remove islands under N voxels", show=False),
+    Binding("F", "fill_between", "Fill between slices", show=False),
+    Binding("t", "tools", "Edit tools"),
+    Binding("left_square_bracket", "tolerance(-1)", "Tolerance -", show=False),
+    Binding("right_square_bracket", "tolerance(1)", "Tolerance +", show=False),
+    Binding("T", "range_edit", "Edit range/tolerance", show=False),
+    Binding("c", "connectivity", "4/8 connectivity", show=False),
+    Binding("m", "prop_mode", "Propagation slice/3D", show=False),
+    Binding("n", "new_object", "New object"),
+    Binding("tab", "cycle_object", "Next object", show=False, priority=True),
+    Binding("N", "rename_object", "Rename object", show=False),
+    Binding("delete", "clear_object", "Clear object", show=False),
+    Binding("u", "undo", "Undo"),
+    Binding("U", "undo(True)", "Redo", show=False),
+    Binding("less_than_sign", "propagate('backward')", "Propagate back", show=False),
+    Binding("greater_than_sign", "propagate('forward')", "Propagate fwd", show=False),
+    Binding("p", "propagate('both')", "Propagate"),
+    Binding("a", "accept", "Accept proposal", show=False),
+    Binding("x", "reject", "Reject proposal", show=False),
+    Binding("escape", "cancel", "Cancel job / lift brush", show=False),
+    Binding("d", "drift", "Drift"),
+    Binding("r", "render3d", "3D"),
+    Binding("M", "measure", "Measure"),
+    Binding("e", "export", "Export"),
+    Binding("o", "open", "Open", show=False),
+]
+
+
+class NavMixin:
+    """Cursor, slices, planes, zoom, windows and the other screens."""
+
+    # ------------------------------------------------------------------ cursor
+    def action_move(self, dx: int, dy: int) -> None:
+        """Move the cursor on the current plane (rows of sagittal/coronal run from the top)."""
+        s = self.s
+        pv = planes.plane_view(s.volume, s.plane)
+        before = s.zyx
+        zyx = list(before)
+        zyx[pv.cols] += dx
+        zyx[pv.rows] += -dy if pv.flip_rows else dy
+        s.z, s.y, s.x = zyx
+        s.clamp()
+        if s.tool and s.zyx != before and not self._busy():
+            self.stroke(before, s.zyx)
+            self.refresh_view()
+        elif self.ortho_mode:
+            self.refresh_view()
+        else:
+            self._repaint_cursor()
+
+    def _repaint_cursor(self) -> None:
+        s = self.s
+        for plane, _view, iv in self._targets():
+            pv = planes.plane_view(s.volume, plane)
+            iv.set_view(zoom=s.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+        self.update_panel()
+
+    def action_pan(self, dx: int, dy: int) -> None:
+        s = self.s
+        if s.zoom <= 1:
+            self.app.notify("Zoom in (+) first to pan", timeout=2)
+            return
+        ny, nx = self._plane_shape(s.plane)
+        cx, cy = self.pan_center or self._view_center()
+        step_x, step_y = nx / s.zoom / 4, ny / s.zoom / 4
+        self.pan_center = (cx + dx * step_x, cy + dy * step_y)
+        # panning drags the cursor along so it stays visible
+        self.action_move(int(round(dx * step_x)), int(round(dy * step_y)))
+
+    def action_slice(self, d: int) -> None:
+        """PageUp/PageDown: the next plane along the current view's normal (z for axial)."""
+        s = self.s
+        pv = planes.plane_view(s.volume, s.plane)
+        zyx = list(s.zyx)
+        zyx[pv.normal] += d
+        s.z, s.y, s.x = zyx
+        self.refresh_view()
+
+    def action_slice_to(self, where: str) -> None:
+        s = self.s
+        pv = planes.plane_view(s.volume, s.plane)
+        zyx = list(s.zyx)
+        zyx[pv.normal] = 0 if where == "first" else s.shape[pv.normal] - 1
+        s.z, s.y, s.x = zyx
+        self.refresh_view()
+
+    def action_goto(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        last = self.s.shape[0] - 1
+
+        def done(val: str | None) -> None:
+            if not val:
+                return
+            try:
+                z = int(val.strip())
+            except ValueError:
+                self.app.notify(f"Not a slice number: {val!r}", severity="error")
+                return
+            if not 0 <= z <= last:
+                self.app.notify(f"Slices run from 0 to {last}", severity="warning", timeout=3)
+            self.s.z = z
+            self.refresh_view()
+
+        self.app.push_screen(PromptScreen(f"Go to slice (0..{last})", str(self.s.z)), done)
+
+    def action_zoom(self, d: int) -> None:
+        s = self.s
+        s.zoom = min(max(s.zoom * (2.0 if d > 0 else 0.5), 1.0), 16.0)
+        if s.zoom == 1.0:
+            self.pan_center = None
+        self._repaint_cursor()
+
+    # ------------------------------------------------------------------ windows and views
+    def action_window_cycle(self) -> None:
+        presets = self.s.window_presets()
+        idx = (getattr(self, "_window_idx", -1) + 1) % len(presets)
+        name, win = presets[idx]
+        self._window_idx, self._window_name = idx, name
+        self.s.window = (float(win[0]), float(win[1]))
+        self.refresh_view()
+        self.app.notify(f"Window {name}: C {win[0]:g} W {win[1]:g}", timeout=2)
+
+    def action_window_set(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        def done(val: str | None) -> None:
+            if not val:
+                return
+            try:
+                parts = val.replace(",", " ").replace("/", " ").split()
+                c, w = float(parts[0]), float(parts[1])
+                if w <= 0:
+                    raise ValueError
+            except (ValueError, IndexError):
+                self.app.notify("Window: give centre and width, e.g. '40 400'", severity="error")
+                return
+            self.s.window = (c, w)
+            self._window_name = "custom"
+            self.refresh_view()
+
+        c, w = self.s.window
+        self.app.push_screen(PromptScreen("Window centre and width (e.g. 40 400)", f"{c:g} {w:g}"), done)
+
+    def _layout(self, *, grid: bool = False, ortho: bool = False) -> None:
+        self.grid_mode, self.ortho_mode = grid, ortho
+        self.query_one("#grid").set_class(grid, "on")
+        self.query_one("#ortho").set_class(ortho, "on")
+        self.query_one("#main-box").set_class(grid or ortho, "off")
+        for iv in self.query(ImageView):
+            iv.token = None
+        self.pan_center = None
+        self.refresh_view()
+
+    def action_view_cycle(self) -> None:
+        if self.grid_mode:
+            self._layout()
+            return
+        self.s.plane = "axial"
+        self.s.view = VIEWS[(VIEWS.index(self.s.view) + 1) % len(VIEWS)]
+        self._layout(ortho=self.ortho_mode)
+
+    def action_grid(self) -> None:
+        self.s.plane = "axial"
+        self._layout(grid=not self.grid_mode)
+
+    def action_plane(self, plane: str) -> None:
+        """1/2/3: axial, sagittal or coronal (the active plane of the 2x2 layout)."""
+        self.s.plane = plane
+        self._layout(ortho=self.ortho_mode)
+        self.set_status(f"{plane.capitalize()} view: arrows move in it, PageUp/PageDown step across it")
+
+    def action_ortho(self) -> None:
+        if not self.ortho_mode and (self.size.width < 100 or self.size.height < 30):
+            self.app.notify("The 2x2 layout needs a terminal of at least 100x30: 1/2/3 show one plane",
+                            severity="warning", timeout=4)
+            return
+        self._layout(ortho=not self.ortho_mode)
+        if self.ortho_mode:
+            self.request_3d()
+
+    def on_click(self, event) -> None:
+        """Click on a view moves the cursor there (and makes its plane the active one)."""
+        widget = getattr(event, "widget", None)
+        if not isinstance(widget, ImageView) or widget.id in (None, "o-3d"):
+            return
+        off = event.get_content_offset(widget)
+        pos = None if off is None else widget.display_to_image(off.x, off.y)
+        if pos is None:
+            return
+        wid = widget.id or ""
+        plane = wid[2:] if wid.startswith("o-") else ("axial" if wid.startswith("g-") else self.s.plane)
+        s = self.s
+        s.plane = plane
+        pv = planes.plane_view(s.volume, plane)
+        s.z, s.y, s.x = planes.voxel_of(pv, pos[0], pos[1], s.zyx, s.shape)
+        s.clamp()
+        self.refresh_view()
+
+    # ------------------------------------------------------------------ propagation
+    def action_propagate(self, direction: str) -> None:
+        from ctui.screens.propagation import start_propagation
+
+        if self._need_seg():
+            start_propagation(self, direction)
+
+    def action_accept(self) -> None:
+        from ctui.screens.propagation import accept
+
+        if not self._busy():
+            accept(self)
+
+    def action_reject(self) -> None:
+        from ctui.screens.propagation import reject
+
+        reject(self)
+
+    def action_cancel(self) -> None:
+        if self._prop is not None:
+            self._prop.cancel()
+            self.set_status("Cancelling propagation...")
+        elif self._job is not None:
+            self._job.cancel()
+            self._job = None
+            self.show_progress(None)
+            self.set_status("Cancelled")
+        elif self.s.tool:
+            self.s.tool = None
+            self.set_status("Brush lifted")
+            self.update_panel()
+
+    # ------------------------------------------------------------------ other screens
+    def action_filters(self) -> None:
+        from ctui.screens.pipeline_editor import PipelineEditor
+
+        if self._busy():
+            return
+        if self.s.pipeline is None:
+            self.app.notify("The pipeline engine is not available in this build", severity="error")
+            return
+        self.app.push_screen(PipelineEditor(self.s), lambda _=None: self._after_pipeline())
+
+    def _after_pipeline(self) -> None:
+        self.s.dirty = True
+        self._layout(grid=self.grid_mode, ortho=self.ortho_mode)
+
+    def action_drift(self) -> None:
+        from ctui.screens.drift_screen import DriftScreen
+
+        if not self._busy():
+            self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
+
+    def action_render3d(self) -> None:
+        from ctui.screens.view3d import View3DScreen
+
+        self.app.push_screen(View3DScreen(self.s))
+
+    def action_measure(self) -> None:
+        from ctui.screens.measure_screen import MeasureScreen
+
+        self.app.push_screen(MeasureScreen(self.s))
+
+    def action_export(self) -> None:
+        from ctui.screens.export import export_dialog
+
+        export_dialog(self)
+
+    def action_open(self) -> None:
+        self.app.action_open()
+
+
+def panel_text(ws) -> Text:
+    """The side panel: slice, cursor, value, window, view, tools, pipeline, objects."""
+    s, v = ws.s, ws.s.volume
+    nz = s.shape[0]
+    t = Text()
+    t.append("ctui", style="bold")
+    src = (s.source_path or v.source or "").rstrip("/").split("/")[-1]
+    t.append(f"  {src[:28]}\n", style="dim")
+    try:
+        xmm, ymm, zmm = s.position_mm()
+    except Exception:
+        xmm = ymm = zmm = float("nan")
+    slice_pos = float(v.slice_positions[s.z]) if v.slice_positions is not None and len(v.slice_positions) == nz else zmm
+    t.append(f"Slice {s.z}/{nz - 1}", style="bold")
+    t.append(f"  {slice_pos:.1f} mm\n")
+    t.append(f"Cursor x {s.x}  y {s.y}\n")
+    t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
+    t.append("Value ", style="bold")
+    t.append(f"{s.value():g} {'HU' if v.modality == 'CT' else ''}\n")
+    c, w = s.window
+    t.append(f"Window C {c:g} W {w:g}")
+    if getattr(ws, "_window_name", None):
+        t.append(f" ({ws._window_name})", style="dim")
+    view = "2x2 pipeline" if ws.grid_mode else ("2x2 planes" if ws.ortho_mode else s.view)
+    t.append(f"\nView {s.plane} {view}  zoom {s.zoom:g}x\n")
+    dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
+    t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
+    t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
+    pen = f" {s.tool} down" if s.tool else ""
+    t.append(f"Mode {s.edit_mode}  brush {s.brush} px{pen}\n")
+    if s.limits.slices is not None or s.limits.values is not None:
+        t.append(f"Limits {s.limits.describe()}\n", style="yellow")
+    t.append("\nPipeline", style="bold underline")
+    steps = s.pipeline_steps()
+    t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
+    for line in steps[:6]:
+        t.append(f" {line[:34]}\n")
+    _objects_text(ws, t)
+    if s.dirty:
+        t.append("\n● unsaved changes", style="yellow")
+    return t
+
+
+def _objects_text(ws, t: Text) -> None:
+    s = ws.s
+    t.append("\nObjects", style="bold underline")
+    t.append("  (n new, Tab next)\n")
+    lab = s.labels()
+    if lab is None:
+        t.append(" (selection engine missing)\n", style="dim")
+        return
+    objs = sorted(getattr(s.seg, "objects", {}) or {})
+    area = np.bincount(lab[s.z].ravel(), minlength=11)
+    vols = ws._object_volumes()
+    px_mm2 = s.volume.spacing[1] * s.volume.spacing[2]
+    ids = sorted(set(objs) | set(vols) | {s.current})
+    for i in ids:
+        info = s.seg.objects.get(i)
+        col = info.color if info is not None else (128, 128, 128)
+        t.append("▶" if i == s.current else " ")
+        t.append("██", style=f"rgb({col[0]},{col[1]},{col[2]})")
+        name = info.name if info is not None else f"object {i}"
+        a = int(area[i]) if i < len(area) else 0
+        t.append(f" {name[:10]:<10} {a * px_mm2:7.0f}mm² {vols.get(i, 0.0):6.1f}ml\n")
