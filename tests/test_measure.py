@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from ctui.engine.measure.summary import measure_object
 from ctui.engine.measure.stats import (
     label_stats,
-    measure_object,
     mesh_components,
     mesh_stats,
     object_stats,

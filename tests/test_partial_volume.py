@@ -10,7 +10,8 @@ import pytest
 from scipy import ndimage as ndi
 
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.measure.stats import measure_object, partial_volume_fraction
+from ctui.engine.measure.fields import partial_volume_fraction
+from ctui.engine.measure.summary import measure_object
 
 
 @pytest.fixture(scope="module")

@@ -17,20 +17,13 @@ import math
 import numpy as np
 import pytest
 
+from ctui.engine.measure.between import volume_between
 from ctui.engine.measure.centreline import centreline
-from ctui.engine.measure.sections import (
-    feret_diameters,
-    find_steps,
-    object_field,
-    path_points,
-    plot_sections,
-    rotation_minimising_frames,
-    sections_along_path,
-    shoelace_area,
-    volume_between,
-    write_sections_csv,
-    write_sections_json,
-)
+from ctui.engine.measure.fields import object_field
+from ctui.engine.measure.paths import path_points, rotation_minimising_frames
+from ctui.engine.measure.planes import feret_diameters, shoelace_area
+from ctui.engine.measure.report import plot_sections, sections_plot_image, write_sections_csv, write_sections_json
+from ctui.engine.measure.sections import find_steps, sections_along_path
 
 SP = (0.5, 0.5, 0.5)
 
@@ -278,8 +271,6 @@ def test_outputs_csv_json_plot(tmp_path):
     red = (im[..., 0] > 180) & (im[..., 1] < 90) & (im[..., 2] < 90)
     blue = (im[..., 2] > 150) & (im[..., 0] < 80)
     assert red.sum() > 50 and blue.sum() > 50
-    from ctui.engine.measure.sections import sections_plot_image
-
     arr = sections_plot_image(rows, references=[math.pi * 4], size_px=(640, 320), quantity="eq_diameter_mm")
     assert arr.shape == (320, 640, 3) and arr.dtype == np.uint8
     assert ((arr[..., 2] > 150) & (arr[..., 0] < 80)).sum() > 50

@@ -13,8 +13,8 @@ import numpy as np
 from ctui.engine.actions import defaults
 from ctui.engine.actions.opened import Opened, open_input
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.measure import stats
-from ctui.engine.measure.sections import plot_sections, write_sections_csv
+from ctui.engine.measure import stats, summary
+from ctui.engine.measure.report import plot_sections, write_sections_csv
 
 
 @dataclass
@@ -101,10 +101,10 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     oid = opened.pick_objects(object)[0]
     g = opened.geometry
     assert opened.labels is not None and g is not None
-    res = stats.measure_object(opened.labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
-                               path=path, path_voxels=path_voxels, step_mm=step_mm,
-                               between=tuple(between) if between is not None else None, mesh=mesh, area=area,
-                               average_mm=average_mm, image=image)
+    res = summary.measure_object(opened.labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
+                                 path=path, path_voxels=path_voxels, step_mm=step_mm,
+                                 between=tuple(between) if between is not None else None, mesh=mesh, area=area,
+                                 average_mm=average_mm, image=image)
     pv = res.get("partial_volume")
     return MeasureResult(
         os.path.basename(opened.path), object=res["object"], volume_ml=res["volume_ml"],

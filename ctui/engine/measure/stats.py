@@ -7,8 +7,8 @@
 * :func:`mesh_stats` - volume and area of a mesh per connected component, with
   warnings for components that are not closed;
 * :func:`principal_axes` - second-moment axes of a mask in mm;
-* :func:`partial_volume_fraction` - sub-voxel occupancy of an object from the grey
-  levels of the series (for sections and volumes of small objects).
+* :func:`~ctui.engine.measure.fields.partial_volume_fraction` (re-exported here) -
+  sub-voxel occupancy of an object from the grey levels of the series.
 
 Principal axes (definition used here): the eigen-decomposition of the covariance of
 the object's points in mm, taking every voxel as a uniform box (covariance of the voxel
@@ -21,14 +21,16 @@ All positions are patient mm (x, y, z) (see :mod:`ctui.engine.core.volume`).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from ctui.engine.measure.centreline import index_matrix, index_to_mm
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh, face_areas, signed_volume_mm3
+from ctui.engine.measure.fields import partial_volume_field, partial_volume_fraction  # noqa: F401  (re-exported)
+from ctui.engine.measure.paths import index_matrix, index_to_mm
+from ctui.engine.mesh.surface import mask_surface
 
 
 # ------------------------------------------------------------------ meshes
@@ -145,13 +147,6 @@ def principal_axes(mask: np.ndarray, *, spacing=(1.0, 1.0, 1.0), direction=None)
     return {"lengths_mm": 2.0 * np.sqrt(5.0 * w), "axes": vec, "eigenvalues_mm2": w}
 
 
-def _surface(mask: np.ndarray, *, spacing, origin, direction, smooth: bool) -> Mesh:
-    """The mask's surface by MESH's mask_surface (imported lazily)."""
-    from ctui.engine.mesh.surface import mask_surface
-
-    return mask_surface(mask, spacing=tuple(spacing), origin=tuple(origin), direction=direction, smooth=smooth)
-
-
 def object_stats(
     labels: np.ndarray,
     object_id: int = 1,
@@ -236,13 +231,8 @@ def object_stats(
             sub = np.pad(sub, pad)
             start = start - np.array([p[0] for p in pad])
         sub_origin = index_to_mm(start.astype(np.float64), spacing=sp, origin=origin, direction=direction)
-        try:
-            surf = _surface(sub, spacing=sp, origin=sub_origin, direction=direction, smooth=smooth)
-        except ImportError:
-            out["warnings"].append("mesh volume unavailable: ctui.engine.mesh.surface.mask_surface is missing")
-            surf = None
-        else:
-            surf.object_id = int(object_id)
+        surf = mask_surface(sub, spacing=tuple(sp), origin=tuple(sub_origin), direction=direction, smooth=smooth)
+        surf.object_id = int(object_id)
     if surf is not None:
         st = mesh_stats(surf)
         out.update(
@@ -268,220 +258,4 @@ def label_stats(labels: np.ndarray, *, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0
 
 def stats_json(stats: dict[str, Any]) -> dict[str, Any]:
     """A JSON-ready copy of :func:`object_stats`'s result (arrays to lists, no mesh)."""
-    def clean(v):
-        if isinstance(v, Mesh):
-            return None
-        if isinstance(v, np.ndarray):
-            return clean(v.tolist())
-        if isinstance(v, (list, tuple)):
-            return [clean(x) for x in v]
-        if isinstance(v, (float, np.floating)):
-            return None if not math.isfinite(float(v)) else round(float(v), 6)
-        if isinstance(v, np.integer):
-            return int(v)
-        if isinstance(v, (bool, np.bool_)):
-            return bool(v)
-        return v
-
-    return {k: clean(v) for k, v in stats.items() if k != "mesh"}
-
-
-def partial_volume_fraction(image: np.ndarray, mask: np.ndarray, *, inside_erode_vox: int = 1,
-                            shell_vox: tuple[int, int] = (2, 4), reach_vox: int = 1,
-                            min_contrast: float = 20.0) -> dict[str, Any]:
-    """Sub-voxel occupancy of an object from the image's grey levels (partial volume).
-
-    A border voxel's value is a mix of the object's and its surroundings' values, so
-    ``(I - bg) / (fg - bg)`` clipped to [0, 1] is the fraction of the voxel inside the
-    object. Voxels of the mask eroded by ``inside_erode_vox`` voxels count as fully
-    inside (fraction 1). ``fg`` is the median of the image over those voxels, ``bg``
-    the median of the shell between ``shell_vox`` dilations of the mask (the local
-    surroundings: soft tissue around a vessel or a rod). Only voxels within ``reach_vox`` of the mask count (neighbouring structures
-    of similar value further away are not added). Measuring sections and volumes on
-    this fraction removes most of the binary mask's pixel-count error on small
-    objects (the bundled phantom's 3-pixel-radius rod: sections -8 % from the
-    thresholded mask, -0.2 % from the fraction; its kidneys' volumes within 0.1 %).
-
-    Parameters
-    ----------
-    image : ndarray (z, y, x)
-        The series (HU for CT).
-    mask : ndarray bool (z, y, x)
-        The segmented object.
-
-    Returns
-    -------
-    dict with ``fraction`` float32 (z', y', x') on the crop ``offset_zyx`` .. (the
-    mask's bounding box plus ``shell_vox[1]`` + 1 voxels), ``offset_zyx``, ``fg``,
-    ``bg`` (image units), ``volume_voxels`` (sum of the fraction, in voxels).
-
-    Raises
-    ------
-    CtuiError
-        When the object and its surroundings differ by less than ``min_contrast``
-        (image units): the grey levels say nothing about the border then.
-    """
-    from scipy import ndimage as ndi
-
-    img = np.asarray(image)
-    m = np.asarray(mask).astype(bool, copy=False)
-    if img.shape != m.shape:
-        raise CtuiError(f"image {img.shape} and mask {m.shape} differ in shape")
-    zs = np.flatnonzero(m.any(axis=(1, 2)))
-    if not len(zs):
-        raise CtuiError("the object is empty")
-    ys = np.flatnonzero(m.any(axis=(0, 2)))
-    xs = np.flatnonzero(m.any(axis=(0, 1)))
-    pad = int(max(shell_vox[1], reach_vox)) + 1
-    lo = np.maximum([zs[0] - pad, ys[0] - pad, xs[0] - pad], 0)
-    hi = np.minimum([zs[-1] + pad + 1, ys[-1] + pad + 1, xs[-1] + pad + 1], m.shape)
-    sl = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi))
-    sub = m[sl]
-    val = img[sl].astype(np.float32)
-    st = ndi.generate_binary_structure(3, 1)
-    inner = ndi.binary_erosion(sub, st, iterations=inside_erode_vox) if inside_erode_vox > 0 else sub
-    if not inner.any():
-        inner = sub
-    d1 = ndi.binary_dilation(sub, st, iterations=int(shell_vox[0]))
-    d2 = ndi.binary_dilation(d1, st, iterations=int(shell_vox[1] - shell_vox[0]))
-    shell = d2 & ~d1
-    if not shell.any():
-        raise CtuiError("no surroundings around the object to estimate the background value")
-    fg = float(np.median(val[inner]))
-    bg = float(np.median(val[shell]))
-    if abs(fg - bg) < min_contrast:
-        raise CtuiError(f"the object ({fg:.0f}) and its surroundings ({bg:.0f}) differ by less than "
-                        f"{min_contrast:g}: no partial-volume estimate")
-    reach = ndi.binary_dilation(sub, st, iterations=int(reach_vox))
-    frac = np.clip((val - bg) / (fg - bg), 0.0, 1.0)
-    frac[~reach] = 0.0
-    # voxels deep inside are inside, whatever their noise: clipping noisy values at 1
-    # there would bias the volume low by about noise / contrast / 2.5 per voxel
-    frac[inner] = 1.0
-    return {"fraction": frac.astype(np.float32), "offset_zyx": tuple(int(v) for v in lo), "fg": fg, "bg": bg,
-            "volume_voxels": float(frac.sum(dtype=np.float64))}
-
-
-def partial_volume_field(pv: dict[str, Any], *, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0),
-                         direction=None):
-    """The section tools' smooth field (:func:`ctui.engine.measure.sections.object_field`) of a
-    :func:`partial_volume_fraction` result, placed where its crop lies in the volume."""
-    from ctui.engine.measure.sections import object_field
-
-    crop_origin = index_to_mm(np.array([pv["offset_zyx"]], np.float64), spacing=spacing, origin=origin,
-                              direction=direction)[0]
-    return object_field(pv["fraction"], spacing=spacing, origin=crop_origin, direction=direction)
-
-
-def measure_object(
-    labels: np.ndarray,
-    object_id: int,
-    *,
-    spacing=(1.0, 1.0, 1.0),
-    origin=(0.0, 0.0, 0.0),
-    direction=None,
-    path: str | np.ndarray | None = None,
-    path_voxels: bool = False,
-    step_mm: float = 0.5,
-    between: tuple[float, float] | None = None,
-    mesh: bool = True,
-    area: str = "pv",
-    average_mm: float = 0.0,
-    image: np.ndarray | None = None,
-) -> dict[str, Any]:
-    """Everything ``ctui measure`` reports for one object, for the TUI and scripts.
-
-    Parameters
-    ----------
-    labels, object_id, spacing, origin, direction
-        As :func:`object_stats`.
-    path : "auto", "x,y,z;x,y,z;...", (n, 3) array, or None
-        "auto": automatic centreline (:func:`ctui.engine.measure.centreline.centreline`);
-        a string of points: a spline through them (patient mm, or voxel (z, y, x)
-        when ``path_voxels``); an array: a dense path in mm used as given (or control
-        points in voxels with ``path_voxels``; for a few mm control points call
-        :func:`ctui.engine.measure.centreline.path_from_points` first); None: no sections.
-    step_mm : float
-        Distance between sections along the path.
-    between : (s1, s2) or None
-        Arc lengths (mm) of two planes for :func:`ctui.engine.measure.sections.volume_between`.
-    mesh : bool
-        Compute the mesh (Gauss) volume and area with MESH's ``mask_surface``.
-    area : "pv" or "contour"
-        Section area estimate (see :mod:`ctui.engine.measure.sections`).
-    average_mm : float
-        Thin-slab averaging of each section along the path (0 = single planes).
-    image : ndarray (z, y, x), optional
-        The series the object was segmented from. Given, sections and the volume
-        between planes are measured on the object's partial-volume fraction from the
-        grey levels (:func:`partial_volume_fraction`) instead of its binary mask, and
-        ``volume_ml`` gains ``partial_volume``. The centreline still comes from the mask.
-
-    Returns
-    -------
-    dict with the JSON keys of ``ctui measure``: ``object``, ``volume_ml``
-    ({``voxels``, ``mesh``}), ``volume_difference_percent``, ``area_mm2``,
-    ``path_length_mm``, ``sections`` (list of {s_mm, area_mm2, eq_diameter_mm,
-    min_diameter_mm, max_diameter_mm}), ``between`` ({volume_ml, area1_mm2,
-    area2_mm2} or None), ``centroid_mm``, ``principal_axes_mm``, ``warnings``; plus,
-    not for JSON: ``stats`` (:func:`object_stats`), ``path_mm`` (n, 3) and ``rows``
-    (full section dicts with ``contour_mm`` (k, 3) and ``point_mm``, for drawing;
-    pass them to :func:`ctui.engine.measure.sections.plot_sections` for the area plot).
-    """
-    st = object_stats(labels, object_id, spacing=spacing, origin=origin, direction=direction, mesh=mesh)
-    out: dict[str, Any] = {
-        "object": int(object_id),
-        "volume_ml": {"voxels": st["volume_voxels_ml"], "mesh": st["volume_mesh_ml"]},
-        "volume_difference_percent": st["volume_difference_percent"],
-        "area_mm2": st["area_mm2"],
-        "path_length_mm": None,
-        "sections": [],
-        "between": None,
-        "centroid_mm": [float(v) for v in st["centroid_mm"]],
-        "principal_axes_mm": [float(v) for v in st["principal_axes_mm"]],
-        "warnings": list(st["warnings"]),
-        "stats": st,
-        "path_mm": None,
-        "rows": [],
-    }
-    lab = np.asarray(labels)
-    mask = lab.astype(bool) if lab.dtype == bool else lab == object_id
-    if image is not None:
-        pv = partial_volume_fraction(image, mask)
-        out["partial_volume"] = pv
-        out["volume_ml"]["partial_volume"] = pv["volume_voxels"] * float(np.prod(spacing)) / 1000.0
-    if path is None:
-        if between is not None:
-            raise CtuiError("a volume between planes needs a path")
-        return out
-    from ctui.engine.measure.centreline import centreline, path_from_points, path_length
-    from ctui.engine.measure.sections import object_field, sections_along_path, sections_table, volume_between
-
-    fine = min(step_mm, 0.5)
-    if isinstance(path, str) and path.strip().lower() == "auto":
-        path = centreline(mask, spacing=spacing, origin=origin, direction=direction, step_mm=fine)
-    elif isinstance(path, str) or path_voxels:
-        from ctui.engine.measure.centreline import parse_points
-
-        pts = parse_points(path) if isinstance(path, str) else np.asarray(path, dtype=np.float64)
-        path = path_from_points(pts, step_mm=fine, voxel=path_voxels, spacing=spacing, origin=origin, direction=direction)
-    else:
-        path = np.asarray(path, dtype=np.float64)
-    if image is not None:
-        field = partial_volume_field(out["partial_volume"], spacing=spacing, origin=origin, direction=direction)
-    else:
-        field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
-    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)
-    out["path_mm"] = path
-    out["path_length_mm"] = path_length(path)
-    out["rows"] = rows
-    out["sections"] = sections_table(rows)
-    outside = sum(1 for r in rows if not math.isfinite(r["area_mm2"]))
-    if outside:
-        out["warnings"].append(f"{outside} of {len(rows)} path points lie outside object {object_id}")
-    if between is not None:
-        s1, s2 = between
-        vb = volume_between(None, path, s1, s2, field=field)
-        out["between"] = {"volume_ml": vb["volume_ml"], "area1_mm2": vb["area1_mm2"], "area2_mm2": vb["area2_mm2"]}
-        out["warnings"] += vb["warnings"]
-    return out
+    return to_jsonable({k: v for k, v in stats.items() if k != "mesh"})
