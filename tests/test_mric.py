@@ -202,3 +202,92 @@ def test_overwrite_is_atomic_and_leaves_no_temp(tmp_path):
     write_mric(p, [[], []], width=3, height=3)
     assert read_mric(p).n_slices == 2
     assert os.listdir(tmp_path) == ["a.mric"]
+
+
+# --------------------------------------------------------------------------- true size
+def _kidney_like(shape=(24, 70, 60)):
+    """An ellipsoid label map (z, y, x) and its voxel count."""
+    z, y, x = np.mgrid[: shape[0], : shape[1], : shape[2]]
+    m = ((x - 30) / 22.0) ** 2 + ((y - 35) / 28.0) ** 2 + ((z - 12) / 9.5) ** 2 <= 1
+    return m.astype(np.uint8)
+
+
+def test_true_size_round_trip(tmp_path):
+    """Written with the labels' spacing, an MRIC meshes at its true size when read back
+    alone (it used to mesh at 1 mm: 38 mL for a 130 mL kidney)."""
+    from ctui.engine.actions.mesh import mesh_objects
+    from ctui.engine.core.borders import borders_for_mric
+    from ctui.engine.io.mric import sidecar_path
+
+    lab = _kidney_like()
+    spacing, origin = (2.5, 0.7, 0.7), (-40.0, 12.5, 300.0)
+    f = tmp_path / "kidney.mric"
+    write_mric(f, borders_for_mric(lab), width=60, height=70, spacing=spacing, origin=origin)
+    assert f.read_bytes().startswith(SIGNATURE) and sidecar_path(f).name == "kidney.mric.json"
+    back = read_mric(f)
+    assert back.spacing == spacing and back.origin == origin
+    mesh = mesh_objects(f).mesh
+    truth_ml = lab.sum() * np.prod(spacing) / 1000
+    v = mesh.vertices
+    vol_ml = float(np.einsum("ij,ij->i", v[mesh.faces[:, 0]], np.cross(v[mesh.faces[:, 1]], v[mesh.faces[:, 2]])).sum()) / 6e3
+    assert abs(vol_ml) == pytest.approx(truth_ml, rel=0.02)
+    # placed at the labels' origin: x extent starts near origin + 8 px * 0.7 mm
+    assert v[:, 0].min() == pytest.approx(origin[0] + 8 * 0.7, abs=1.0)
+    # the user's --spacing wins over the sidecar
+    half = mesh_objects(f, spacing=(1.25, 0.7, 0.7)).mesh
+    vh = half.vertices
+    vol_h = float(np.einsum("ij,ij->i", vh[half.faces[:, 0]], np.cross(vh[half.faces[:, 1]], vh[half.faces[:, 2]])).sum()) / 6e3
+    assert abs(vol_h) == pytest.approx(truth_ml / 2, rel=0.03)
+
+
+def test_without_spacing_refused_unless_given(tmp_path):
+    from ctui.engine.actions.mesh import mesh_objects
+    from ctui.engine.core.borders import borders_for_mric
+    from ctui.engine.core.errors import CtuiError
+    from ctui.engine.io.mric import sidecar_path
+
+    lab = _kidney_like()
+    f = tmp_path / "k.mric"
+    write_mric(f, borders_for_mric(lab), width=60, height=70, spacing=(2.0, 1.0, 1.0))
+    write_mric(f, borders_for_mric(lab), width=60, height=70)  # replaced without geometry: stale sidecar gone
+    assert not sidecar_path(f).exists() and read_mric(f).spacing is None
+    with pytest.raises(CtuiError) as exc:
+        mesh_objects(f)
+    assert "--spacing" in str(exc.value) and str(f) in str(exc.value)
+    assert mesh_objects(f, spacing=(2.0, 1.0, 1.0)).mesh.n_faces > 0
+
+
+@pytest.mark.parametrize("text", ['{"spacing_zyx_mm": [1, "nan", 1]}', '{"spacing_zyx_mm": [0, 1, 1]}', "not json",
+                                  '{"spacing_zyx_mm": [1, 1, 1], "shape_zyx": [3, 9, 9]}'])
+def test_bad_sidecar_one_line(tmp_path, text):
+    from ctui.engine.io.mric import sidecar_path
+
+    f = tmp_path / "b.mric"
+    write_mric(f, [[]], width=60, height=70)
+    sidecar_path(f).write_text(text)
+    with pytest.raises(FormatError) as exc:
+        read_mric(f)
+    assert "\n" not in str(exc.value) and "b.mric.json" in str(exc.value)
+
+
+def test_segment_cli_mric_meshes_at_true_size(tmp_path, capsys):
+    """`ctui segment --mric` then `ctui mesh FILE.mric` with no --spacing: the series' size."""
+    import json
+
+    from ctui.cli import main
+    from ctui.engine.core.volume import Volume
+    from ctui.engine.io.phantom import write_series
+
+    lab = _kidney_like((16, 48, 40))
+    data = np.where(lab > 0, 200, -100).astype(np.int16)
+    write_series(tmp_path / "s", Volume(data=data, spacing=(3.0, 0.8, 0.8), modality="CT", window=(40, 400)))
+    mric = tmp_path / "k.mric"
+    rc = main(["segment", str(tmp_path / "s"), "--seed", "20,24,8", "--range", "100:300", "--mric", str(mric),
+               "--json"])
+    assert rc == 0, capsys.readouterr().err
+    capsys.readouterr()
+    rc = main(["mesh", str(mric), "--out", str(tmp_path / "k.stl"), "--json"])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    truth_ml = lab.sum() * 3.0 * 0.8 * 0.8 / 1000
+    assert json.loads(out)["volume_ml"] == pytest.approx(truth_ml, rel=0.05)

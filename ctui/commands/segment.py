@@ -236,7 +236,8 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
         nz, ny, nx = seg.labels.shape
         mid = nz // 2
         image = pipeline.run_slice(volume, mid).display("original")
-        write_mric(args.mric, borders_for_mric(seg.labels), width=nx, height=ny, image=image)
+        write_mric(args.mric, borders_for_mric(seg.labels), width=nx, height=ny, image=image,
+                   spacing=volume.spacing, origin=volume.origin, direction=volume.direction)
         written.append(args.mric)
     return written
 

@@ -196,7 +196,9 @@ def _write_mric(path: Path, src: ExportSource, ids: list[int]) -> None:
         from ctui.engine.core.windows import apply_window
 
         image = apply_window(src.volume.data[nz // 2], tuple(src.volume.window))
-    write_mric(path, borders_for_mric(src.labels, ids), width=nx, height=ny, image=image)
+    g = src.geometry  # the sidecar <name>.mric.json keeps the true voxel size
+    write_mric(path, borders_for_mric(src.labels, ids), width=nx, height=ny, image=image,
+               spacing=g.spacing, origin=g.origin, direction=g.direction)
 
 
 def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.PathLike,

@@ -16,7 +16,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.mric import read_mric
+from ctui.engine.io.mric import read_mric, require_spacing
 from ctui.engine.mesh import meshtools
 from ctui.engine.mesh.contour_connect import connect_contours
 from ctui.engine.mesh.surface import isosurface, label_surfaces
@@ -78,7 +78,7 @@ def label_meshes(labels: np.ndarray, geometry: Geometry, ids: Sequence[int], *, 
 
 
 def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
-                 spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
+                 spacing: Sequence[float] | None = None, origin: Sequence[float] | None = None,
                  direction: np.ndarray | None = None, method: str = defaults.CONTOUR_TILING) -> Mesh:
     """Surface from an MRIC contour file (:func:`ctui.engine.io.mric.read_mric`).
 
@@ -88,6 +88,10 @@ def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
     Holes are recognised by their clockwise orientation (negative shoelace area).
     """
     data = read_mric(path)
+    # the file's own geometry (sidecar <name>.mric.json), or the user's spacing; never a silent 1 mm
+    spacing = require_spacing(data, path, spacing)
+    origin = origin if origin is not None else data.origin
+    direction = direction if direction is not None else data.direction
     per_slice = []
     for objs in data.slices:
         if object_index is None:
@@ -152,7 +156,7 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
         if iso is not None:
             raise CtuiError("--iso applies to a series, not to an MRIC file", path=opened.path)
         obj = objects if isinstance(objects, (int, np.integer)) or objects is None else objects[0]
-        mesh = connect_mric(opened.path, object_index=obj, spacing=spacing or (1.0, 1.0, 1.0), method=tiling)
+        mesh = connect_mric(opened.path, object_index=obj, spacing=spacing, method=tiling)
         if mesh.n_faces == 0:
             raise CtuiError("no contour found" + (f" for object {obj}" if obj else ""), path=opened.path)
         res.meshes = {0: mesh}

@@ -21,6 +21,13 @@ Points are integer pixel coordinates (x = column, y = row) on the slice grid, so
 ``0 <= x <= width`` and ``0 <= y <= height`` (the upper bound is inclusive because a
 border traced along pixel edges may touch the far edge).
 
+Geometry: the format stores no voxel size, so an MRIC read back alone meshed at 1 mm
+(a 130 mL kidney came back as 38 mL). :func:`write_mric` given ``spacing`` (and
+``origin``, ``direction``) writes it to a sidecar ``<name>.mric.json`` next to the file
+(the MRIC bytes stay those the prototype reads); :func:`read_mric` reads it back into
+``MricData.spacing/origin/direction`` (None without a sidecar: callers then need the
+user's ``--spacing`` and refuse otherwise, see :func:`require_spacing`).
+
 The reader trusts nothing: every count is checked against the bytes left in the file
 before anything is allocated, so a corrupted or hostile file can never make it
 allocate more than the file's own size; any fault raises a one-line
@@ -29,6 +36,8 @@ allocate more than the file's own size; any fault raises a one-line
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import struct
 from dataclasses import dataclass, field
@@ -38,7 +47,7 @@ from typing import Sequence
 import numpy as np
 
 from ctui.engine.core.atomic import atomic_write
-from ctui.engine.core.errors import FormatError
+from ctui.engine.core.errors import CtuiError, FormatError
 
 SIGNATURE = b"VAJIRA-MRICUBE-V8"
 HEADER = struct.Struct("<5i")
@@ -64,6 +73,9 @@ class MricData:
         Cross-section image.
     slices : list (per slice) of list (per object) of list (per border) of ndarray (n, 2) int32
         Border points as (x, y) pixel coordinates.
+    spacing : (dz, dy, dx) mm, or None when unknown (no sidecar)
+    origin : (x, y, z) mm of pixel (0, 0) of slice 0; direction : (3, 3) or None (identity)
+        From the sidecar ``<file>.json`` (see the module docstring).
     """
 
     width: int
@@ -71,6 +83,9 @@ class MricData:
     axis: tuple[int, int] = (0, 0)
     image: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     slices: list[list[list[np.ndarray]]] = field(default_factory=list)
+    spacing: tuple[float, float, float] | None = None
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    direction: np.ndarray | None = None
 
     @property
     def n_slices(self) -> int:
@@ -147,6 +162,9 @@ def write_mric(
     height: int,
     axis: tuple[int, int] = (0, 0),
     image: np.ndarray | None = None,
+    spacing=None,
+    origin=None,
+    direction=None,
 ) -> Path:
     """Write an MRIC contour file atomically.
 
@@ -163,15 +181,93 @@ def write_mric(
         The prototype's axis point, stored as is.
     image : ndarray (height, width) uint8, optional
         Cross-section image; zeros when omitted.
+    spacing, origin, direction : optional
+        The labels' geometry ((dz, dy, dx) mm, (x, y, z) mm, 3x3): written to the
+        sidecar ``<path>.json`` so the file meshes at its true size when read back.
+        Without ``spacing`` an existing sidecar (of the file replaced) is removed.
 
     Returns
     -------
     Path of the written file.
     """
     data = encode_mric(slices, width=width, height=height, axis=axis, image=image, path=path)
+    side = None
+    if spacing is not None:
+        side = _sidecar_json(path, len(slices), height, width, spacing, origin, direction)
     with atomic_write(path, "wb") as fh:
         fh.write(data)
+    sc = sidecar_path(path)
+    if side is not None:
+        with atomic_write(sc, "w") as fh:
+            fh.write(side)
+    elif sc.is_file():
+        sc.unlink()  # it described the file just replaced
     return Path(path)
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """``kidney.mric`` -> ``kidney.mric.json``: where an MRIC file's geometry is kept."""
+    p = Path(path)
+    return p.with_name(p.name + ".json")
+
+
+def _finite3(v, what: str, path, *, positive: bool = False) -> tuple[float, float, float]:
+    try:
+        out = tuple(float(x) for x in v)
+    except (TypeError, ValueError):
+        raise FormatError(f"{path}: {what} must be three numbers, got {v!r}") from None
+    if len(out) != 3 or not all(math.isfinite(x) for x in out) or (positive and min(out) <= 0):
+        raise FormatError(f"{path}: {what} must be three {'positive ' if positive else ''}finite numbers, got {v!r}")
+    return out  # type: ignore[return-value]
+
+
+def _sidecar_json(path, nz: int, ny: int, nx: int, spacing, origin, direction) -> str:
+    sp = _finite3(spacing, "spacing (dz, dy, dx)", path, positive=True)
+    org = _finite3(origin if origin is not None else (0.0, 0.0, 0.0), "origin (x, y, z)", path)
+    d = np.eye(3) if direction is None else np.asarray(direction, float).reshape(3, 3)
+    if not np.all(np.isfinite(d)):
+        raise FormatError(f"{path}: direction must be finite")
+    return json.dumps({"format": "ctui MRIC geometry", "version": 1, "shape_zyx": [nz, ny, nx],
+                       "spacing_zyx_mm": list(sp), "origin_xyz_mm": list(org),
+                       "direction": [[float(x) for x in r] for r in d]}, indent=1) + "\n"
+
+
+def read_sidecar(path: str | os.PathLike, data: MricData) -> None:
+    """Fill ``data.spacing/origin/direction`` from ``<path>.json`` when it exists."""
+    sc = sidecar_path(path)
+    if not sc.is_file():
+        return
+    buf = read_regular_file(sc, 1 << 20, what="an MRIC geometry sidecar")
+    try:
+        d = json.loads(buf.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise FormatError(f"{sc}: not a valid MRIC geometry sidecar ({type(exc).__name__})") from None
+    if not isinstance(d, dict) or "spacing_zyx_mm" not in d:
+        raise FormatError(f"{sc}: not a valid MRIC geometry sidecar (no spacing_zyx_mm)")
+    shape = d.get("shape_zyx")
+    if shape is not None and list(shape)[1:] != [data.height, data.width]:
+        raise FormatError(f"{sc}: describes {shape[1]}x{shape[2]} slices, the MRIC file has "
+                          f"{data.height}x{data.width}")
+    data.spacing = _finite3(d["spacing_zyx_mm"], "spacing_zyx_mm", sc, positive=True)
+    data.origin = _finite3(d.get("origin_xyz_mm", (0, 0, 0)), "origin_xyz_mm", sc)
+    try:
+        m = np.asarray(d.get("direction", np.eye(3).tolist()), float).reshape(3, 3)
+    except (TypeError, ValueError):
+        raise FormatError(f"{sc}: direction must be a 3x3 matrix") from None
+    if not np.all(np.isfinite(m)) or abs(np.linalg.det(m)) < 1e-6:
+        raise FormatError(f"{sc}: direction must be a finite, non-degenerate 3x3 matrix")
+    data.direction = m
+
+
+def require_spacing(data: MricData, path: str | os.PathLike, spacing=None) -> tuple[float, float, float]:
+    """The voxel size to mesh ``data`` at: the user's ``spacing`` (dz, dy, dx) mm, else the
+    sidecar's; raises CtuiError when neither is known (never a silent 1 mm)."""
+    if spacing is not None:
+        return _finite3(spacing, "spacing (dz, dy, dx)", path, positive=True)
+    if data.spacing is None:
+        raise CtuiError(f"the MRIC file stores no voxel size and {sidecar_path(path).name} is missing; "
+                        f"give --spacing dz,dy,dx (mm)", path=path)
+    return data.spacing
 
 
 # --------------------------------------------------------------------------- reading
@@ -252,7 +348,8 @@ def read_mric(path: str | os.PathLike) -> MricData:
 
     Returns
     -------
-    MricData with ``.width .height .axis .image (h, w) uint8 .slices``.
+    MricData with ``.width .height .axis .image (h, w) uint8 .slices`` and, from the
+    sidecar ``<path>.json`` when present, ``.spacing .origin .direction``.
 
     Raises
     ------
@@ -263,7 +360,9 @@ def read_mric(path: str | os.PathLike) -> MricData:
     """
     p = Path(path)
     buf = read_regular_file(p, MAX_FILE_BYTES, what="an MRIC file")
-    return decode_mric(buf, p)
+    data = decode_mric(buf, p)
+    read_sidecar(p, data)
+    return data
 
 
 def read_regular_file(path: Path, limit: int, *, what: str) -> bytes:
