@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ctui.engine.actions.mesh import connect_mric
 from ctui.engine.mesh.contour_connect import (
     connect_contours,
-    connect_mric,
     offset_pixel_boundary,
     tile_dp,
     tile_greedy,

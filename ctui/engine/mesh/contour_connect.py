@@ -49,13 +49,12 @@ spacing, origin and direction.
 Input: per slice, a list of :class:`ctui.engine.core.borders.Border` (``points`` (n, 2)
 float x, y pixels, ``hole`` bool), or ``(points, hole)`` pairs, or plain (n, 2)
 arrays (a negative shoelace area means a hole); or an MRIC file
-(:func:`connect_mric`).
+(:func:`ctui.engine.actions.mesh.connect_mric`).
 """
 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -659,29 +658,6 @@ def connect_contours(
     mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces, normals=vertex_normals(v_mm, faces),
                 meta={"method": f"contours-{method}"})
     return mesh
-
-
-def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
-                 spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
-                 direction: np.ndarray | None = None, method: str = "dp") -> Mesh:
-    """Surface from an MRIC contour file (:func:`ctui.engine.io.mric.read_mric`).
-
-    MRIC stores no object ids and no geometry: by default every border of every slice
-    is used (objects are disjoint, so they become separate closed components);
-    ``object_index`` (1-based) takes the N-th object list of each slice, as stored.
-    Holes are recognised by their clockwise orientation (negative shoelace area).
-    """
-    from ctui.engine.io.mric import read_mric
-
-    data = read_mric(path)
-    per_slice = []
-    for objs in data.slices:
-        if object_index is None:
-            per_slice.append([b for o in objs for b in o])
-        else:
-            k = int(object_index) - 1
-            per_slice.append(list(objs[k]) if 0 <= k < len(objs) else [])
-    return connect_contours(per_slice, spacing=spacing, origin=origin, direction=direction, method=method)
 
 
 def mask_contours(mask: np.ndarray) -> list[list[Any]]:

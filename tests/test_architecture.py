@@ -1,0 +1,119 @@
+"""The architecture holds: import-linter contracts (pyproject.toml), no import cycles in the
+engine, no module over 600 lines, no function over 100 lines (compiled kernels aside), no
+string-named imports in the UI (see ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import ast
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PKG = ROOT / "ctui"
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_LINES = 100
+
+
+def _py_files(base: Path = PKG) -> list[Path]:
+    return sorted(p for p in base.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def test_import_contracts_kept():
+    exe = shutil.which("lint-imports")
+    if exe is None:
+        pytest.skip("lint-imports (import-linter) is not installed: pip install -e '.[test]'")
+    r = subprocess.run([exe, "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    out = r.stdout + r.stderr
+    kept = re.search(r"Contracts: (\d+) kept, (\d+) broken", out)
+    assert kept is not None, out[-3000:]
+    assert int(kept.group(1)) >= 3, out[-3000:]
+    assert r.returncode == 0 and kept.group(2) == "0", out[-3000:]
+
+
+def test_contracts_cover_every_private_engine_module():
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    forbidden = {m for c in cfg if "private" in c["name"] for m in c["forbidden_modules"]}
+    private = {".".join(p.relative_to(ROOT).with_suffix("").parts) for p in _py_files(PKG / "engine")
+               if p.name.startswith("_") and p.name != "__init__.py"}
+    assert private <= forbidden, f"add to the private-modules contract: {sorted(private - forbidden)}"
+
+
+def test_no_import_cycles_in_the_engine():
+    grimp = pytest.importorskip("grimp", reason="grimp comes with import-linter")
+    g = grimp.build_graph("ctui", cache_dir=None)
+    mods = sorted(m for m in g.modules if m.startswith("ctui.engine."))
+    adj = {m: [n for n in g.find_modules_directly_imported_by(m) if n.startswith("ctui.engine.")] for m in mods}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    cycles: list[list[str]] = []
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(mods) + 100))
+
+    def visit(v: str) -> None:  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in adj.get(v, []):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for m in mods:
+        if m not in index:
+            visit(m)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_no_module_over_600_lines():
+    big = {str(p.relative_to(ROOT)): n for p in _py_files() if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert not big, f"modules over {MAX_MODULE_LINES} lines: {big}"
+
+
+def _compiled(fn: ast.AST) -> bool:
+    for d in getattr(fn, "decorator_list", []):
+        name = ast.unparse(d)
+        if "njit" in name or "numba" in name or name.startswith("jit"):
+            return True
+    return False
+
+
+def test_no_function_over_100_lines():
+    long = []
+    for p in _py_files():
+        tree = ast.parse(p.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not _compiled(node):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{p.relative_to(ROOT)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, "functions over 100 lines: " + "; ".join(long)
+
+
+def test_no_string_named_imports_in_the_ui():
+    files = _py_files(PKG / "screens") + sorted(PKG.glob("*.py"))
+    bad = []
+    for p in files:
+        for k, line in enumerate(p.read_text().splitlines(), 1):
+            code = line.split("#", 1)[0]
+            if "import_module" in code or "__import__(" in code or re.search(r"""\bengine\(\s*["']""", code):
+                bad.append(f"{p.relative_to(ROOT)}:{k}: {line.strip()}")
+    assert not bad, "string-named imports: " + "; ".join(bad)
