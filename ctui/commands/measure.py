@@ -46,6 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--partial-volume", action="store_true",
                    help="project input: measure sections, and a third volume, on the object's partial-volume "
                    "fraction from the series' grey levels (sub-voxel; for small vessels and rods)")
+    p.add_argument("--labels", metavar="FILE", default=None,
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     p.set_defaults(func=run)
 
@@ -72,12 +74,17 @@ def run(args: argparse.Namespace) -> int:
 
     if not os.path.exists(args.input):
         raise CtuiError(f"{args.input}: no such file")
-    check_outputs({"--csv": args.csv, "--plot": args.plot}, inputs=[args.input])
+    check_outputs({"--csv": args.csv, "--plot": args.plot}, inputs=[args.input, args.labels])
     between = _floats(args.between, 2, "--between") if args.between else None
     refs = _floats(args.reference, None, "--reference") if args.reference else None
     if (between or args.csv or args.plot) and not args.path:
         raise CtuiError("--between, --csv and --plot need --path (auto or points)")
-    res = measure_object(args.input, object=args.object, path=args.path or None, path_voxels=args.path_voxels,
+    source = args.input
+    if args.labels:  # a label file over its series
+        from ctui.engine.actions.opened import open_input
+
+        source = open_input(args.input, labels=args.labels)
+    res = measure_object(source, object=args.object, path=args.path or None, path_voxels=args.path_voxels,
                          step_mm=args.step, between=between, mesh=not args.no_mesh, area=args.area,
                          average_mm=args.average, partial_volume=args.partial_volume)
     written = save_sections(res, csv=args.csv, plot=args.plot, references=refs)

@@ -40,6 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="project / label file: plain marching cubes of the label map, every object in one pass "
                    "(voxel staircase kept) instead of smoothed signed-distance surfaces")
     p.add_argument("--ascii", action="store_true", help="ASCII STL/PLY instead of binary")
+    p.add_argument("--labels", metavar="FILE", default=None,
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     add_load_options(p)
     p.set_defaults(func=run)
@@ -68,9 +70,13 @@ def run(args: argparse.Namespace) -> int:
         raise CtuiError("no such file or folder", path=src)
     if out.parent and not out.parent.exists():
         raise CtuiError(f"folder {out.parent} does not exist", path=out)
-    check_output(out, inputs=[src], label="--out")
+    check_output(out, inputs=[src, args.labels], label="--out")
     spacing = parse_floats(args.spacing, "--spacing") if getattr(args, "spacing", None) else None
     load = {k: v for k, v in load_kwargs(args).items() if k != "spacing"}
+    if args.labels:  # a label file over its series
+        from ctui.engine.actions.opened import open_input
+
+        src, load = open_input(src, labels=args.labels, spacing=spacing, **load), {}
     with progress_bar(args, "meshing") as progress:
         res = mesh_objects(src, objects=args.object, method=args.method, iso=args.iso, terraced=args.terraced,
                            tiling=args.tiling, smooth=args.smooth, decimate=args.decimate, spacing=spacing,

@@ -49,6 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "the project object given with --object; --out a .gif/.apng or a folder for PNG frames")
     p.add_argument("--frames", type=int, default=48, help="fly-through frames (default 48)")
     p.add_argument("--fov", type=float, default=70.0, help="fly-through view angle in degrees (default 70)")
+    p.add_argument("--labels", metavar="FILE", default=None,
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -81,8 +83,12 @@ def run(args: argparse.Namespace) -> int:
         raise CtuiError("no such file or folder", path=src)
     if out.parent and not out.parent.exists():
         raise CtuiError("output folder does not exist", path=out)
-    check_output(out, inputs=[src], label="--out")
+    check_output(out, inputs=[src, args.labels], label="--out")
     w, h = (int(v) for v in _pair(args.size, "--size (want WxH)"))
+    if args.labels:  # a label file over its series
+        from ctui.engine.actions.opened import open_input
+
+        src = open_input(src, labels=args.labels, **load_kwargs(args))
     res = render_view(
         src, out=out, size=(w, h), turntable=args.turntable, fps=args.fps, flythrough=args.flythrough,
         frames=args.frames, fov=args.fov, load_options=load_kwargs(args),

@@ -236,5 +236,5 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     project = Project(source_path=os.path.abspath(s), source_options=dict(load_options), labels=imp.labels,
                       objects=imp.objects, window=tuple(volume.window) if volume.window else None)
     project.set_source(volume)
-    return Opened("labels", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
-                  notes=list(imp.warnings), masks=imp.masks)
+    return Opened("project", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
+                  notes=list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)

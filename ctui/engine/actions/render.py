@@ -13,7 +13,7 @@ import numpy as np
 
 from ctui.engine.actions import defaults
 from ctui.engine.actions.mesh import label_meshes
-from ctui.engine.actions.opened import Opened, open_input, open_project, series_available
+from ctui.engine.actions.opened import Opened, input_kind, open_input, open_project, series_available
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io.project import load_project
 from ctui.engine.measure.centreline import centreline
@@ -58,6 +58,8 @@ def _open(src: str, *, need_volume: bool, load_options: dict) -> Opened:
         if opened.labels is None or not np.any(opened.labels):
             raise CtuiError("project has no segmented objects to render", path=src)
         return opened
+    if os.path.isfile(src) and not src.lower().endswith(defaults.LABEL_SUFFIXES) and input_kind(src) == "labels":
+        return open_input(src, kind="labels")  # a DICOM-SEG (an RTSTRUCT needs --labels over its series)
     return open_input(src, kind="series", **load_options)
 
 
@@ -72,7 +74,7 @@ def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = N
     """The meshes a render of ``opened`` shows (objects of a project, a mesh, an isosurface)."""
     if opened.kind == "mesh":
         return [opened.mesh]
-    if opened.kind == "project":
+    if opened.kind in ("project", "labels"):
         assert opened.labels is not None and opened.geometry is not None
         ids = opened.pick_objects(list(objects) if objects else None)
         return [m for _, m in sorted(label_meshes(opened.labels, opened.geometry, ids).items())]
