@@ -23,7 +23,10 @@ import cv2
 import numpy as np
 
 from ctui.engine.core.colors import MAX_OBJECTS, object_color
+from ctui.engine.segment.edit import EditMixin
 from ctui.engine.segment.necks import cut_necks_2d
+
+SLAB = 16  # slices per chunk in whole-volume queries
 
 
 @dataclass
@@ -153,8 +156,11 @@ def _bbox2d(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
 
 
-class Segmentation:
+class Segmentation(EditMixin):
     """Up to ten objects in one uint8 label volume, with bounding-box undo/redo.
+
+    Editing (brush, eraser, add/replace/subtract, islands, fill between slices) comes
+    from :class:`ctui.engine.segment.edit.EditMixin`; every edit is one undo step.
 
     Parameters
     ----------
@@ -221,19 +227,26 @@ class Segmentation:
         return n
 
     # ------------------------------------------------------------- queries
+    # Queries go through slabs of SLAB slices: no full-volume temporaries (a bool copy of a
+    # 300 x 512 x 512 label volume is 79 MB; an int64 bincount copy 630 MB).
     def object_bbox(self, object_id: int) -> tuple[slice, slice, slice] | None:
         """(z, y, x) slices of the object's bounding box, or None if empty."""
-        m = self.labels == object_id
-        zs = np.flatnonzero(m.any(axis=(1, 2)))
+        nz, ny, nx = self.labels.shape
+        zany = np.zeros(nz, bool)
+        yany = np.zeros(ny, bool)
+        xany = np.zeros(nx, bool)
+        for z0 in range(0, nz, SLAB):
+            m = self.labels[z0:z0 + SLAB] == object_id
+            zany[z0:z0 + SLAB] = m.any(axis=(1, 2))
+            yany |= m.any(axis=(0, 2))
+            xany |= m.any(axis=(0, 1))
+        zs, ys, xs = np.flatnonzero(zany), np.flatnonzero(yany), np.flatnonzero(xany)
         if zs.size == 0:
             return None
-        sub = m[zs[0]:zs[-1] + 1]
-        ys = np.flatnonzero(sub.any(axis=(0, 2)))
-        xs = np.flatnonzero(sub.any(axis=(0, 1)))
         return (slice(int(zs[0]), int(zs[-1]) + 1), slice(int(ys[0]), int(ys[-1]) + 1), slice(int(xs[0]), int(xs[-1]) + 1))
 
     def voxels(self, object_id: int) -> int:
-        return int(np.count_nonzero(self.labels == object_id))
+        return int(label_counts(self.labels)[object_id]) if 0 <= object_id < 256 else 0
 
     def slice_range(self, object_id: int) -> tuple[int, int] | None:
         """(first, last) slice index holding the object, or None."""
@@ -242,7 +255,11 @@ class Segmentation:
 
     def areas(self, object_id: int) -> np.ndarray:
         """Pixels of the object on each slice, int64 (nz,)."""
-        return np.count_nonzero(self.labels == object_id, axis=(1, 2))
+        nz = self.labels.shape[0]
+        out = np.zeros(nz, np.int64)
+        for z0 in range(0, nz, SLAB):
+            out[z0:z0 + SLAB] = np.count_nonzero(self.labels[z0:z0 + SLAB] == object_id, axis=(1, 2))
+        return out
 
     # ------------------------------------------------------------- editing
     def apply_region(self, box: tuple[slice, slice, slice], new_values: np.ndarray, *, label: str = "edit") -> None:
@@ -398,7 +415,7 @@ class Segmentation:
     def summary(self, *, spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> list[dict[str, Any]]:
         """Per object: ``{id, name, voxels, volume_ml, slices: [first, last]}``."""
         vox_ml = float(np.prod(spacing)) / 1000.0
-        counts = np.bincount(self.labels.ravel(), minlength=256)
+        counts = label_counts(self.labels)
         out = []
         for i in sorted(set(self.objects) | {int(v) for v in np.flatnonzero(counts[1:]) + 1}):
             rng = self.slice_range(i)
@@ -406,6 +423,16 @@ class Segmentation:
                         "voxels": int(counts[i]), "volume_ml": round(int(counts[i]) * vox_ml, 6),
                         "slices": None if rng is None else [rng[0], rng[1]]})
         return out
+
+
+def label_counts(labels: np.ndarray) -> np.ndarray:
+    """Voxels per label value of a uint8 volume, int64 (256,), counted slab by slab
+    (``np.bincount`` of the whole volume makes an int64 copy: 8 bytes a voxel)."""
+    counts = np.zeros(256, np.int64)
+    flat = labels.reshape(labels.shape[0], -1) if labels.ndim > 1 else labels.reshape(1, -1)
+    for z0 in range(0, flat.shape[0], SLAB):
+        counts += np.bincount(flat[z0:z0 + SLAB].ravel(), minlength=256)[:256]
+    return counts
 
 
 def _bbox3d(mask: np.ndarray) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None:
