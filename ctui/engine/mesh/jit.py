@@ -1,0 +1,128 @@
+"""Where the compiled (numba) kernels are cached, and whether they are compiled yet.
+
+* On import, when ``NUMBA_CACHE_DIR`` is not set and the package's own ``__pycache__``
+  folders are not writable (a system-wide install), numba's cache goes to
+  ``$XDG_CACHE_HOME/ctui/numba`` (default ``~/.cache/ctui/numba``), so the kernels are
+  compiled once per user, not once per process. Import this module before defining a
+  ``cache=True`` kernel.
+* :func:`is_compiled` says whether a kernel is compiled in this process or loadable from
+  the disk cache, without compiling it: the meshing functions use a vectorised numpy
+  path meanwhile (same output), so a fresh install's first mesh takes about a second
+  instead of 10-60 s of compilation.
+* :func:`compile_in_background` compiles every kernel in a detached, low-priority
+  process (once per 10 minutes at most), so the next command finds them compiled.
+
+``CTUI_KERNELS=compiled`` (always compile and use the kernels), ``=numpy`` (always the
+vectorised path) or ``=auto`` (default) chooses; ``CTUI_NO_BACKGROUND_COMPILE=1`` turns
+the background compilation off.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numba
+
+
+def _writable(folder: Path) -> bool:
+    probe = folder if folder.exists() else folder.parent
+    return os.access(probe, os.W_OK)
+
+
+def user_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/ctui/numba`` (``~/.cache/ctui/numba``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "ctui" / "numba"
+
+
+def configure_cache() -> str | None:
+    """Point numba's cache at the user cache folder when the package folder is read-only;
+    returns the folder in use (None: numba's default, next to the sources)."""
+    if numba.config.CACHE_DIR:
+        return str(numba.config.CACHE_DIR)
+    if _writable(Path(__file__).resolve().parent / "__pycache__"):
+        return None
+    d = user_cache_dir()
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    numba.config.CACHE_DIR = str(d)
+    return str(d)
+
+
+configure_cache()
+
+
+def mode() -> str:
+    """'auto', 'compiled' or 'numpy' (``CTUI_KERNELS``)."""
+    m = os.environ.get("CTUI_KERNELS", "auto").strip().lower()
+    return m if m in ("auto", "compiled", "numpy") else "auto"
+
+
+def is_compiled(dispatcher: Any, dtype: Any = None) -> bool:
+    """Whether ``dispatcher`` (a numba kernel) has a version for data of ``dtype`` (its first
+    argument; any when None) compiled in this process or in the disk cache. Looks at
+    numba's cache index without compiling; when that cannot be read (another numba
+    version), answers True (the compiled path, compiling if need be)."""
+    try:
+        want = None if dtype is None else numba.from_dtype(dtype)
+
+        def matches(sig) -> bool:
+            if want is None:
+                return True
+            first = sig[0] if len(sig) else None
+            return getattr(first, "dtype", None) == want
+
+        if any(matches(s) for s in dispatcher.signatures):
+            return True
+        cache = getattr(dispatcher, "_cache", None)
+        if cache is None:
+            return False
+        index = cache._cache_file._load_index()
+        return any(matches(key[0]) for key in index)
+    except Exception:  # pragma: no cover - numba internals changed
+        return True
+
+
+def use_compiled(dispatchers: Any, dtype: Any = None) -> bool:
+    """Whether to run the compiled kernels (all of ``dispatchers`` ready, or forced)."""
+    m = mode()
+    if m != "auto":
+        return m == "compiled"
+    return all(is_compiled(d, dtype) for d in dispatchers)
+
+
+_LOCK = Path(tempfile.gettempdir()) / f"ctui-numba-warm-{os.getuid() if hasattr(os, 'getuid') else 0}.lock"
+_spawned = False
+
+
+def compile_in_background() -> bool:
+    """Start ``python -m ctui.engine.mesh.warm`` detached at low priority (at most once per
+    process and once per 10 minutes per user); True when started."""
+    global _spawned
+    if _spawned or os.environ.get("CTUI_NO_BACKGROUND_COMPILE") or mode() == "numpy":
+        return False
+    _spawned = True
+    try:
+        if _LOCK.exists() and time.time() - _LOCK.stat().st_mtime < 600:
+            return False
+        _LOCK.write_text(str(os.getpid()))
+        kw: dict[str, Any] = {"stdin": subprocess.DEVNULL, "stdout": subprocess.DEVNULL,
+                              "stderr": subprocess.DEVNULL, "close_fds": True}
+        if os.name == "posix":
+            kw["start_new_session"] = True
+            kw["preexec_fn"] = lambda: os.nice(19)
+        env = dict(os.environ, CTUI_NO_BACKGROUND_COMPILE="1")
+        if numba.config.CACHE_DIR:
+            env["NUMBA_CACHE_DIR"] = str(numba.config.CACHE_DIR)
+        subprocess.Popen([sys.executable, "-m", "ctui.engine.mesh.warm"], env=env, **kw)
+        return True
+    except OSError:
+        return False
