@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
 
 MODES = ("surface", "wire", "transparent", "mip", "minip", "dvr")
@@ -327,7 +328,7 @@ class Scene:
                 "origin_xyz_mm": list(self.volume.origin), "modality": self.volume.modality,
             },
         }
-        return _jsonable(d)
+        return to_jsonable(d, ndigits=None)  # exact: from_dict must rebuild the same scene
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], *, meshes: Any = (), volume: Any = None) -> "Scene":
@@ -393,15 +394,3 @@ def _make(cls: Any, d: dict[str, Any]) -> Any:
 
 def _tuples(d: dict[str, Any]) -> dict[str, Any]:
     return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
