@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ctui.engine.actions.mesh import mesh_objects
 from ctui.engine.core import borders
 from ctui.engine.io import labels as labelio
 from ctui.engine.io import meshes as meshio
 from ctui.engine.io import mric
-from ctui.engine.mesh import meshtools, surface
+from ctui.screens.projects import opened_of
 from ctui.screens.session import safe_cwd
 from ctui.screens.ws_jobs import run_job
 
@@ -46,8 +47,7 @@ def export_mesh(session, path: str, object_id: int):
     labels = session.labels()
     if labels is None or not (labels == object_id).any():
         raise ValueError(f"object {object_id} is empty: nothing to export")
-    v = session.volume
-    mesh = surface.mask_surface(labels == object_id, spacing=v.spacing, origin=v.origin, direction=v.direction)
+    mesh = mesh_objects(opened_of(session), objects=int(object_id)).mesh  # the action `ctui mesh` calls
     mesh.object_id = int(object_id)
     meshio.save_mesh(path, mesh)
     return mesh
@@ -59,11 +59,9 @@ def export_all_meshes(session, path: str):
     labels = session.labels()
     if labels is None or not labels.any():
         raise ValueError("no objects to export")
-    v = session.volume
-    meshes = surface.label_surfaces(labels, spacing=v.spacing, origin=v.origin, direction=v.direction)
-    mesh = meshtools.merge([meshes[k] for k in sorted(meshes)])
-    meshio.save_mesh(path, mesh)
-    return mesh, len(meshes)
+    res = mesh_objects(opened_of(session))  # the action `ctui mesh` calls: the same surfaces
+    meshio.save_mesh(path, res.mesh)
+    return res.mesh, len(res.meshes)
 
 
 def export_labels(session, path: str):

@@ -8,7 +8,8 @@ from __future__ import annotations
 import copy
 import time
 
-from textual import work
+import numpy as np
+from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
@@ -16,37 +17,26 @@ from textual.screen import Screen
 from textual.widgets import Footer, Static
 
 from ctui.engine import render
-from ctui.engine.core import borders
+from ctui.engine.actions.mesh import label_meshes
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.geometry import Geometry
 from ctui.engine.measure import centreline
-from ctui.engine.mesh import contour_connect, surface
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.messages import JobDone, JobFailed, Status
 
 MODES = ("surface", "wire", "transparent", "mip", "dvr")
 METHODS = ("marching-cubes", "contours")
 
 
-def build_meshes(session, method: str) -> dict:
-    """{object_id: Mesh} of the session's objects with the chosen surface method."""
-    vol = session.volume
+def build_meshes(session, method: str, *, progress=None) -> dict:
+    """{object_id: Mesh} of the session's objects with the chosen surface method, by
+    :func:`ctui.engine.actions.mesh.label_meshes` (what ``ctui mesh`` of a project does)."""
     labels = session.labels()
     if labels is None or not labels.any():
         return {}
-    if method == "contours":
-        cc = contour_connect
-        out = {}
-        for oid in sorted(int(i) for i in set(labels.ravel().tolist()) - {0}) if labels.size < 4_000_000 else range(1, 11):
-            per_slice = borders.object_borders(labels, oid)
-            if not any(per_slice):
-                continue
-            out[oid] = cc.connect_contours(per_slice, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
-            out[oid].object_id = oid
-        return out
-    meshes = surface.label_surfaces(labels, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
-    for oid, m in meshes.items():
-        m.object_id = int(oid)
-    return dict(meshes)
+    ids = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=256)[1:]) + 1]
+    return label_meshes(labels, Geometry.of(session.volume), ids, method=method, progress=progress)
 
 
 class View3DScreen(GuardMixin, Screen):
@@ -92,6 +82,7 @@ class View3DScreen(GuardMixin, Screen):
         self.shown_requests: list[int] = []
         self.fly_frames_shown = 0
         self._flying = False
+        self._busy_since: tuple[float, str] | None = None
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="v3-body"):
@@ -106,6 +97,7 @@ class View3DScreen(GuardMixin, Screen):
             self._info()
             return
         self._info()
+        self.set_interval(0.5, self._tick)
         self.prepare_meshes()
 
     def on_resize(self) -> None:
@@ -140,15 +132,18 @@ class View3DScreen(GuardMixin, Screen):
     # ------------------------------------------------------------------ meshes
     @work(thread=True, exclusive=True, group="meshes")
     def prepare_meshes(self) -> None:
-        self.app.call_from_thread(self._status, f"Building surfaces ({self.method}) ...")
         t0 = time.perf_counter()
+        self._busy_since = (t0, f"Building surfaces ({self.method})")  # the ticker says how long, every 0.5 s
+
+        def progress(done, total, message=""):
+            self._busy_since = (t0, f"Building surfaces ({self.method}): {message or ''} {done:g}/{total:g}")
+
         try:
-            meshes = build_meshes(self.s, self.method)
+            meshes = build_meshes(self.s, self.method, progress=progress)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Surfaces failed: {exc}", severity="error")
+            self.post_message(JobFailed("Surfaces", str(exc)))
             meshes = {}
-        dt = time.perf_counter() - t0
-        self.app.call_from_thread(self._meshes_ready, meshes, dt)
+        self.post_message(JobDone("meshes", meshes, dt=time.perf_counter() - t0))
 
     def _meshes_ready(self, meshes: dict, dt: float) -> None:
         self.meshes = meshes
@@ -196,14 +191,39 @@ class View3DScreen(GuardMixin, Screen):
                         return
         except Exception as exc:
             msg = str(exc)
-            self.app.call_from_thread(self._render_failed, msg)
+            self.post_message(JobFailed("3D render", msg))
             return
-        dt = time.perf_counter() - t0
-        self.app.call_from_thread(self._show, img, req, dt)
+        self.post_message(JobDone("frame", img, req=req, dt=time.perf_counter() - t0))
 
-    def _render_failed(self, msg: str) -> None:
-        self._status(f"Render failed: {msg}")
-        self.app.notify(f"3D render failed: {msg}", severity="error", timeout=10)
+    # ------------------------------------------------------------------ messages from the workers
+    @on(Status)
+    def _status_msg(self, msg: Status) -> None:
+        self._status(msg.text)
+
+    @on(JobFailed)
+    def _failed(self, msg: JobFailed) -> None:
+        self._busy_since = None
+        self._status(f"{msg.what} failed: {msg.reason}")
+        self.app.notify(f"{msg.what}: {msg.reason}", severity="error", timeout=10)
+
+    @on(JobDone)
+    def _done(self, msg: JobDone) -> None:
+        if msg.kind == "meshes":
+            self._busy_since = None
+            self._meshes_ready(msg.result, msg.info["dt"])
+        elif msg.kind == "frame":
+            self._show(msg.result, msg.info["req"], msg.info["dt"])
+        elif msg.kind == "fly":
+            self._show_fly(msg.result, msg.info["req"], msg.info["i"], msg.info["n"], msg.info["dt"])
+        elif msg.kind == "saved":
+            self.app.notify(f"Saved {msg.result}")
+            self._status(f"Saved {msg.result}")
+
+    def _tick(self) -> None:
+        """While surfaces are built: what is happening and for how long (never a static message)."""
+        busy = self._busy_since
+        if busy is not None:
+            self._status(f"{busy[1]} ... {time.perf_counter() - busy[0]:.1f} s")
 
     def _show(self, img, req: int, dt: float) -> None:
         if req != self._req:
@@ -295,9 +315,9 @@ class View3DScreen(GuardMixin, Screen):
             img = render.get_renderer().submit(scene, (w, h)).result()
             render.save_png(path, img)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"PNG not saved: {exc}", severity="error")
+            self.post_message(JobFailed("PNG not saved", str(exc)))
             return
-        self.app.call_from_thread(self.app.notify, f"Saved {path}")
+        self.post_message(JobDone("saved", path))
 
     def action_turntable(self) -> None:
         self._ask_path("Turntable animation (36 frames, GIF)", "ctui-turntable.gif", self._turntable)
@@ -306,14 +326,13 @@ class View3DScreen(GuardMixin, Screen):
     def _turntable(self, path: str) -> None:
         scene = self.scene.snapshot()
         scene.mode = self.mode
-        self.app.call_from_thread(self._status, f"Writing turntable {path} ...")
+        self.post_message(Status(f"Writing turntable {path} ..."))
         try:
             render.save_turntable(path, scene, 36, (384, 384))
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Turntable not saved: {exc}", severity="error")
+            self.post_message(JobFailed("Turntable not saved", str(exc)))
             return
-        self.app.call_from_thread(self.app.notify, f"Saved {path}")
-        self.app.call_from_thread(self._status, f"Saved {path}")
+        self.post_message(JobDone("saved", path))
 
     # ------------------------------------------------------------------ fly-through
     FLY_FRAMES = 60
@@ -358,7 +377,7 @@ class View3DScreen(GuardMixin, Screen):
     @work(thread=True, exclusive=True, group="render")
     def _fly_worker(self, scene, size, req: int) -> None:
         try:
-            self.app.call_from_thread(self._status, "Centreline of the current object ...")
+            self.post_message(Status("Centreline of the current object ..."))
             path = self._fly_path()
             cams = render.flythrough_cameras(path, self.FLY_FRAMES)
             for i, cam in enumerate(cams):
@@ -366,9 +385,9 @@ class View3DScreen(GuardMixin, Screen):
                     return
                 t0 = time.perf_counter()
                 img = render.get_renderer().submit(render.flythrough_scene(scene, cam), size).result()
-                self.app.call_from_thread(self._show_fly, img, req, i + 1, len(cams), time.perf_counter() - t0)
+                self.post_message(JobDone("fly", img, req=req, i=i + 1, n=len(cams), dt=time.perf_counter() - t0))
         except Exception as exc:
-            self.app.call_from_thread(self._render_failed, str(exc))
+            self.post_message(JobFailed("3D render", str(exc)))
         finally:
             if req == self._req:
                 self._flying = False
@@ -388,14 +407,13 @@ class View3DScreen(GuardMixin, Screen):
     @work(thread=True, group="save")
     def _fly_save(self, path: str) -> None:
         scene = self._fly_scene()
-        self.app.call_from_thread(self._status, f"Writing fly-through {path} ...")
+        self.post_message(Status(f"Writing fly-through {path} ..."))
         try:
             render.save_flythrough(path, scene, self._fly_path(), self.FLY_FRAMES, (384, 384))
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Fly-through not saved: {exc}", severity="error")
+            self.post_message(JobFailed("Fly-through not saved", str(exc)))
             return
-        self.app.call_from_thread(self.app.notify, f"Saved {path}")
-        self.app.call_from_thread(self._status, f"Saved {path}")
+        self.post_message(JobDone("saved", path))
 
     def action_close(self) -> None:
         self._req += 1  # drop anything in flight
