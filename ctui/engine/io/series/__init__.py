@@ -334,11 +334,14 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if kind == "mhd":
         vf = next(f for f in files if _is_volume_file(f))
         if vf.suffix.lower() in _MHD:
-            from ctui.engine.io.series.stacks import read_mhd_header
+            from ctui.engine.io.series.stacks import mhd_spacing, parse_spacing, read_mhd_header
 
             hdr, _ = read_mhd_header(vf)
-            dims = [int(v) for v in hdr.get("DimSize", "0 0 0").split()] + [1]
-            sp = [float(v) for v in (hdr.get("ElementSpacing") or "1 1 1").split()] + [1.0]
+            try:
+                dims = [int(v) for v in hdr.get("DimSize", "0 0 0").split()] + [1]
+            except ValueError:
+                raise LoadError("MetaImage header lacks a valid DimSize", path=vf) from None
+            sp = mhd_spacing(hdr)[0] if spacing is None else list(parse_spacing(spacing, vf))[::-1]
             return [{"uid": "", "description": "MetaImage",
                      "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
                      "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],

@@ -273,3 +273,43 @@ def to_grey(arr: np.ndarray, *, channels_last: bool = True) -> np.ndarray:
     if np.issubdtype(arr.dtype, np.integer):
         return np.rint(g).astype(arr.dtype)
     return g.astype(arr.dtype)
+
+
+# --------------------------------------------------------------------- header geometry
+def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Validate a header's index-axis matrix and origin (NIfTI, NRRD, MetaImage).
+
+    ``m`` (3, 3): columns = steps in mm of the x, y, z index axes (spacing x direction);
+    ``origin`` (3,) mm. An axis whose step is NaN, infinite, 0 or beyond 100 m becomes
+    a 1 mm step along its own index axis; collinear axes become axis-aligned; a
+    non-finite origin becomes 0. Each correction is said in the returned warnings
+    (``spacing_given``: the user's spacing replaces the voxel size, so that part is not
+    warned about). Returns (m, origin, warnings); never NaN or inf.
+    """
+    m = np.array(m, dtype=np.float64).reshape(3, 3)
+    warnings: list[str] = []
+    with np.errstate(all="ignore"):
+        norms = np.sqrt((m * m).sum(axis=0))
+    bad = [a for a in range(3) if not (np.all(np.isfinite(m[:, a])) and 1e-6 < norms[a] < 1e5)]
+    for a in bad:
+        m[:, a] = np.eye(3)[:, a]
+    if bad and not spacing_given:
+        vals = ", ".join(f"{'xyz'[a]} ({'NaN' if not np.isfinite(norms[a]) and np.isnan(norms[a]) else f'{norms[a]:g}'})"
+                         for a in bad)
+        warnings.append(f"{what} gives an invalid voxel size along {vals}: 1 mm used instead; give "
+                        f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements")
+    norms = np.sqrt((m * m).sum(axis=0))
+    if abs(np.linalg.det(m / norms[None, :])) < 1e-6:
+        m = np.diag(norms)
+        warnings.append(f"{what} gives collinear axis directions: axis-aligned directions used")
+    o = np.zeros(3)
+    try:
+        given = np.array(origin, dtype=np.float64).reshape(-1)[:3]
+        o[: len(given)] = given
+    except (TypeError, ValueError):
+        o[:] = np.nan
+    if not np.all(np.isfinite(o)) or np.abs(o).max() > 1e7:
+        o = np.zeros(3)
+        warnings.append(f"{what} gives an invalid origin: (0, 0, 0) used")
+    return m, o, warnings

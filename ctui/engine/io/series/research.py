@@ -21,7 +21,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
-from ctui.engine.io.series._common import check_memory, make_plan
+from ctui.engine.io.series._common import check_memory, checked_axes, make_plan
 
 _LPS_FROM_RAS = np.diag([-1.0, -1.0, 1.0])
 
@@ -66,6 +66,16 @@ def _nib():
     return nib
 
 
+def _raw_pixdim(nib: Any, path: Path, hdr: Any) -> np.ndarray:
+    """pixdim[1:4] as stored in the file (before nibabel's repair of zero values)."""
+    try:
+        with nib.openers.ImageOpener(str(path)) as fh:
+            raw = type(hdr).from_fileobj(fh, check=False)
+        return np.asarray(raw["pixdim"][1:4], float)
+    except Exception:  # noqa: BLE001 - the header was read once already; fall back to it
+        return np.asarray(hdr["pixdim"][1:4], float)
+
+
 def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
                spacing=None) -> Volume:
     nib = _nib()
@@ -84,9 +94,18 @@ def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progres
     nx, ny = shape[0], shape[1]
     nz = shape[2] if len(shape) > 2 else 1
     affine = img.affine
-    m = _LPS_FROM_RAS @ affine[:3, :3]
+    m, origin, bad = checked_axes(_LPS_FROM_RAS @ affine[:3, :3], _LPS_FROM_RAS @ affine[:3, 3],
+                                  what="the NIfTI header", spacing_given=spacing is not None)
+    if not bad and spacing is None and int(hdr.get("sform_code", 0)) == 0:
+        # nibabel turns a zero pixdim into 1 mm on loading (only a log line): say so
+        pix = _raw_pixdim(nib, path, hdr)
+        zero = [a for a in range(min(3, len(shape))) if not (np.isfinite(pix[a]) and pix[a] != 0)]
+        if zero:
+            bad = [f"the NIfTI header gives an invalid voxel size along "
+                   f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in zero)}: 1 mm used instead; give "
+                   f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements"]
+    warnings += bad
     sp, direction = _geometry_from_matrix(m)
-    origin = _LPS_FROM_RAS @ affine[:3, 3]
     if spacing is not None:
         from ctui.engine.io.series.stacks import parse_spacing
 
@@ -166,25 +185,14 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
     # geometry
     space = str(hdr.get("space", "")).lower()
     ras = space in ("right-anterior-superior", "ras", "3d-right-handed")
-    m = np.eye(3)
-    if "space directions" in hdr and hdr["space directions"] is not None:
-        sd = np.asarray(hdr["space directions"], dtype=float)
-        if sd.shape[0] == dim and not np.isnan(sd).any():
-            for a in range(dim):
-                m[:, a] = sd[a][:3] if sd.shape[1] >= 3 else np.r_[sd[a], 0][:3]
-    elif "spacings" in hdr:
-        spc = [float(s) if np.isfinite(s) else 1.0 for s in np.atleast_1d(hdr["spacings"])]
-        for a in range(dim):
-            m[a, a] = spc[a]
-    origin = np.zeros(3)
-    if hdr.get("space origin") is not None:
-        o = np.asarray(hdr["space origin"], float)
-        origin[: len(o)] = o[:3]
+    warnings: list[str] = []
+    m, origin = _nrrd_axes(hdr, dim, warnings)
     if ras and space != "3d-right-handed":
         m = _LPS_FROM_RAS @ m
         origin = _LPS_FROM_RAS @ origin
+    m, origin, bad = checked_axes(m, origin, what="the NRRD header", spacing_given=spacing is not None)
+    warnings += bad
     sp, direction = _geometry_from_matrix(m)
-    warnings: list[str] = []
     if "space directions" not in hdr and "spacings" not in hdr:
         warnings.append("default spacing 1 mm: the NRRD header gives no spacing")
     if spacing is not None:
@@ -240,6 +248,36 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
                    plan=plan, full=full)
 
 
+def _nrrd_axes(hdr: dict, dim: int, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Index-axis matrix (columns: steps in mm) and origin as the NRRD header states them
+    (unchecked: NaN, 0 or inf are left for :func:`checked_axes`). A negative ``spacings``
+    value is taken as its size, with a warning."""
+    m = np.eye(3)
+    try:
+        if hdr.get("space directions") is not None:
+            sd = np.asarray(hdr["space directions"], dtype=float)
+            for a in range(min(dim, sd.shape[0])):
+                m[:, a] = np.r_[sd[a], 0, 0][:3]
+        elif "spacings" in hdr:
+            spc = [float(v) for v in np.atleast_1d(hdr["spacings"])]
+            for a in range(min(dim, len(spc))):
+                if np.isfinite(spc[a]) and spc[a] < 0:
+                    warnings.append(f"the NRRD header gives a negative spacing {spc[a]:g} along {'xyz'[a]}: "
+                                    f"{-spc[a]:g} mm used")
+                    spc[a] = -spc[a]
+                m[a, a] = spc[a]
+    except (TypeError, ValueError, IndexError):
+        m = np.full((3, 3), np.nan)
+    origin = np.zeros(3)
+    if hdr.get("space origin") is not None:
+        try:
+            o = np.asarray(hdr["space origin"], float).reshape(-1)
+            origin[: min(3, len(o))] = o[:3]
+        except (TypeError, ValueError):
+            origin[:] = np.nan
+    return m, origin
+
+
 def _nrrd_data_files(path: Path, spec: str, nz: int) -> list[Path] | None:
     """Files of a 'data file: <format> <min> <max> <step> [<subdim>]' or 'LIST' spec, else None."""
     parts = spec.split()
@@ -271,7 +309,7 @@ def header_info(path: Path) -> dict[str, Any]:
         except Exception as exc:
             raise LoadError(f"not a readable NIfTI file ({type(exc).__name__})", path=path) from None
         shp = (list(img.shape) + [1, 1])[:3]
-        m = _LPS_FROM_RAS @ img.affine[:3, :3]
+        m, _, _ = checked_axes(_LPS_FROM_RAS @ img.affine[:3, :3], np.zeros(3), what="NIfTI")
         sp, _ = _geometry_from_matrix(m)
         kind = "nifti"
     else:
@@ -282,15 +320,8 @@ def header_info(path: Path) -> dict[str, Any]:
         except Exception as exc:
             raise LoadError(f"not a readable NRRD header ({type(exc).__name__})", path=path) from None
         shp = ([int(s) for s in np.atleast_1d(hdr.get("sizes", []))] + [1, 1])[:3]
-        m = np.eye(3)
-        if hdr.get("space directions") is not None:
-            sd = np.asarray(hdr["space directions"], dtype=float)
-            if not np.isnan(sd).any():
-                for a in range(min(3, sd.shape[0])):
-                    m[: sd.shape[1], a] = sd[a][:3]
-        elif "spacings" in hdr:
-            for a, v in enumerate(np.atleast_1d(hdr["spacings"])[:3]):
-                m[a, a] = float(v) if np.isfinite(v) else 1.0
+        m, _ = _nrrd_axes(hdr, int(hdr.get("dimension", 3) or 3), [])
+        m, _, _ = checked_axes(m, np.zeros(3), what="NRRD")
         sp, _ = _geometry_from_matrix(m)
         kind = "nrrd"
     return {"uid": "", "description": kind, "modality": "OT", "files": 1, "shape_zyx": [shp[2], shp[1], shp[0]],

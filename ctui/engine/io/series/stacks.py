@@ -510,6 +510,39 @@ def _mhd_slice_files(path: Path, datafile: str, header_end: int, nz: int) -> lis
     return files
 
 
+def mhd_spacing(hdr: dict[str, str]) -> tuple[list[float], list[str]]:
+    """(dx, dy, dz) mm from a MetaImage header's ElementSpacing (or ElementSize), and the
+    warnings: none given -> 1 mm (default spacing); a negative value -> its size; NaN,
+    inf, 0 or an unreadable value -> 1 mm along that axis. Never NaN."""
+    text = hdr.get("ElementSpacing") or hdr.get("ElementSize")
+    if not text:
+        return [1.0, 1.0, 1.0], [_default_spacing_warning("the MetaImage header")]
+    vals: list[float] = []
+    for v in text.split()[:3]:
+        try:
+            vals.append(float(v))
+        except ValueError:
+            vals.append(float("nan"))
+    vals += [1.0] * (3 - len(vals))  # 2D image: one slice of 1 mm
+    out, negative, invalid = [], [], []
+    for a, v in enumerate(vals):
+        if np.isfinite(v) and -1e5 < v < 0:
+            negative.append(f"{'xyz'[a]} ({v:g})")
+            v = -v
+        if not (np.isfinite(v) and 1e-6 < v < 1e5):
+            invalid.append(f"{'xyz'[a]} ({v:g})")
+            v = 1.0
+        out.append(float(v))
+    warnings = []
+    if negative:
+        warnings.append(f"the MetaImage header gives a negative ElementSpacing along {', '.join(negative)}: "
+                        f"its size used")
+    if invalid:
+        warnings.append(f"the MetaImage header gives an invalid ElementSpacing along {', '.join(invalid)}: 1 mm "
+                        f"used instead; give spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements")
+    return out, warnings
+
+
 def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, downsample: Any = None,
              progress: Any = None, memory_limit: int | None = None, spacing: Any = None) -> Volume:
     hdr, header_end = read_mhd_header(path)
@@ -541,10 +574,7 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
             return None
         return (vals + [default] * n)[:n] if text else [default] * n
 
-    sp_x = floats(hdr.get("ElementSpacing") or hdr.get("ElementSize"), 3, 1.0)
-    given = ("ElementSpacing" in hdr or "ElementSize" in hdr) and sp_x is not None and min(sp_x) > 0
-    if not given:
-        sp_x = [1.0, 1.0, 1.0]
+    sp_x, sp_warnings = mhd_spacing(hdr)
     org = floats(hdr.get("Offset") or hdr.get("Position") or hdr.get("Origin"), 3, 0.0) or [0.0, 0.0, 0.0]
     tm = hdr.get("TransformMatrix") or hdr.get("Rotation") or hdr.get("Orientation")
     direction = np.eye(3)
@@ -604,5 +634,5 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
         keep_order=files is not None,
         source_kind="MetaImage" if files is None else "MetaImage slices",
         zlib_compressed=compressed,
-        warnings=[] if given or spacing is not None else [_default_spacing_warning("the MetaImage header")],
+        warnings=[] if spacing is not None else sp_warnings,
     )
