@@ -53,11 +53,17 @@ import numpy as np
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.mesh import jit
-from ctui.engine.mesh.mc_kernels import _finish_vertices, _pass_count, _pass_generate, _pass_rows, _pass_trims
+from ctui.engine.mesh.mc_kernels import (
+    _finish_vertices,
+    _pass_count,
+    _pass_generate,
+    _pass_rows,
+    _pass_trims,
+)
 from ctui.engine.mesh.mc_numpy import marching_cubes_numpy
 from ctui.engine.mesh.mc_tables import _CORNER_OFFSETS, _EDGES, NTRI, TRI_TABLE
 
-__all__ = ["marching_cubes", "marching_squares", "kernels_ready", "NTRI", "TRI_TABLE", "_CORNER_OFFSETS", "_EDGES"]
+__all__ = ["NTRI", "TRI_TABLE", "_CORNER_OFFSETS", "_EDGES", "kernels_ready", "marching_cubes", "marching_squares"]
 _KERNELS = (_pass_rows, _pass_count, _pass_generate, _finish_vertices)
 
 _KERNEL_DTYPES = (np.dtype(np.int16), np.dtype(np.float32))

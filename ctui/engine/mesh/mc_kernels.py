@@ -15,7 +15,6 @@ from numba import njit, prange
 from ctui.engine.mesh import jit  # noqa: F401  (sets the numba cache folder before the kernels are defined)
 
 
-
 @njit(cache=True, parallel=True)
 def _pass_rows(data, thr, xl, xr, sl, sr, cx):
     """Per voxel row: first/last crossed x-edge, signs at both ends, crossed x-edges."""

@@ -24,7 +24,6 @@ from numba import njit
 
 from ctui.engine.core.meshdata import Mesh, signed_volume_mm3
 
-
 _KEEP = object()
 
 
