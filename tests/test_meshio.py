@@ -80,3 +80,16 @@ def test_bad_ply_obj_and_extension(tmp_path):
 def test_write_into_missing_folder_is_a_clear_error(tmp_path, mesh):
     with pytest.raises(CtuiError):
         save_mesh(tmp_path / "nope" / "m.stl", mesh)
+
+
+@pytest.mark.parametrize("encoding", ["latin-1", "utf-8", "utf-8-sig"])
+def test_obj_in_latin1_or_utf8(tmp_path, encoding):
+    """OBJ text with non-ASCII comments, object and material names (older exporters write
+    latin-1): read, not a UnicodeDecodeError traceback."""
+    text = ("# exporté par un logiciel ancien, ©\no Rein_gauche_é\nusemtl matériau\n"
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    p = tmp_path / "t.obj"
+    p.write_bytes(text.encode(encoding))
+    m = load_mesh(p)
+    assert m.vertices.shape == (4, 3) and m.faces.shape == (4, 3)
+    assert np.allclose(np.sort(m.vertices.sum(axis=1)), [0, 1, 1, 1])

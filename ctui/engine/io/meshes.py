@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -155,6 +156,22 @@ def _load_stl_ascii(p: Path) -> Mesh:
     return Mesh(vertices=v, faces=f, meta={"source": p.name, "format": "stl-ascii"})
 
 
+def _obj_utf8(p: Path) -> bytes:
+    """An OBJ file's bytes as UTF-8: UTF-8 (with or without BOM) as is, anything else
+    read as latin-1 (every byte is a character there) and re-encoded."""
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise FormatError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    try:
+        raw.decode("utf-8")
+        return raw
+    except UnicodeDecodeError:
+        return raw.decode("latin-1").encode("utf-8")
+
+
 def load_mesh(path: str | os.PathLike) -> Mesh:
     """Read an STL, PLY or OBJ file into a Mesh (vertices float32 mm, faces int32).
 
@@ -170,7 +187,15 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     import trimesh
 
     try:
-        tm = trimesh.load(str(p), file_type=ext[1:], process=False, force="mesh")
+        if ext == ".obj":
+            # trimesh decodes OBJ text as UTF-8 only: a latin-1 comment or material name
+            # (common from older exporters) gave a UnicodeDecodeError traceback
+            src = io.BytesIO(_obj_utf8(p))
+            tm = trimesh.load(src, file_type="obj", process=False, force="mesh")
+        else:
+            tm = trimesh.load(str(p), file_type=ext[1:], process=False, force="mesh")
+    except FormatError:
+        raise
     except Exception as exc:  # trimesh raises many types on bad files
         raise FormatError(f"{p}: cannot read {ext[1:].upper()} ({type(exc).__name__}: {exc})") from exc
     v = np.asarray(getattr(tm, "vertices", np.zeros((0, 3))), np.float32)
