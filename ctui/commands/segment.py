@@ -1,4 +1,7 @@
-"""``ctui segment PATH --seed X,Y,Z (--range LO:HI | --tolerance T) ...``: threshold fill + propagation."""
+"""``ctui segment PATH --seed X,Y,Z (--range LO:HI | --tolerance T) [--background X,Y,Z] [--method ...]``.
+
+Parses arguments and calls :func:`ctui.engine.actions.segment.segment` (the TUI calls the same).
+"""
 
 from __future__ import annotations
 
@@ -23,10 +26,17 @@ class _ThresholdAction(argparse.Action):
 
 
 def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) -> None:
-    """Options shared by ``segment`` and ``drift``."""
+    """Options shared by ``segment`` and ``drift``. Slices are numbered from 0 everywhere."""
     p.add_argument("--seed", action="append", default=[], metavar="X,Y,Z",
-                   help="seed voxel: column, row, slice (slice 0 lowest along the slice normal); "
-                        "repeat for several objects" + ("" if required else " (instead of --mask)"))
+                   help="seed voxel inside the object: column, row, slice (numbered from 0, slice 0 lowest along "
+                        "the slice normal, as in the TUI); repeat for several objects" + ("" if required else " (instead of --mask)"))
+    p.add_argument("--background", action="append", default=[], metavar="X,Y,Z",
+                   help="background seed: a voxel of a neighbour with the same values that the object must not "
+                        "reach (column, row, slice from 0); repeatable, shared by every object")
+    p.add_argument("--method", choices=("fill", "grow", "levelset"), default="fill",
+                   help="fill: threshold fill + propagation with the neck-cutting leak guard (default); "
+                        "grow: competitive region growing from --seed and --background inside the range; "
+                        "levelset: the fill refined by a threshold level set with a curvature term")
     p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI",
                    help="in-range values LO..HI inclusive (HU for CT in the default hu domain); "
                         "one per --seed, or one for all")
@@ -40,23 +50,34 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--direction", choices=("both", "forward", "backward"), default="both",
                    help="propagate from the seed slice towards higher slices, lower, or both (default)")
     p.add_argument("--mode", choices=("slice", "3d"), default="slice",
-                   help="slice-by-slice propagation with leak guard (default) or one 3D flood fill")
+                   help="slice-by-slice propagation (default) or one 3D flood fill; both cut necks (--neck)")
+    p.add_argument("--slices", metavar="A:B", default=None,
+                   help="propagate (and grow) only within slices A..B inclusive, numbered from 0")
+    p.add_argument("--neck", type=float, default=5.0, metavar="MM",
+                   help="leak guard: follow the object only through necks at least MM wide (default 5; 0 = off)")
     p.add_argument("--leak-factor", type=float, default=2.5,
-                   help="leak guard: stop when the area grows more than this factor from one slice to the next (default 2.5)")
+                   help="second leak guard, slice mode: stop when the area grows more than this factor from one "
+                        "slice to the next (default 2.5; used in 3D mode only with --neck 0)")
     p.add_argument("--neighbourhood", type=int, default=2,
-                   help="pixels the previous slice's object is grown by to seed the next slice (default 2)")
+                   help="pixels the previous slice's object is grown by to seed the next slice (default 2; 0 = overlap only)")
     p.add_argument("--min-area", type=int, default=5, help="smallest accepted fill / object slice in pixels (default 5)")
+    p.add_argument("--keep-largest", action="store_true", help="keep only each object's largest 3D island")
+    p.add_argument("--min-island", type=int, default=0, metavar="N", help="remove each object's islands under N voxels")
+    p.add_argument("--interpolate", action="store_true",
+                   help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "segment",
-        help="threshold flood fill from seeds, propagated through the slices",
+        help="objects from seeds and an HU range: fill + propagation, grow, or level set",
         description="Fill each object from its seed on the seed slice (after the filter pipeline), "
-        "propagate it slice by slice with a leak guard, and report voxels and volume. "
-        "--seed/--range/--tolerance may repeat: one object per --seed (ids 1, 2, ...).",
-        epilog="Example: ctui segment scan/ --seed 94,81,40 --range 115:445 --filter opening:size=3 --json",
+        "propagate it slice by slice (or in 3D) keeping only what joins it through necks wider than --neck mm, "
+        "and report voxels and volume. --background seeds mark neighbours the object must not reach. "
+        "--seed/--range/--tolerance may repeat: one object per --seed (ids 1, 2, ...). "
+        "Slices are numbered from 0 (as in the TUI).",
+        epilog="Example: ctui segment scan/ --seed 94,81,40 --range 115:445 --background 140,90,40 --method grow --json",
     )
     p.add_argument("path", help="series folder/file (anything `ctui open` loads)")
     add_segmentation_args(p)
@@ -128,78 +149,79 @@ def load_volume(path: str, *, series: str | None = None):
     return load(path, **opts)
 
 
-def segment_volume(volume, args: argparse.Namespace, *, pipeline=None):
-    """Fill and propagate every --seed; returns (Segmentation, pipeline, settings list, results list)."""
-    from ctui.engine.segment.propagate import PropagationSettings, propagate_object
-    from ctui.engine.segment.selection import Segmentation
+def parse_slices(text: str | None) -> tuple[int, int] | None:
+    if not text:
+        return None
+    a, sep, b = text.partition(":")
+    try:
+        lo, hi = int(a), int(b)
+        if not sep:
+            raise ValueError
+    except ValueError:
+        raise _err(f"--slices {text!r}: expected A:B (slice numbers from 0), e.g. 10:40") from None
+    if lo > hi or lo < 0:
+        raise _err(f"--slices {text!r}: need 0 <= A <= B")
+    return lo, hi
+
+
+def _options(args: argparse.Namespace):
+    from ctui.engine.actions.segment import SegmentOptions
+
+    return SegmentOptions(method=getattr(args, "method", "fill"), mode=args.mode, direction=args.direction,
+                          connectivity=args.connectivity, neighbourhood=args.neighbourhood, min_area=args.min_area,
+                          leak_factor=args.leak_factor, neck_mm=getattr(args, "neck", 5.0),
+                          slices=parse_slices(getattr(args, "slices", None)),
+                          keep_largest=getattr(args, "keep_largest", False), min_island=getattr(args, "min_island", 0),
+                          interpolate=getattr(args, "interpolate", False))
+
+
+def _thresholds(args: argparse.Namespace) -> list:
+    out = []
+    for kind, value in args.thresholds or []:
+        if kind == "range":
+            out.append(parse_range(value))
+        else:
+            try:
+                out.append(float(value))
+            except ValueError:
+                raise _err(f"--tolerance {value!r}: expected a number") from None
+    return out
+
+
+def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=None):
+    """Run the segment action for the parsed arguments; returns (Segmentation, pipeline, settings, results).
+
+    ``results``: one dict per object (id, seed, range, stops, warnings), as before the action existed.
+    """
+    from ctui.engine.actions.segment import segment
 
     seeds = [parse_seed(s) for s in args.seed]
     if not seeds:
         raise _err("give at least one --seed X,Y,Z")
-    thresholds = list(args.thresholds or [])
-    if not thresholds:
+    if not args.thresholds:
         raise _err("give --range LO:HI or --tolerance T")
-    if len(thresholds) == 1:
-        thresholds = thresholds * len(seeds)
-    if len(thresholds) != len(seeds):
-        raise _err(f"{len(seeds)} --seed but {len(thresholds)} --range/--tolerance: give one for all or one per seed")
-    if len(seeds) > 10:
-        raise _err("at most 10 objects (--seed given more than 10 times)")
-    if args.leak_factor <= 1:
-        raise _err("--leak-factor must be > 1")
-    if args.neighbourhood < 0 or args.min_area < 1:
-        raise _err("--neighbourhood must be >= 0 and --min-area >= 1")
+    background = [parse_seed(s) for s in getattr(args, "background", [])]
     pipeline = pipeline or build_pipeline(args)
-    nz, ny, nx = volume.data.shape
-    for x, y, z in seeds:
-        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
-            raise _err(f"--seed {x},{y},{z} is outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
-    seg = Segmentation(volume.data.shape)
-    results = []
-    all_settings = []
-    for i, ((x, y, z), (kind, value)) in enumerate(zip(seeds, thresholds), start=1):
-        final = pipeline.final_slice(volume, z)
-        if kind == "range":
-            lo, hi = parse_range(value)
-            fill_kw = {"low": lo, "high": hi}
-        else:
-            try:
-                tol = float(value)
-            except ValueError:
-                raise _err(f"--tolerance {value!r}: expected a number") from None
-            fill_kw = {"tolerance": tol}
-        oid = seg.add_object(f"object {i}", object_id=i)
-        res = seg.fill(final, x, y, z, object_id=oid, connectivity=args.connectivity, min_area=args.min_area, **fill_kw)
-        warnings: list[str] = []
-        if not res.accepted:
-            if res.area == 0 and seg.labels[z, y, x] not in (0, oid):
-                raise _err(f"--seed {x},{y},{z}: the voxel already belongs to object {int(seg.labels[z, y, x])}")
-            raise _err(f"--seed {x},{y},{z}: {res.reason}")
-        lo, hi = res.range
-        settings = PropagationSettings(low=lo, high=hi, direction=args.direction, connectivity=args.connectivity,
-                                       neighbourhood=args.neighbourhood, min_area=args.min_area,
-                                       leak_factor=args.leak_factor, mode=args.mode)
-        prop = propagate_object(seg, volume, pipeline, oid, z, settings)
-        prop.accept(seg)
-        warnings.extend(prop.warnings())
-        seg.objects[oid].settings["propagation"] = prop.summary()["stops"]
-        all_settings.append(settings.to_dict())
-        results.append({"id": oid, "seed": [x, y, z], "range": [lo, hi], "stops": prop.stops, "warnings": warnings})
-    return seg, pipeline, all_settings, results
+    res = segment(volume, seeds, _thresholds(args), background=background, options=_options(args), pipeline=pipeline,
+                  progress=progress)
+    results = [{"id": o.id, "seed": list(o.seed), "range": list(o.range), "stops": o.stops, "warnings": o.warnings,
+                "neck_cut_slices": o.necks} for o in res.objects]
+    return res.segmentation, res.pipeline, res.settings, results
 
 
 def objects_report(seg, volume, results) -> list[dict]:
-    import numpy as np
+    from ctui.engine.segment.selection import label_counts
 
     vox_ml = volume.voxel_volume_mm3() / 1000.0
-    counts = {int(i): int(c) for i, c in enumerate(np.bincount(seg.labels.ravel(), minlength=256))}
+    counts = label_counts(seg.labels)  # slab by slab: no int64 copy of the volume
     out = []
     for r in results:
         oid = r["id"]
         rng = seg.slice_range(oid)
-        out.append({"id": oid, "voxels": counts.get(oid, 0), "volume_ml": round(counts.get(oid, 0) * vox_ml, 4),
+        n = int(counts[oid])
+        out.append({"id": oid, "voxels": n, "volume_ml": round(n * vox_ml, 4),
                     "slices": None if rng is None else [int(rng[0]), int(rng[1])], "warnings": r["warnings"],
-                    "seed": r["seed"], "range": r["range"]})
+                    "seed": r["seed"], "range": r["range"], "stops": r.get("stops", {})})
     return out
 
 
@@ -248,8 +270,11 @@ def run(args: argparse.Namespace) -> int:
     from ctui.engine.core.atomic import check_outputs
 
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
+    from ctui.commands._progress import progress_bar
+
     volume = load_volume(args.path, series=args.series)
-    seg, pipeline, settings, results = segment_volume(volume, args)
+    with progress_bar(args, "segmenting") as progress:
+        seg, pipeline, settings, results = segment_volume(volume, args, progress=progress)
     written = write_outputs(args, volume, seg, pipeline, settings)
     objs = objects_report(seg, volume, results)
     if args.json:
@@ -258,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         for o in objs:
             sl = "-" if o["slices"] is None else f"{o['slices'][0]}..{o['slices'][1]}"
-            print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl}")
+            print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl} (numbered from 0)")
             for w in o["warnings"]:
                 print(f"  warning: {w}")
         for w in written:

@@ -1,0 +1,386 @@
+"""The segment action: seeds (and background seeds) + an HU range -> objects, as ``ctui segment`` and the TUI do it.
+
+:func:`segment` validates every seed first (a seed off the volume, out of its range, or
+a background seed inside a foreground seed's own region raises one-line
+:class:`CtuiError` before anything is written: nothing is lost), then for each
+foreground seed, in order (object ids 1, 2, ...):
+
+* ``method="fill"`` (default): threshold fill of the seed slice, cut at necks narrower
+  than ``neck_mm`` (:mod:`ctui.engine.segment.necks`), propagated slice by slice or in
+  3D (``mode``) with the neck-cutting leak guard; with background seeds the object is
+  then split at its narrowest place between the seed and any background seed it
+  reached (:func:`ctui.engine.segment.grow.compete`);
+* ``method="grow"``: competitive region growing inside the range from the seed and the
+  background seeds (:func:`ctui.engine.segment.grow.grow`);
+* ``method="levelset"``: the fill above, then a threshold level set with a curvature
+  term (:func:`ctui.engine.segment.grow.levelset`), cut to the foreground's share when
+  background seeds are given.
+
+Then ``keep_largest`` / ``min_island`` clean-ups, and ``interpolate`` fills the empty
+slices between key slices. Each object is one or a few undo steps of the
+:class:`Segmentation`. Slices are numbered from 0 (the lowest along the slice normal),
+in the CLI and the TUI alike. Coordinates: seeds are (x, y, z) = (column, row, slice).
+
+Memory: the fill works on crops; 3D mode, ``grow`` and ``levelset`` hold one bool
+in-range volume (1 byte a voxel) plus crop-sized work arrays, checked against the
+memory available before they are allocated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.limits import check_allocation
+from ctui.engine.core.progress import Cancelled, Progress, report
+from ctui.engine.segment import grow as _grow
+from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
+from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+from ctui.engine.segment.selection import Segmentation, fill_range, in_range, label_counts, threshold_fill
+
+METHODS = ("fill", "grow", "levelset")
+Seed = tuple[int, int, int]
+#: A range (low, high) or a tolerance (seed value +- t).
+Threshold = tuple[float, float] | float
+
+
+@dataclass
+class SegmentOptions:
+    """How to segment (keyword defaults = the CLI's defaults)."""
+
+    method: str = "fill"
+    mode: str = "slice"
+    direction: str = "both"
+    connectivity: int = 8
+    neighbourhood: int = 2
+    min_area: int = 5
+    leak_factor: float | None = 2.5
+    neck_mm: float = DEFAULT_NECK_MM
+    slices: tuple[int, int] | None = None
+    keep_largest: bool = False
+    min_island: int = 0
+    interpolate: bool = False
+    curvature: float = 1.0
+    overwrite: bool = False
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise CtuiError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        if self.leak_factor is not None and self.leak_factor <= 1:
+            raise CtuiError("the leak factor must be > 1")
+        if self.neighbourhood < 0 or self.min_area < 1:
+            raise CtuiError("the neighbourhood must be >= 0 and the minimum area >= 1")
+        if self.neck_mm < 0:
+            raise CtuiError("the neck width must be >= 0 mm")
+        if self.min_island < 0:
+            raise CtuiError("the minimum island size must be >= 0")
+
+
+@dataclass
+class ObjectResult:
+    """One object: id, seed (x, y, z), range, voxels, volume (mL), slices [first, last], warnings."""
+
+    id: int
+    seed: Seed
+    range: tuple[float, float]
+    voxels: int = 0
+    volume_ml: float = 0.0
+    slices: tuple[int, int] | None = None
+    stops: dict[str, str] = field(default_factory=dict)
+    necks: list[int] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "voxels": self.voxels, "volume_ml": round(self.volume_ml, 4),
+                "slices": None if self.slices is None else list(self.slices), "warnings": list(self.warnings),
+                "seed": list(self.seed), "range": list(self.range), "stops": dict(self.stops),
+                "neck_cut_slices": list(self.necks)}
+
+
+@dataclass
+class SegmentResult:
+    """What :func:`segment` made: the segmentation (labels + objects, undoable), the
+    pipeline, per-object propagation settings (dicts, for projects) and reports."""
+
+    segmentation: Segmentation
+    pipeline: Pipeline
+    settings: list[dict[str, Any]]
+    objects: list[ObjectResult]
+    method: str = "fill"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "pipeline": self.pipeline.to_dict(), "objects": [o.to_dict() for o in self.objects]}
+
+
+def _check_seed(seed: Sequence[int], shape: tuple[int, ...], what: str) -> Seed:
+    x, y, z = (int(v) for v in seed)
+    nz, ny, nx = shape
+    if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+        raise CtuiError(f"{what} {x},{y},{z} is outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, "
+                        f"slices 0..{nz - 1}, numbered from 0)")
+    return x, y, z
+
+
+def _ranges(thresholds: Sequence[Threshold], n: int) -> list[Threshold]:
+    th = list(thresholds)
+    if not th:
+        raise CtuiError("give a range LO:HI or a tolerance T")
+    if len(th) == 1:
+        th = th * n
+    if len(th) != n:
+        raise CtuiError(f"{n} seeds but {len(th)} ranges/tolerances: give one for all or one per seed")
+    return th
+
+
+def _seed_fill(final: np.ndarray, seed: Seed, th: Threshold, opts: SegmentOptions,
+               spacing_yx: tuple[float, float]) -> tuple[np.ndarray, tuple[float, float]]:
+    """The seed slice's neck-cut fill (bool (ny, nx)) and the range; raises CtuiError when the seed fails."""
+    x, y, z = seed
+    if isinstance(th, tuple):
+        lo, hi = fill_range(0.0, low=th[0], high=th[1])
+    else:
+        lo, hi = fill_range(float(final[y, x]), tolerance=float(th))
+    mask = threshold_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity)
+    if not mask.any():
+        raise CtuiError(f"seed {x},{y},{z}: its value {float(final[y, x]):g} is outside the range [{lo:g}, {hi:g}]")
+    if opts.neck_mm > 0:
+        ref = np.zeros(mask.shape, bool)
+        ref[y, x] = True
+        cut, status = cut_necks_2d(mask, ref, neck_mm=opts.neck_mm, spacing_yx=spacing_yx, connectivity=opts.connectivity)
+        if status in ("ok", "cut"):
+            mask = cut
+    if int(mask.sum()) < opts.min_area:
+        raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
+                        f"{opts.min_area} px")
+    return mask, (lo, hi)
+
+
+def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Threshold], *,
+            background: Sequence[Sequence[int]] = (), options: SegmentOptions | None = None,
+            pipeline: Pipeline | None = None, segmentation: Segmentation | None = None,
+            names: Sequence[str] | None = None, progress: Progress | None = None) -> SegmentResult:
+    """Segment one object per seed; see the module docstring.
+
+    Parameters
+    ----------
+    volume : Volume (data (nz, ny, nx), spacing (dz, dy, dx) mm)
+    seeds : foreground seeds (x, y, z), one object each (ids 1, 2, ... or the next free ids)
+    thresholds : per seed (or one for all): (low, high) inclusive, or a tolerance t (seed value +- t),
+        in the pipeline's domain (HU by default)
+    background : background seeds (x, y, z), shared by every object
+    options : :class:`SegmentOptions`
+    pipeline : the filter pipeline (default: none, HU)
+    segmentation : add to this Segmentation (the TUI's); default: a new one
+    progress : ``progress(done, total, message)``; returning False cancels (raises Cancelled;
+        the segmentation is left as it was before the cancelled object)
+
+    Returns :class:`SegmentResult`. Raises CtuiError on bad input, before any change.
+    """
+    opts = options or SegmentOptions()
+    pipe = pipeline or Pipeline()
+    shape = tuple(volume.data.shape)
+    if not seeds:
+        raise CtuiError("give at least one seed X,Y,Z")
+    fg = [_check_seed(s, shape, "seed") for s in seeds]
+    bg = [_check_seed(s, shape, "background seed") for s in background]
+    ths = _ranges(thresholds, len(fg))
+    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    free = [i for i in range(1, 11) if i not in seg.objects]
+    if len(fg) > len(free):
+        raise CtuiError(f"at most 10 objects: {len(fg)} seeds but {len(free)} free object ids")
+    spacing = tuple(float(v) for v in volume.spacing)
+    fills = []
+    for seed, th in zip(fg, ths):  # validate everything before the first change
+        fills.append(_seed_fill(pipe.final_slice(volume, seed[2]), seed, th, opts, spacing[1:]))  # type: ignore[arg-type]
+    check = opts if opts.neck_mm > 0 else SegmentOptions(**{**opts.__dict__, "neck_mm": DEFAULT_NECK_MM})
+    for seed, th in zip(fg, ths):  # a background seed in the seed's own region (no neck between) splits the organ
+        same = [b for b in bg if b[2] == seed[2]]
+        mask = _seed_fill(pipe.final_slice(volume, seed[2]), seed, th, check, spacing[1:])[0] if same else None  # type: ignore[arg-type]
+        for b in same:
+            if mask is not None and mask[b[1], b[0]]:
+                raise CtuiError(f"background seed {b[0]},{b[1]},{b[2]} lies inside the region of seed "
+                                f"{seed[0]},{seed[1]},{seed[2]} on its slice (same range, no neck between): "
+                                "move it outside the object")
+    results, settings = [], []
+    for i, (seed, (mask, rng)) in enumerate(zip(fg, fills)):
+        oid = free[i]
+        sub = _scaled(progress, i, len(fg))
+        seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
+        res, st = _one(volume, pipe, seg, oid, seed, mask, rng, bg, opts, sub)
+        results.append(res)
+        settings.append(st)
+    counts = label_counts(seg.labels)
+    vox_ml = float(np.prod(spacing)) / 1000.0
+    for r in results:
+        r.voxels = int(counts[r.id])
+        r.volume_ml = r.voxels * vox_ml
+        r.slices = seg.slice_range(r.id)
+    report(progress, 1, 1, "")
+    return SegmentResult(segmentation=seg, pipeline=pipe, settings=settings, objects=results, method=opts.method)
+
+
+def _scaled(progress: Progress | None, i: int, n: int) -> Progress | None:
+    if progress is None:
+        return None
+
+    def sub(done: float, total: float, message: str = "") -> bool | None:
+        frac = (done / total) if total else 1.0
+        return progress((i + frac) / n, 1.0, f"object {i + 1}/{n}: {message}" if n > 1 else message)
+
+    return sub
+
+
+def _settings(opts: SegmentOptions, rng: tuple[float, float]) -> PropagationSettings:
+    return PropagationSettings(low=rng[0], high=rng[1], direction=opts.direction, connectivity=opts.connectivity,
+                               neighbourhood=opts.neighbourhood, min_area=opts.min_area, leak_factor=opts.leak_factor,
+                               mode=opts.mode, neck_mm=opts.neck_mm, slices=opts.slices, overwrite=opts.overwrite)
+
+
+def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, mask: np.ndarray,
+         rng: tuple[float, float], bg: list[Seed], opts: SegmentOptions,
+         progress: Progress | None) -> tuple[ObjectResult, dict[str, Any]]:
+    x, y, z = seed
+    res = ObjectResult(id=oid, seed=seed, range=rng)
+    s = _settings(opts, rng)
+    spacing = tuple(float(v) for v in volume.spacing)
+    info = seg.objects[oid]
+    info.seeds.append(seed)
+    info.settings.update({"low": rng[0], "high": rng[1], "connectivity": opts.connectivity, "method": opts.method})
+    if bg:
+        info.settings["background"] = [list(b) for b in bg]
+    if opts.method == "grow":
+        _grow_object(volume, pipe, seg, oid, seed, bg, s, spacing, progress)  # type: ignore[arg-type]
+        res.stops = {"grow": "competition with the background seeds" if bg else "in-range region"}
+    else:
+        seg.apply_mask(mask, oid, offset=(z, 0, 0), overwrite=opts.overwrite, label=f"fill object {oid} at ({x}, {y}, {z})")
+
+        def cb(ev: Any) -> bool:
+            try:
+                report(progress, ev.done, max(ev.total, 1) * (2 if opts.method == "levelset" else 1),
+                       f"slice {ev.z}")
+            except Cancelled:
+                return False
+            return True
+
+        prop = propagate_object(seg, volume, pipe, oid, z, s, progress=cb if progress is not None else None)
+        if prop.cancelled:
+            seg.undo()
+            raise Cancelled()
+        prop.accept(seg)
+        res.stops, res.necks = dict(prop.stops), list(prop.necks)
+        res.warnings.extend(prop.warnings())
+        if bg:
+            _split_background(seg, oid, seed, bg, spacing, opts.connectivity)  # type: ignore[arg-type]
+        if opts.method == "levelset":
+            report(progress, 1, 2, "level set")
+            _levelset_object(volume, pipe, seg, oid, bg, s, opts, spacing)  # type: ignore[arg-type]
+    _clean(seg, oid, opts, spacing)  # type: ignore[arg-type]
+    info.settings["propagation"] = res.stops
+    return res, s.to_dict()
+
+
+def _clean(seg: Segmentation, oid: int, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:
+    if opts.interpolate:
+        seg.fill_between_slices(oid, slices=opts.slices, spacing=spacing)
+    if opts.keep_largest:
+        seg.keep_largest_island(oid)
+    if opts.min_island:
+        seg.remove_islands(oid, opts.min_island)
+
+
+def inrange_volume(volume: Any, pipe: Pipeline, low: float, high: float, *, slices: tuple[int, int] | None = None,
+                   labels: np.ndarray | None = None, object_id: int = 0,
+                   progress: Progress | None = None) -> np.ndarray:
+    """bool (nz, ny, nx): the pipeline's final view in [low, high], slice by slice (1 byte a voxel);
+    voxels of other objects in ``labels`` and slices outside ``slices`` are False."""
+    nz, ny, nx = volume.data.shape
+    check_allocation(nz * ny * nx, what="the in-range mask")
+    out = np.zeros((nz, ny, nx), bool)
+    z0, z1 = (0, nz - 1) if slices is None else (max(slices[0], 0), min(slices[1], nz - 1))
+    window = pipe.window_for(volume)
+    for z in range(z0, z1 + 1):
+        img = pipe.prepare(volume.data[z], window) if not pipe.active_steps() else pipe.final_region(
+            volume, z, 0, ny, 0, nx, window=window)
+        out[z] = in_range(img, low, high).view(bool)
+        if labels is not None:
+            lab = labels[z]
+            if lab.any():
+                out[z] &= (lab == 0) | (lab == object_id)
+        if z % 16 == 0:
+            report(progress, z - z0, z1 - z0 + 1, f"threshold slice {z}")
+    return out
+
+
+def _grow_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, bg: list[Seed],
+                 s: PropagationSettings, spacing: tuple[float, float, float], progress: Progress | None) -> None:
+    inr = inrange_volume(volume, pipe, s.low, s.high, slices=s.slices, labels=None if s.overwrite else seg.labels,
+                         object_id=oid, progress=_grow_progress(progress, 0.0, 0.5))
+    x, y, z = seed
+    off, m = _grow.grow(inr, np.array([[z, y, x]]), np.array([[b[2], b[1], b[0]] for b in bg]).reshape(-1, 3),
+                        spacing=spacing, connectivity=s.connectivity, progress=_grow_progress(progress, 0.5, 1.0))
+    del inr
+    if not bg and s.neck_mm > 0 and m.size:  # nothing to compete with: cut the necks instead
+        m, _status = cut_necks_3d(m, np.array([[z - off[0], y - off[1], x - off[2]]]), neck_mm=s.neck_mm,
+                                  spacing=spacing, connectivity=s.connectivity)
+    seg.apply_mask(m, oid, offset=off, overwrite=s.overwrite, label=f"grow object {oid} from ({x}, {y}, {z})")
+
+
+def _grow_progress(progress: Progress | None, a: float, b: float) -> Progress | None:
+    if progress is None:
+        return None
+
+    def sub(done: float, total: float, message: str = "") -> bool | None:
+        return progress(a + (b - a) * (done / total if total else 1.0), 1.0, message)
+
+    return sub
+
+
+def _split_background(seg: Segmentation, oid: int, seed: Seed, bg: list[Seed], spacing: tuple[float, float, float],
+                      connectivity: int) -> None:
+    """Cut the object at its narrowest place between the seed and the background seeds it reached."""
+    box = seg.object_bbox(oid)
+    if box is None:
+        return
+    origin = np.array([b.start for b in box])
+    region = seg.labels[box] == oid
+    inside = [b for b in bg if all(box[k].start <= v < box[k].stop for k, v in enumerate((b[2], b[1], b[0])))
+              and region[tuple(np.array([b[2], b[1], b[0]]) - origin)]]
+    if not inside:
+        return
+    x, y, z = seed
+    fgz = np.array([[z, y, x]]) - origin
+    bgz = np.array([[b[2], b[1], b[0]] for b in inside]) - origin
+    share = _grow.compete(region, fgz, bgz, spacing=spacing, connectivity=connectivity)
+    seg.apply_mask(region & ~share, oid, offset=tuple(int(v) for v in origin), mode="subtract",  # type: ignore[arg-type]
+                   label=f"cut object {oid} at the background seeds")
+
+
+def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, bg: list[Seed],
+                     s: PropagationSettings, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:
+    box = seg.object_bbox(oid)
+    if box is None:
+        return
+    margin = [max(1, int(np.ceil(8.0 / sp))) for sp in spacing]
+    nz, ny, nx = seg.labels.shape
+    big = tuple(slice(max(b.start - m, 0), min(b.stop + m, n)) for b, m, n in zip(box, margin, (nz, ny, nx)))
+    origin = np.array([b.start for b in big])
+    window = pipe.window_for(volume)
+    image = np.stack([pipe.final_region(volume, z, big[1].start, big[1].stop, big[2].start, big[2].stop, window=window)
+                      for z in range(big[0].start, big[0].stop)]).astype(np.float32)
+    init = seg.labels[big] == oid
+    if (init.sum(axis=(1, 2)) > 0).sum() < 3:
+        return  # the level set needs a body at least 3 slices thick
+    bgz = np.array([[b[2], b[1], b[0]] for b in bg]).reshape(-1, 3) - origin
+    off, m = _grow.levelset(image, init, low=s.low, high=s.high, spacing=spacing, background=bgz,
+                            curvature=opts.curvature, margin_mm=8.0, connectivity=s.connectivity)
+    full = np.zeros(init.shape, bool)
+    full[off[0]:off[0] + m.shape[0], off[1]:off[1] + m.shape[1], off[2]:off[2] + m.shape[2]] = m
+    if s.slices is not None:
+        zs = np.arange(big[0].start, big[0].stop)
+        full[(zs < s.slices[0]) | (zs > s.slices[1])] = init[(zs < s.slices[0]) | (zs > s.slices[1])]
+    seg.apply_mask(full, oid, offset=tuple(int(v) for v in origin), mode="replace", axis=0,  # type: ignore[arg-type]
+                   overwrite=s.overwrite, label=f"level set of object {oid}")

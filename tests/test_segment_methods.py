@@ -1,0 +1,112 @@
+"""The segment action: fill / grow / levelset with background seeds on the leak phantoms,
+bad input refused before any change, progress and cancel, and the CLI's new options."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ctui.cli import main
+from ctui.engine.actions.segment import SegmentOptions, segment
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.progress import Cancelled
+from ctui.engine.segment.phantoms import KINDS, leak_case
+from ctui.engine.segment.selection import Segmentation
+
+
+@pytest.fixture(scope="module", params=KINDS)
+def case(request):
+    return leak_case(request.param)
+
+
+def _check(case, labels, oid=1, tol=0.05):
+    got = labels == oid
+    n = int(case.truth.sum())
+    assert abs(int(got.sum()) - n) / n < tol, case.kind
+    bx, by, bz = case.background
+    assert not got[bz, by, bx]
+
+
+@pytest.mark.parametrize("method", ["fill", "grow"])
+def test_methods_with_background_seed_within_5_percent(case, method):
+    res = segment(case.volume, [case.seed], [case.hu_range], background=[case.background],
+                  options=SegmentOptions(method=method))
+    _check(case, res.segmentation.labels)
+    o = res.objects[0]
+    assert o.voxels == res.segmentation.voxels(1) and o.volume_ml == pytest.approx(case.truth_ml, rel=0.05)
+
+
+def test_levelset_with_background_seed_within_5_percent():
+    case = leak_case("bowel")
+    res = segment(case.volume, [case.seed], [case.hu_range], background=[case.background],
+                  options=SegmentOptions(method="levelset"))
+    _check(case, res.segmentation.labels)
+
+
+def test_background_seed_alone_splits_a_leaky_fill():
+    """Without the neck cut (neck 0) the background seed still cuts the object at the bridge."""
+    case = leak_case("neck")
+    res = segment(case.volume, [case.seed], [case.hu_range], background=[case.background],
+                  options=SegmentOptions(neck_mm=0))
+    _check(case, res.segmentation.labels)
+
+
+def test_bad_input_is_one_line_and_changes_nothing():
+    case = leak_case("neck")
+    vol = case.volume
+    seg = Segmentation(vol.shape)
+    seg.paint(case.truth[:, :, :40], 3)
+    before = seg.labels.copy()
+    x, y, z = case.seed
+    bad = [
+        (dict(seeds=[case.seed, (500, 1, 1)]), "seed 500,1,1 is outside the volume"),
+        (dict(seeds=[case.seed], background=[(1, 1, 99)]), "background seed 1,1,99 is outside the volume"),
+        (dict(seeds=[case.seed], background=[(x + 3, y, z)]), "lies inside the region of seed"),
+        (dict(seeds=[case.seed, (2, 2, 2)]), "outside the range"),
+    ]
+    for kw, msg in bad:
+        with pytest.raises(CtuiError, match=msg) as err:
+            segment(vol, thresholds=[case.hu_range], segmentation=seg, **kw)
+        assert "\n" not in str(err.value)
+        np.testing.assert_array_equal(seg.labels, before)
+        assert seg.undo_labels() == ["paint object 3"]
+
+
+def test_progress_and_cancel_leave_nothing_behind():
+    case = leak_case("bowel")
+    seen = []
+    segment(case.volume, [case.seed], [case.hu_range], progress=lambda d, t, m="": seen.append((d, t)))
+    assert seen and seen[-1][0] == seen[-1][1]
+    seg = Segmentation(case.volume.shape)
+    with pytest.raises(Cancelled):
+        segment(case.volume, [case.seed], [case.hu_range], segmentation=seg, progress=lambda d, t, m="": d < 0.2 * t)
+    assert not seg.labels.any()
+
+
+def test_cli_options(capsys, tmp_path):
+    from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
+
+    truth = load_truth()
+    k = [o for o in truth["objects"] if o["name"] == "kidney_left"][0]
+    z, y, x = k["seed_zyx"]
+    base = ["segment", str(SAMPLE_DIR), "--seed", f"{x},{y},{z}", "--range", "{}:{}".format(*k["hu_range"]), "--json"]
+    assert main(base + ["--slices", f"{z - 3}:{z + 2}", "--keep-largest", "--min-island", "5"]) == 0
+    o = json.loads(capsys.readouterr().out)["objects"][0]
+    assert o["slices"] == [z - 3, z + 2] and "slice limit" in o["stops"]["forward"]
+    assert main(base + ["--method", "grow"]) == 0
+    o = json.loads(capsys.readouterr().out)["objects"][0]
+    assert o["volume_ml"] == pytest.approx(k["volume_ml"], rel=0.03)
+    assert main(base + ["--slices", "9:3"]) == 2
+    assert "--slices" in capsys.readouterr().err
+    assert main(["segment", str(SAMPLE_DIR), "--seed", f"{x},{y},{z}", "--range", "1:2", "--background", "0,0,999"]) == 2
+    err = capsys.readouterr().err
+    assert "background seed 0,0,999 is outside the volume" in err and len(err.strip().splitlines()) == 1
+
+
+def test_help_says_slices_number_from_0(capsys):
+    with pytest.raises(SystemExit):
+        main(["segment", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "numbered from 0" in out and "--background" in out and "--slices" in out and "--neck" in out
