@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -292,7 +293,7 @@ def _client(scheduler: str | None, workers: int | None, processes: bool) -> tupl
             raise CtuiError(f"cannot reach the Dask scheduler at {scheduler} ({' '.join(str(exc).split())[:120]})") \
                 from None
     cluster = LocalCluster(n_workers=max(1, int(workers or 1)), threads_per_worker=1, processes=processes,
-                           dashboard_address=None)
+                           dashboard_address=None, silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
