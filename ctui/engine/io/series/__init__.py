@@ -259,7 +259,7 @@ def load(
                 if any("not a DICOM" in r for r in reasons) else "")
         raise LoadError(f"nothing loadable: {why}{hint}", path=path_label)
     ordered = dicom._ordered_series(found)
-    summaries = [dicom.series_summary(s) for s in ordered]
+    summaries = [dicom.series_summary(s, ids=ids) for s in ordered]
     chosen = dicom.pick_series(ordered, series, path_label)
     vol = dicom.load_series(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
                             spacing=spacing, all_series=summaries, **common)
@@ -315,8 +315,8 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if kind == "dicom":
         from ctui.engine.io.series import dicom
 
-        found, _, _ = dicom.read_headers(files, base=base)
-        return [dicom.series_summary(s) for s in dicom._ordered_series(found)]
+        found, _, ids = dicom.read_headers(files, base=base)
+        return [dicom.series_summary(s, ids=ids) for s in dicom._ordered_series(found)]
     if kind == "images":
         from ctui.engine.io.series.stacks import image_entries, parse_spacing
 

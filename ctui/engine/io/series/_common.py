@@ -200,13 +200,15 @@ def check_memory(nbytes: int, *, shape: Sequence[int], path: Any, limit: int | N
 
 # --------------------------------------------------------------------- privacy
 def scrub(text: str, identifiers: Iterable[str]) -> str:
-    """Replace the whole-word tokens of patient identifiers in ``text`` (core.privacy.scrub_text)."""
+    """``text`` without the whole-word tokens of the headers' own patient identifiers
+    (name, ID, birth date...): :func:`ctui.engine.core.privacy.scrub_text` (common words
+    such as HEAD or CHEST in a name are left alone)."""
     return scrub_text(text, identifiers)
 
 
 def scrub_obj(obj: Any, identifiers: Iterable[str]) -> Any:
-    """:func:`scrub` applied to every string in ``obj`` (core.privacy.scrub_text_obj)."""
-    return scrub_text_obj(obj, identifiers)
+    """:func:`scrub` applied to every string in ``obj`` (dicts' values, lists, tuples)."""
+    return scrub_text_obj(obj, list(identifiers))
 
 
 # --------------------------------------------------------------------- parallel decode

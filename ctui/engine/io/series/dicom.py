@@ -70,8 +70,9 @@ __all__ = ["Frame", "Series", "read_header", "read_headers", "series_summary", "
            "codec_message", "MAX_COMPRESSION", "_ordered_series"]
 
 
-def series_summary(s: Series, frames: list[Frame] | None = None) -> dict[str, Any]:
-    """The contract's series dict (cheap: from headers)."""
+def series_summary(s: Series, frames: list[Frame] | None = None, *, ids: set[str] | None = None) -> dict[str, Any]:
+    """The contract's series dict (cheap: from headers); the description is scrubbed of
+    ``ids`` (the headers' own patient identifiers)."""
     frames = frames if frames is not None else s.frames
     f0 = frames[0]
     try:
@@ -82,7 +83,7 @@ def series_summary(s: Series, frames: list[Frame] | None = None) -> dict[str, An
     dy, dx = f0.pixel_spacing or (1.0, 1.0)
     return {
         "uid": s.uid,
-        "description": f0.description,
+        "description": scrub_obj(f0.description, ids) if ids else f0.description,
         "modality": f0.modality,
         "files": len(s.files),
         "shape_zyx": [nz, f0.rows, f0.cols],
