@@ -108,3 +108,36 @@ def test_correct_segmentation_is_one_slab_sized_undo_step(phantom_seg):
     fixed = corrected_volume(vol, corr)
     assert fixed.data is not vol.data and fixed.spacing == vol.spacing
     assert fixed.meta["drift_corrections"] == corr
+
+
+def _shape_changing_kidney():
+    """Breath-hold, no motion: a kidney-like object whose outline changes fast near the poles
+    (one side fixed against the psoas, the section growing and shrinking from it, a hilum notch)."""
+    nz, n = 40, 96
+    yy, xx = np.mgrid[:n, :n]
+    labels = np.zeros((nz, n, n), np.uint8)
+    for z in range(2, 38):
+        t = (z - 2) / 35.0
+        r = 2 + 22 * np.sin(np.pi * t) ** 0.6  # fast change at the poles
+        ry = 0.7 * r + 3
+        cx = 20 + r  # the medial side stays at x = 20: the centroid follows the radius
+        cy = 48 + 6 * max(0.0, t - 0.8) * 5  # the lower pole turns forward
+        m = ((xx - cx) / r) ** 2 + ((yy - cy) / ry) ** 2 <= 1
+        if 15 <= z <= 24:
+            m &= ~((xx < cx - 0.3 * r) & (np.abs(yy - cy) < 0.25 * ry))  # hilum notch
+        labels[z][m] = 1
+    return labels
+
+
+def test_shape_change_without_motion_is_not_drift():
+    labels = _shape_changing_kidney()
+    sp = (3.0, 0.8, 0.8)
+    old = analyze_drift(labels, spacing=sp, confirm=False)
+    assert old.flagged  # the old check raised false alarms here
+    rep = analyze_drift(labels, spacing=sp)
+    assert rep.flagged == [] and rep.objects[0].shape_change == old.flagged
+    assert rep.to_dict()["objects"][0]["shape_change"] == old.flagged
+    # a true jolt on the same object (two slices, then back) is still flagged
+    jolt = labels.copy()
+    jolt[20:22] = np.roll(jolt[20:22], 6, axis=2)
+    assert analyze_drift(jolt, spacing=sp).flagged == [20, 21]

@@ -5,8 +5,23 @@ displaced in-plane: the centroid of every object jumps on those slices and comes
 :func:`analyze_drift` computes each object's centroid on each slice, fits a smooth
 curve along the slices (running median of ``window`` slices, robust to a run of up to
 ``window // 2`` displaced slices, then a 3-slice mean; or a robust polynomial with
-``method="poly"``), and flags slices whose in-plane deviation from the fit exceeds
-``threshold_mm``.
+``method="poly"``), and takes slices whose in-plane deviation from the fit exceeds
+``threshold_mm`` as candidates.
+
+A candidate is flagged only when it looks like a jolt, not like the object changing
+shape (an organ's centroid wanders near its poles in a breath-hold scan with no motion
+at all):
+
+* **all objects shift together**: on that slice at least two objects deviate by more
+  than half the threshold in the same direction (within 45 degrees); or
+* **a shift that returns**: a run of at most ``window // 2`` candidate slices, with
+  slices of the object on both sides, whose centroid is off the straight line joining
+  the centroids just before and just after the run by more than the threshold, on a
+  slice where the object has at least a quarter of its median area (the thin caps of
+  an organ change shape fastest).
+
+Other candidates are reported as ``shape_change`` (not flagged). ``confirm=False``
+gives the old behaviour (every candidate flagged).
 
 Units: centroids are reported in pixels (x, y) and in patient mm (x, y, z, through the
 volume geometry); deviations are in mm along the x and y index axes (pixel offset
@@ -40,6 +55,8 @@ class ObjectDrift:
     deviation_mm: np.ndarray  # (n, 2) along x and y index axes
     distance_mm: np.ndarray  # (n,)
     flagged: list[int] = field(default_factory=list)
+    shape_change: list[int] = field(default_factory=list)  # over the threshold, but not a jolt
+    area: np.ndarray | None = None  # pixels (n,)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -51,6 +68,7 @@ class ObjectDrift:
             "deviation_mm": np.round(self.deviation_mm, 3).tolist(),
             "distance_mm": np.round(self.distance_mm, 3).tolist(),
             "flagged": [int(z) for z in self.flagged],
+            "shape_change": [int(z) for z in self.shape_change],
         }
 
 
@@ -142,7 +160,7 @@ def smooth_fit(values: np.ndarray, *, method: str = "median", window: int = 9, d
 
 def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[float, float, float] | None = None,
                   object_ids: list[int] | None = None, threshold_mm: float | None = None, method: str = "median",
-                  window: int = 9, min_area: int = 5) -> DriftReport:
+                  window: int = 9, min_area: int = 5, confirm: bool = True) -> DriftReport:
     """Centroids per slice, deviation from a smooth fit, flagged slices.
 
     Parameters
@@ -153,6 +171,7 @@ def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[floa
     threshold_mm : flag slices deviating more than this (default: max(1 mm, 0.75 pixel))
     method, window : see :func:`smooth_fit`
     min_area : slices where the object has fewer pixels are ignored (noisy centroids)
+    confirm : flag only candidates that look like a jolt (see the module docstring)
     """
     if volume is not None:
         spacing = tuple(volume.spacing)  # type: ignore[assignment]
@@ -168,7 +187,7 @@ def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[floa
     for oid in object_ids:
         zs, c, area = slice_centroids(labels, oid)
         keep = area >= min_area
-        zs, c = zs[keep], c[keep]
+        zs, c, area = zs[keep], c[keep], area[keep]
         if zs.size == 0:
             continue
         fit = smooth_fit(c, method=method, window=window)
@@ -179,11 +198,61 @@ def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[floa
         else:
             cmm = np.column_stack([c[:, 0] * dx, c[:, 1] * dy, zs * dz])
         fl = [int(z) for z, d in zip(zs, dist) if d > threshold_mm]
-        flagged.update(fl)
         results.append(ObjectDrift(object_id=int(oid), slices=zs, centroid_px=c, centroid_mm=cmm, fit_px=fit,
-                                   deviation_mm=dev, distance_mm=dist, flagged=fl))
+                                   deviation_mm=dev, distance_mm=dist, flagged=fl, area=area))
+    if confirm:
+        _confirm(results, float(threshold_mm), max_run=max(1, int(window) // 2), spacing_yx=(dy, dx))
+    for o in results:
+        flagged.update(o.flagged)
     return DriftReport(objects=results, flagged=sorted(flagged), threshold_mm=float(threshold_mm),
                        spacing=(dz, dy, dx), method=method, window=int(window))
+
+
+def _confirm(objects: list[ObjectDrift], threshold: float, *, max_run: int, spacing_yx: tuple[float, float]) -> None:
+    """Keep in each object's ``flagged`` only the jolts; move the rest to ``shape_change``."""
+    together: set[int] = set()
+    devs: dict[int, list[np.ndarray]] = {}
+    for o in objects:
+        for z, d in zip(o.slices, o.deviation_mm):
+            if np.hypot(*d) > threshold / 2:
+                devs.setdefault(int(z), []).append(d)
+    for z, ds in devs.items():
+        for i in range(len(ds)):
+            for j in range(i + 1, len(ds)):
+                a, b = ds[i], ds[j]
+                if float(a @ b) > np.cos(np.pi / 4) * np.hypot(*a) * np.hypot(*b):
+                    together.add(z)
+    scale = np.array([spacing_yx[1], spacing_yx[0]])
+    for o in objects:
+        if not o.flagged:
+            continue
+        med = float(np.median(o.area)) if o.area is not None and len(o.area) else 0.0
+        cand = set(o.flagged)
+        idx = [k for k, z in enumerate(o.slices) if int(z) in cand]
+        keep: set[int] = {int(o.slices[k]) for k in idx if int(o.slices[k]) in together}
+        for run in _runs(idx, o.slices):
+            a, b = run[0] - 1, run[-1] + 1
+            if len(run) > max_run or a < 0 or b >= len(o.slices):
+                continue
+            for k in run:
+                t = (o.slices[k] - o.slices[a]) / max(o.slices[b] - o.slices[a], 1)
+                line = (1 - t) * o.centroid_px[a] + t * o.centroid_px[b]
+                off = float(np.hypot(*((o.centroid_px[k] - line) * scale)))
+                if off > threshold and (o.area is None or o.area[k] >= 0.25 * med):
+                    keep.add(int(o.slices[k]))
+        o.shape_change = sorted(cand - keep)
+        o.flagged = sorted(keep)
+
+
+def _runs(idx: list[int], slices: np.ndarray) -> list[list[int]]:
+    """Consecutive candidate indices that are also consecutive slices."""
+    runs: list[list[int]] = []
+    for k in idx:
+        if runs and runs[-1][-1] == k - 1 and slices[k] == slices[k - 1] + 1:
+            runs[-1].append(k)
+        else:
+            runs.append([k])
+    return runs
 
 
 def corrections_from_report(report: DriftReport, *, estimate: str = "centroid", volume: Any = None,
