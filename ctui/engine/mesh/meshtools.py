@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from ctui.engine.core.meshdata import Mesh, signed_volume_mm3
+from ctui.engine.mesh import jit
 
 _KEEP = object()
 
@@ -168,7 +169,17 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, float32 (n, 3) (outward for CCW-outside faces)."""
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    return _vertex_normals(v, f)
+    if jit.use_compiled([_vertex_normals], np.float64):
+        return _vertex_normals(v, f)
+    # not compiled yet (fresh install): the same sums by bincount, no compilation
+    nrm = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]) if len(f) else np.zeros((0, 3))
+    n = np.zeros((len(v), 3))
+    for c in range(3):
+        idx = f.ravel()
+        n[:, c] = np.bincount(idx, weights=np.repeat(nrm[:, c], 3), minlength=len(v))
+    ln = np.linalg.norm(n, axis=1)
+    ln[ln == 0.0] = 1.0
+    return (n / ln[:, None]).astype(np.float32)
 
 
 @njit(cache=True)
