@@ -21,6 +21,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) to open when PATH holds several")
     p.add_argument("--downsample", type=int, default=None, metavar="N", help="load every N-th voxel (large series)")
     p.add_argument("--crop", default=None, metavar="z0,z1,y0,y1,x0,x1", help="load only this box (voxel indices)")
+    p.add_argument("--labels", default=None, metavar="FILE",
+                   help="open a label file over the series PATH for editing: DICOM-SEG, RTSTRUCT, .nii, .nii.gz, "
+                   ".nrrd (e.g. from 3D Slicer or TotalSegmentator); its geometry must match the series'")
     p.set_defaults(func=run)
 
 
@@ -52,6 +55,27 @@ def run(args: argparse.Namespace) -> int:
             assert len(options["crop"]) == 6
         except (ValueError, AssertionError):
             raise CtuiError(f"--crop wants six integers z0,z1,y0,y1,x0,x1, got {args.crop!r}") from None
-    app = CtuiApp(path, project=project, graphics=mode, **options)
+    if args.labels:
+        app = CtuiApp(path, graphics=mode, session=_labels_session(path, args.labels, options))
+    else:
+        app = CtuiApp(path, project=project, graphics=mode, **options)
     app.run()
     return int(app.return_code or 0)
+
+
+def _labels_session(path, labels: str, options: dict):
+    """A TUI session of the series ``path`` with the label file ``labels`` on it (unsaved project)."""
+    from ctui.engine.actions.opened import open_input
+    from ctui.engine.core.colors import MAX_OBJECTS
+    from ctui.engine.core.errors import CtuiError
+    from ctui.screens.app import session_from_project
+
+    if path is None:
+        raise CtuiError("--labels needs the series the labels were drawn on: ctui open SERIES --labels FILE")
+    opened = open_input(path, labels=labels, **options)
+    ids = opened.object_ids
+    if len(ids) > MAX_OBJECTS or max(ids, default=0) > MAX_OBJECTS:
+        raise CtuiError(f"the TUI edits objects 1..{MAX_OBJECTS}; this file holds {len(ids)} (ids up to {max(ids)}): "
+                        "use ctui measure/mesh/render SERIES --labels FILE, or export fewer labels", path=labels)
+    opened.volume.warnings[:0] = list(opened.notes)  # shown as notifications when the workspace opens
+    return session_from_project(opened.project, opened.volume, "")
