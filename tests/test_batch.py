@@ -14,7 +14,8 @@ distributed = pytest.importorskip("distributed")
 @pytest.fixture(scope="module")
 def manifest(tmp_path_factory):
     root = tmp_path_factory.mktemp("batch")
-    rows = ["series,seed,range,outdir,name"]
+    rows = ["series,seed,range,outdir,name,method,mode,background"]
+    how = ["fill,slice,", "grow,slice,{bg}", "fill,3d,"]  # the segment action's methods, one each
     truths = {}
     for i in range(3):
         vol, truth = make_phantom(shape=(24, 52, 52), spacing=(8.0, 5.0, 5.0), noise_sd=4.0, seed=i, drift=False,
@@ -22,9 +23,10 @@ def manifest(tmp_path_factory):
         write_series(root / f"s{i}", vol, seed=i)
         k = next(o for o in truth["objects"] if o["name"] == "kidney_left")
         z, y, x = k["seed_zyx"]
-        rows.append(f's{i},"{x},{y},{z}",115:445,out,case{i}')
+        bz, by, bx = next(o for o in truth["objects"] if o["name"] == "spine")["seed_zyx"]
+        rows.append(f's{i},"{x},{y},{z}",115:445,out,case{i},' + how[i].format(bg=f'"{bx},{by},{bz}"'))
         truths[f"case{i}"] = k["volume_ml"]
-    rows.append('missing,"1,2,3",115:445,out,gone')
+    rows.append('missing,"1,2,3",115:445,out,gone,,,')
     (root / "jobs.csv").write_text("\n".join(rows) + "\n")
     return root, truths
 
@@ -45,6 +47,7 @@ def test_batch_three_right_rows_one_failed_then_skips(manifest):
     for name, truth_ml in truths.items():
         r = rows[name]
         assert r["status"] == "ok", r["error"]
+        assert r["method"] == ["fill/slice", "grow/slice", "fill/3d"][int(name[-1])]
         assert float(r["volume_voxels_ml"]) == pytest.approx(truth_ml, rel=0.03)
         assert float(r["volume_mesh_ml"]) == pytest.approx(truth_ml, rel=0.03)
         assert float(r["area_mm2"]) > 0

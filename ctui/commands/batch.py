@@ -10,8 +10,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "batch",
         help="segment, measure and mesh many series from a manifest, on Dask",
         description="Run one job per MANIFEST.csv row: columns series, seed (\"X,Y,Z\"), range (\"LO:HI\"), "
-        "optional method (fill|3d), background (\"X,Y,Z;...\"), filter (\"NAME:k=v;...\"), outdir, sections "
-        "(auto), name. Each job segments one object, measures it (voxel and mesh volume, area; sections "
+        "optional method (fill|grow|levelset), mode (slice|3d), background (\"X,Y,Z;...\"), filter "
+        "(\"NAME:k=v;...\"), outdir, sections (auto), name. Each job segments one object, measures it (voxel and mesh volume, area; sections "
         "along the centreline with sections=auto) and writes its project and STL mesh to outdir. Jobs run "
         "on a local Dask cluster (--workers processes) or on a dask.distributed scheduler (--scheduler). "
         "RESULTS.csv is rewritten as each job finishes; a failed job gets status 'failed' and its error; "

@@ -6,9 +6,9 @@ Manifest: a CSV with one row per job and the columns
 series         series folder/file (anything ``ctui open`` loads); required
 seed           "X,Y,Z" voxel (column, row, slice); required
 range          "LO:HI" in-range values (HU for CT); required
-method         "fill" (threshold fill + slice propagation, default) or "3d" (one 3D fill)
-background     "X,Y,Z[;X,Y,Z]" voxels that must stay outside the object (the object is cut
-               back to what stays connected to the seed without them)
+method         "fill" (default), "grow" or "levelset" (:func:`ctui.engine.actions.segment.segment`)
+mode           "slice" (propagation slice by slice, default) or "3d"
+background     "X,Y,Z[;X,Y,Z]" background seeds (outside the object)
 filter         filter steps "NAME[:key=value,...]" separated by ";" (as ``ctui segment --filter``)
 outdir         folder for the job's project and mesh (default: ``<RESULTS>-outputs``)
 sections       "auto": cross-sections along the automatic centreline as well
@@ -43,11 +43,12 @@ from ctui.engine.core.atomic import write_text
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
 
-MANIFEST_COLUMNS = ("series", "seed", "range", "method", "background", "filter", "outdir", "sections", "name")
+MANIFEST_COLUMNS = ("series", "seed", "range", "method", "mode", "background", "filter", "outdir", "sections", "name")
 RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
                   "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
                   "slices", "project", "mesh", "seconds")
-METHODS = ("fill", "3d")
+METHODS = ("fill", "grow", "levelset")
+MODES = ("slice", "3d")
 
 
 @dataclass
@@ -59,6 +60,7 @@ class Job:
     seed: tuple[int, int, int]
     range: tuple[float, float]
     method: str = "fill"
+    mode: str = "slice"
     background: list[tuple[int, int, int]] = field(default_factory=list)
     filters: list[str] = field(default_factory=list)
     outdir: str = ""
@@ -68,8 +70,8 @@ class Job:
 
     @property
     def key(self) -> str:
-        text = "|".join(map(str, (os.path.abspath(self.series), self.seed, self.range, self.method, self.background,
-                                  self.filters, self.sections)))
+        text = "|".join(map(str, (os.path.abspath(self.series), self.seed, self.range, self.method, self.mode,
+                                  self.background, self.filters, self.sections)))
         return hashlib.sha1(text.encode("utf-8", "surrogateescape")).hexdigest()[:10]
 
     @property
@@ -122,6 +124,9 @@ def _job(n: int, row: dict, base: Path, default_outdir: str) -> Job:
         job.method = (get["method"] or "fill").lower()
         if job.method not in METHODS:
             raise CtuiError(f"method {get['method']!r}: one of {', '.join(METHODS)}")
+        job.mode = (get["mode"] or "slice").lower()
+        if job.mode not in MODES:
+            raise CtuiError(f"mode {get['mode']!r}: one of {', '.join(MODES)}")
         job.background = [_xyz(v, "background") for v in get["background"].split(";") if v.strip()]
         job.filters = [v.strip() for v in get["filter"].split(";") if v.strip()]
         job.sections = get["sections"].lower() in ("auto", "yes", "true", "1")
@@ -149,52 +154,24 @@ def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[
 
 # =========================================================================== one job
 def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
-    """(labels uint8, pipeline dict, propagation dict) of one object from the job's seed."""
+    """(labels uint8, pipeline dict, propagation dict) of one object from the job's seed (the segment action)."""
+    from ctui.engine.actions.segment import SegmentOptions, segment
     from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
-    from ctui.engine.segment.propagate import PropagationSettings, propagate_object
-    from ctui.engine.segment.selection import Segmentation
 
-    nz, ny, nx = volume.shape
-    for x, y, z in [job.seed, *job.background]:
-        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
-            raise CtuiError(f"seed {x},{y},{z} is outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
     try:
         pipeline = Pipeline([parse_filter_spec(s) for s in job.filters], domain="hu")
     except ValueError as exc:
         raise CtuiError(f"filter: {exc}") from None
-    x, y, z = job.seed
-    seg = Segmentation(volume.shape)
-    oid = seg.add_object(job.name, object_id=1)
-    res = seg.fill(pipeline.final_slice(volume, z), x, y, z, object_id=oid, low=job.range[0], high=job.range[1])
-    if not res.accepted:
-        raise CtuiError(f"seed {x},{y},{z}: {res.reason}")
-    settings = PropagationSettings(low=job.range[0], high=job.range[1], mode="3d" if job.method == "3d" else "slice")
-    prop = propagate_object(seg, volume, pipeline, oid, z, settings)
-    prop.accept(seg)
-    labels = seg.labels
-    if job.background:
-        labels = _cut_background(labels, job)
-    return labels, pipeline.to_dict(), settings.to_dict()
-
-
-def _cut_background(labels: np.ndarray, job: Job) -> np.ndarray:
-    """Remove background voxels (and what only they connected) from the object."""
-    from scipy import ndimage
-
-    mask = labels == 1
-    for x, y, z in job.background:
-        mask[z, y, x] = False
-    comp, _ = ndimage.label(mask)
-    x, y, z = job.seed
-    keep = comp == comp[z, y, x] if comp[z, y, x] else mask
-    return keep.astype(np.uint8)
+    res = segment(volume, [job.seed], [job.range], background=job.background, pipeline=pipeline,
+                  options=SegmentOptions(method=job.method, mode=job.mode), names=[job.name])
+    return res.segmentation.labels, pipeline.to_dict(), dict(res.settings[0]) if res.settings else {}
 
 
 def run_job(job: Job) -> dict:
     """Run one job (on a Dask worker); returns its RESULTS row. Never raises: a failure is a row."""
     t0 = time.perf_counter()
     row: dict[str, Any] = {"job": job.key, "name": job.name, "series": job.series, "seed": ",".join(map(str, job.seed)),
-                           "range": f"{job.range[0]:g}:{job.range[1]:g}", "method": job.method}
+                           "range": f"{job.range[0]:g}:{job.range[1]:g}", "method": f"{job.method}/{job.mode}"}
     try:
         if job.error:
             raise CtuiError(job.error)
