@@ -70,3 +70,18 @@ def test_bad_manifest_rows_fail_alone(tmp_path):
 
     with pytest.raises(CtuiError, match="seed"):
         read_manifest(tmp_path / "n.csv")
+
+
+def test_batch_on_a_running_scheduler(manifest):
+    """--scheduler tcp://HOST:PORT: the jobs go to that cluster's workers."""
+    from distributed import LocalCluster
+
+    from ctui.engine.actions.batch import run_batch
+
+    root, truths = manifest
+    lines = (root / "jobs.csv").read_text().splitlines()
+    (root / "one.csv").write_text("\n".join([lines[0], lines[1]]) + "\n")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        res = run_batch(root / "one.csv", out=root / "one-results.csv", scheduler=cluster.scheduler_address)
+    assert (res.ran, res.failed) == (1, 0)
+    assert float(res.rows[0]["volume_voxels_ml"]) == pytest.approx(truths["case0"], rel=0.03)
