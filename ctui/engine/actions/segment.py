@@ -37,6 +37,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Cancelled, Progress, report
 from ctui.engine.segment import grow as _grow
+from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.propagate import PropagationSettings, propagate_object
@@ -320,12 +321,25 @@ def _grow_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed:
     inr = inrange_volume(volume, pipe, s.low, s.high, slices=s.slices, labels=None if s.overwrite else seg.labels,
                          object_id=oid, progress=_grow_progress(progress, 0.0, 0.5))
     x, y, z = seed
-    off, m = _grow.grow(inr, np.array([[z, y, x]]), np.array([[b[2], b[1], b[0]] for b in bg]).reshape(-1, 3),
-                        spacing=spacing, connectivity=s.connectivity, progress=_grow_progress(progress, 0.5, 1.0))
-    del inr
-    if not bg and s.neck_mm > 0 and m.size:  # nothing to compete with: cut the necks instead
-        m, _status = cut_necks_3d(m, np.array([[z - off[0], y - off[1], x - off[2]]]), neck_mm=s.neck_mm,
-                                  spacing=spacing, connectivity=s.connectivity)
+    fg = np.array([[z, y, x]])
+    bgz = np.array([[b[2], b[1], b[0]] for b in bg], np.int64).reshape(-1, 3)
+    got = _grow.candidate(inr, np.concatenate([fg, bgz]), spacing, s.connectivity)
+    del inr  # only the candidate's box from here on
+    if got is None:
+        return
+    box, region = got
+    org = np.array([b.start for b in box])
+    report(progress, 0.6, 1.0, "competition" if bg else "necks")
+    if bg:
+        m = _grow.compete(region, fg - org, _grow.inside_seeds(bgz - org, region.shape), spacing=spacing,
+                          connectivity=s.connectivity)
+    else:  # nothing to compete with: cut the necks instead
+        m = fill3d_seeds(region, fg - org, connectivity=s.connectivity)
+        if s.neck_mm > 0:
+            m, _status = cut_necks_3d(m, fg - org, neck_mm=s.neck_mm, spacing=spacing, connectivity=s.connectivity,
+                                      inplace=True)
+    del region
+    off, m = _grow.tight(tuple(int(v) for v in org), m)  # type: ignore[arg-type]
     seg.apply_mask(m, oid, offset=off, overwrite=s.overwrite, label=f"grow object {oid} from ({x}, {y}, {z})")
 
 

@@ -62,7 +62,7 @@ def ball_sections(radius_mm: float, spacing: tuple[float, float, float]) -> list
 
 def _morph2d(m: np.ndarray, kernel: np.ndarray, erode: bool) -> np.ndarray:
     if kernel.size == 1:
-        return m
+        return m.copy()  # never hand back (and later modify) the caller's array
     op = cv2.erode if erode else cv2.dilate
     return op(m, kernel, borderType=cv2.BORDER_REPLICATE if erode else cv2.BORDER_CONSTANT, borderValue=0)
 
@@ -73,7 +73,7 @@ def morph_ball(mask: np.ndarray, radius_mm: float, spacing: tuple[float, float, 
     Slice by slice (one output slice and one 2D result alive at a time), so the only
     full-size allocation is the result.
     """
-    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    m = mask.view(np.uint8) if mask.dtype == bool and mask.flags.c_contiguous else np.ascontiguousarray(mask, dtype=np.uint8)
     nz = m.shape[0]
     sections = ball_sections(radius_mm, spacing)
     out = np.empty(m.shape, np.uint8)
@@ -145,12 +145,15 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
 
 
 def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float,
-                 spacing: tuple[float, float, float], connectivity: int = 8) -> tuple[np.ndarray, str]:
+                 spacing: tuple[float, float, float], connectivity: int = 8,
+                 inplace: bool = False) -> tuple[np.ndarray, str]:
     """The part of ``candidate`` (bool (nz, ny, nx)) joined to the seeds through necks >= ``neck_mm``.
 
     ``seeds_zyx``: int (n, 3) voxels of the object known to be right (the seed, or the
-    seed slice's object). Works on the candidate's bounding box only. Returns (bool mask
-    of the candidate's shape, status as in :func:`cut_necks_2d`).
+    seed slice's object). Works on the candidate's bounding box only, with at most three
+    box-sized uint8 arrays alive at once; ``inplace=True`` writes the result into
+    ``candidate`` (no full-size copy). Returns (bool mask of the candidate's shape,
+    status as in :func:`cut_necks_2d`).
     """
     cand = np.asarray(candidate, bool)
     if neck_mm <= 0 or not cand.any():
@@ -160,19 +163,24 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     ys = np.flatnonzero(cand.any(axis=(0, 2)))
     xs = np.flatnonzero(cand.any(axis=(0, 1)))
     box = (slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1))
-    sub = cand[box]
-    core = morph_ball(morph_ball(sub, r, spacing, erode=True), r, spacing, erode=False) & sub
+    sub = np.ascontiguousarray(cand[box])
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3) - np.array([zs[0], ys[0], xs[0]])
-    inside = np.all((seeds >= 0) & (seeds < np.array(sub.shape)), axis=1)
-    seeds = seeds[inside]
-    if not core.any() or not len(seeds):
-        return cand, "thin"
-    hit = seeds[core[tuple(seeds.T)]]
+    seeds = seeds[np.all((seeds >= 0) & (seeds < np.array(sub.shape)), axis=1)]
+    er = morph_ball(sub, r, spacing, erode=True)
+    core = morph_ball(er, r, spacing, erode=False)
+    del er
+    core &= sub
+    hit = seeds[core[tuple(seeds.T)]] if len(seeds) else seeds
     if not len(hit):
         return cand, "thin"
     kept = fill3d_seeds(core, hit, connectivity=connectivity)
-    back = morph_ball(kept, r, spacing, erode=False) & sub
+    del core
+    back = morph_ball(kept, r, spacing, erode=False)
+    del kept
+    back &= sub
     got = fill3d_seeds(back, hit, connectivity=connectivity)
-    out = np.zeros(cand.shape, bool)
+    del back
+    status = "cut" if np.count_nonzero(got) < np.count_nonzero(sub) else "ok"
+    out = cand if inplace else np.zeros(cand.shape, bool)
     out[box] = got
-    return out, ("cut" if np.count_nonzero(got) < np.count_nonzero(sub) else "ok")
+    return out, status

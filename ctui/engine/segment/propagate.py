@@ -466,7 +466,7 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
         yx = np.argwhere(start)
         seeds = np.column_stack([np.full(len(yx), z - z0), yx])
         comp, status = cut_necks_3d(comp, seeds, neck_mm=s.neck_mm, spacing=tuple(volume.spacing),
-                                    connectivity=s.connectivity)
+                                    connectivity=s.connectivity, inplace=True)
         comp[z - z0] = start  # the seed slice stays as drawn
         if status == "cut":
             prop.necks.append(int(z))
