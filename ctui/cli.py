@@ -58,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    _quiet_libraries()
     stdout = sys.stdout
     if args.command != "open" and not getattr(args, "keep_identifiers", False):
         _hide_input_paths(args)
@@ -101,6 +102,22 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
         where = f"{exc.filename}: " if exc.filename else ""
         return " ".join(f"{where}{exc.strerror or exc}".split()), 2
     return None
+
+
+def _quiet_libraries() -> None:
+    """Keep stderr to ctui's own one-line messages: library chatter (numpy RuntimeWarnings,
+    nibabel's header-fix log lines) is hidden unless the user asks with -W/PYTHONWARNINGS
+    or CTUI_DEBUG=1."""
+    import logging
+    import os
+    import warnings
+
+    if os.environ.get("CTUI_DEBUG"):
+        return
+    if not sys.warnoptions:
+        warnings.simplefilter("ignore")
+    for name in ("nibabel", "nibabel.global", "pydicom", "trimesh", "PIL", "numba"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 class _PathHidingStdout:
