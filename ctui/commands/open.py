@@ -44,17 +44,11 @@ def run(args: argparse.Namespace) -> int:
             project, path = path, None
     from ctui.screens.app import CtuiApp
 
-    options = {}
-    if args.series:
-        options["series"] = args.series
-    if args.downsample:
-        options["downsample"] = args.downsample
-    if args.crop:
-        try:
-            options["crop"] = tuple(int(v) for v in args.crop.split(","))
-            assert len(options["crop"]) == 6
-        except (ValueError, AssertionError):
-            raise CtuiError(f"--crop wants six integers z0,z1,y0,y1,x0,x1, got {args.crop!r}") from None
+    from ctui.engine.actions.options import load_options
+
+    options = load_options(series=args.series, downsample=args.downsample, crop=args.crop)
+    if "series" in options:
+        options["series"] = args.series  # the TUI matches a UID or an index itself
     if args.labels:
         app = CtuiApp(path, graphics=mode, session=_labels_session(path, args.labels, options))
     else:

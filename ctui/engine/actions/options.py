@@ -20,9 +20,18 @@ def _items(text: str, option: str, what: str) -> list[str]:
     return [v.strip() for v in s.split(",")]
 
 
+def _listed(value: Any) -> list:
+    if isinstance(value, (int, float)):
+        return [value]
+    try:
+        return list(value)
+    except TypeError:
+        return [value]
+
+
 def parse_floats(text: Any, option: str, *, n: tuple[int, ...] = (3,), positive: bool = True) -> tuple[float, ...]:
     """``"2,0.5,0.5"`` -> (2.0, 0.5, 0.5); a list/tuple is checked the same way."""
-    items = _items(text, option, "numbers") if isinstance(text, str) else list(text)
+    items = _items(text, option, "numbers") if isinstance(text, str) else _listed(text)
     try:
         vals = tuple(float(v) for v in items)
     except (TypeError, ValueError):
@@ -37,7 +46,7 @@ def parse_floats(text: Any, option: str, *, n: tuple[int, ...] = (3,), positive:
 def parse_ints(text: Any, option: str, *, n: tuple[int, ...], minimum: int | None = 1,
                allow_empty: bool = False) -> tuple[int | None, ...]:
     """``"40,256,256"`` -> (40, 256, 256); empty items become None when ``allow_empty``."""
-    items = _items(text, option, "integers") if isinstance(text, str) else list(text)
+    items = _items(text, option, "integers") if isinstance(text, str) else _listed(text)
     out: list[int | None] = []
     for v in items:
         if allow_empty and (v is None or str(v).strip() == ""):
