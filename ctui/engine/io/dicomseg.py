@@ -230,14 +230,18 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
         seg_array = _multiframe_order(seg_array, sources[0])
     descs = [_segment_description(n, o) for n, o in enumerate(objs, start=1)]
     report(progress, 0.2, 1.0, "DICOM-SEG: frames")
-    seg = hd.seg.Segmentation(
-        source_images=_prepared(sources, keep_identifiers), pixel_array=seg_array,
-        segmentation_type=hd.seg.SegmentationTypeValues.BINARY, segment_descriptions=descs,
-        series_instance_uid=hd.UID(), series_number=int(getattr(sources[0], "SeriesNumber", 0) or 0) + 1000,
-        sop_instance_uid=hd.UID(), instance_number=1, manufacturer="ctui", manufacturer_model_name="ctui",
-        software_versions=__version__, device_serial_number="0", series_description=series_description[:64],
-        content_label="CTUI", content_description="ctui segmentation", omit_empty_frames=True,
-    )
+    try:
+        seg = hd.seg.Segmentation(
+            source_images=_prepared(sources, keep_identifiers), pixel_array=seg_array,
+            segmentation_type=hd.seg.SegmentationTypeValues.BINARY, segment_descriptions=descs,
+            series_instance_uid=hd.UID(), series_number=int(getattr(sources[0], "SeriesNumber", 0) or 0) + 1000,
+            sop_instance_uid=hd.UID(), instance_number=1, manufacturer="ctui", manufacturer_model_name="ctui",
+            software_versions=__version__, device_serial_number="0", series_description=series_description[:64],
+            content_label="CTUI", content_description="ctui segmentation", omit_empty_frames=True,
+        )
+    except (ValueError, TypeError, AttributeError, KeyError) as exc:  # highdicom's checks of the source images
+        raise CtuiError(f"cannot write a DICOM-SEG over this series ({' '.join(str(exc).split())[:200]})",
+                        path=getattr(sources[0], "filename", None)) from None
     blank_identifiers(seg, keep=keep_identifiers)
     report(progress, 0.9, 1.0, "DICOM-SEG: writing")
     p = Path(path)
