@@ -41,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise CtuiError(f"--workers {args.workers}: must be 1 or more")
+    from ctui.engine.core.atomic import check_output
+
+    check_output(args.out, inputs=[args.manifest], label="--out")
     workers = args.workers or min(os.cpu_count() or 1, 4)
     with progress_bar(args, "batch") as progress:
         res = run_batch(args.manifest, out=args.out, scheduler=args.scheduler, workers=workers,

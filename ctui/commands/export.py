@@ -39,7 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ctui.commands._progress import progress_bar
     from ctui.engine.actions.export import export
+    from ctui.engine.core.atomic import check_output
 
+    check_output(args.out, inputs=[args.input, args.series], label="--out")
     with progress_bar(args, f"export {args.format}") as progress:
         res = export(args.input, format=args.format, out=args.out, series=args.series, series_uid=args.series_uid,
                      objects=args.object, keep_identifiers=args.keep_identifiers, progress=progress)
