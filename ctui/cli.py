@@ -80,6 +80,8 @@ def _run(args: argparse.Namespace) -> int:
         if fault is None:
             raise
         message, code = fault
+        if code == 2:
+            message = _naming_the_file(message, exc, args)
         print(f"ctui {args.command}: {message}", file=sys.stderr)
         return code
     return int(rc or 0)
@@ -102,6 +104,25 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
         where = f"{exc.filename}: " if exc.filename else ""
         return " ".join(f"{where}{exc.strerror or exc}".split()), 2
     return None
+
+
+_PATH_ARGS = ("path", "input", "manifest", "out", "outdir", "project", "mask", "mric", "csv", "plot", "labels")
+
+
+def _naming_the_file(msg: str, exc: BaseException, args: argparse.Namespace) -> str:
+    """``msg`` prefixed with the command's input when it names no file (an engine check
+    deep down, e.g. of a geometry field, does not know which file it came from)."""
+    import os
+
+    src = next((v for k in ("path", "input", "manifest") if (v := getattr(args, k, None))), None)
+    if isinstance(src, list):
+        src = src[0] if len(src) == 1 else None
+    if not src or getattr(exc, "path", None) is not None or getattr(exc, "filename", None) or msg.startswith("-"):
+        return msg
+    named = [str(v) for k in _PATH_ARGS if isinstance(v := getattr(args, k, None), str) and v]
+    if any(n in msg or os.path.basename(n.rstrip("/")) in msg for n in named):
+        return msg
+    return f"{src}: {msg}"
 
 
 def _quiet_libraries() -> None:
