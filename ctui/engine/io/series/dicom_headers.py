@@ -9,6 +9,7 @@ against the file's size before anything is built or allocated.
 
 from __future__ import annotations
 
+import io
 import os
 import struct
 from dataclasses import dataclass, field
@@ -38,6 +39,9 @@ _ID_KEYWORDS = (
 # header values bigger than this are not read (pydicom seeks past them): a corrupt
 # length field cannot make us allocate gigabytes for a small file
 _DEFER = 1 << 20
+#: bytes read to parse a header in memory (most headers are a few kB; longer ones are
+#: parsed from the file)
+_HEAD_BYTES = 32 << 10
 MAX_COMPRESSION = 1000  # decoded bytes per stored byte we accept before decoding
 
 
@@ -156,14 +160,33 @@ class _Fast:
 
     _PYDICOM = {"SQ", "PN", "LO", "SH", "ST", "LT", "UT", "UC"}
 
+    _TEXT = {"PN", "LO", "SH", "ST", "LT", "UT", "UC"}
+    #: character sets whose text decodes with one Python codec (no ISO 2022 escapes)
+    _CODECS = {"": "latin-1", "ISO_IR 6": "latin-1", "ISO_IR 100": "latin-1", "ISO_IR 192": "utf-8"}
+
     def __init__(self, ds: Any) -> None:
         self.ds = ds
+        cs = ""
+        try:
+            elem = ds.get_item(0x00080005)
+            if elem is not None:
+                raw = elem.value
+                cs = (raw.decode("latin-1") if isinstance(raw, bytes) else str(raw or "")).strip("\x00 ")
+        except Exception:
+            cs = "?"
+        # text VRs decoded here when the character set is a plain one (pydicom's decoding
+        # of person names and long strings was a third of the header time)
+        self.codec = self._CODECS.get(cs)
+
+    _TAGS: dict[str, Any] = {}
 
     def get(self, keyword: str, default: Any = None) -> Any:
         from pydicom.datadict import dictionary_VR, tag_for_keyword
         from pydicom.dataelem import RawDataElement
 
-        tag = tag_for_keyword(keyword)
+        tag = self._TAGS.get(keyword, -1)
+        if tag == -1:
+            tag = self._TAGS[keyword] = tag_for_keyword(keyword)
         if tag is None:
             return default
         try:
@@ -178,12 +201,20 @@ class _Fast:
             vr = str(elem.VR) if elem.VR else dictionary_VR(tag)
         except KeyError:
             return default
-        if vr in self._PYDICOM or elem.value is None:
+        if elem.value is None or vr == "SQ" or (vr in self._PYDICOM and (self.codec is None or vr not in self._TEXT)):
             try:
                 return self.ds[tag].value
             except Exception:
                 return default
         raw = bytes(elem.value)
+        if vr in self._TEXT:
+            text = raw.decode(self.codec, errors="replace").strip("\x00 ")
+            if not text:
+                return default
+            if vr in ("ST", "LT", "UT"):  # no value multiplicity
+                return text
+            parts = [t.strip() for t in text.split("\\")]
+            return parts[0] if len(parts) == 1 else parts
         if vr in _BIN:
             code = _BIN[vr]
             size = struct.calcsize(code)
@@ -312,9 +343,6 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
 
 
 def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
     path = str(path)
     try:
         size = os.path.getsize(path)
@@ -327,68 +355,86 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     except OSError as exc:
         raise _Skip(f"cannot read ({exc.strerror or exc})") from None
     with fh:
-        forced = False
-        capped = _Capped(fh, size)
+        # the header is parsed from the file's first bytes in memory (pydicom's many small
+        # reads and tells on a file cost more than the parsing: 300 CT headers 2x faster);
+        # a header longer than that is parsed from the file itself
+        head = fh.read(_HEAD_BYTES)
+        if len(head) >= size:
+            return _parse(io.BytesIO(head), path, size)
         try:
-            ds = pydicom.dcmread(capped, stop_before_pixels=True, defer_size=_DEFER)
-        except InvalidDicomError:
-            fh.seek(0)
-            forced = True
-            try:
-                ds = pydicom.dcmread(capped, stop_before_pixels=True, force=True, defer_size=_DEFER)
-            except Exception:
-                raise _Skip("not a DICOM file or image") from None
-        except Exception as exc:
-            raise _Skip(f"broken DICOM header ({type(exc).__name__})") from None
-        try:
-            pos = fh.tell()
-            if forced and not (ds.get("Rows") and ds.get("Columns")):
-                raise _Skip("not a DICOM file or image")
-            implicit, little = ds.original_encoding
-            if implicit is None:
-                implicit, little = True, True
-            meta = getattr(ds, "file_meta", None)
-            syntax = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
-            if not syntax:
-                syntax = "1.2.840.10008.1.2" if implicit else ("1.2.840.10008.1.2.1" if little else "1.2.840.10008.1.2.2")
-            frames = _frames_from_dataset(_Fast(ds), path, syntax, full=ds)
-            ids = []
-            for kw in _ID_KEYWORDS:
-                v = _Fast(ds).get(kw)
-                if v:
-                    ids.append(str(v))
-            compressed = syntax not in _NATIVE_SYNTAXES
-            off, length, kind = _pixel_element(fh, pos, implicit, little, size)
-            f0 = frames[0]
-            need = f0.frame_bytes * f0.nframes
-            if kind != "int":
-                for f in frames:
-                    f.float_kind = kind
-                    f.bits = 32 if kind == "f4" else 64
-                need = f0.rows * f0.cols * f0.samples * frames[0].bits // 8 * f0.nframes
-            if compressed and length != 0xFFFFFFFF and syntax != "1.2.840.10008.1.2.1.99":
-                compressed = False  # some writers label native data with a compressed syntax
-            if not compressed:
-                if f0.bits == 1:
-                    compressed = True  # bit-packed: leave to pydicom
-                elif length == 0xFFFFFFFF:
-                    raise _Skip("encapsulated pixel data under an uncompressed transfer syntax")
-                elif min(length, size - off) < need:
-                    have = max(0, min(length, size - off))
-                    raise _Skip(f"truncated: pixel data has {have} bytes, {need} expected for "
-                                f"{f0.nframes}x{f0.rows}x{f0.cols}x{f0.bits}-bit")
-            else:
-                if need > MAX_COMPRESSION * max(size - off, 1) + (1 << 20):
-                    raise _Skip(f"header claims {need} bytes of pixels, too many for a {size}-byte file")
-            for f in frames:
-                f.offset = None if compressed else off
-                f.compressed = compressed
-                f.big_endian = not little and not compressed
-            return frames, ids
+            return _parse(io.BytesIO(head), path, size)
         except _Skip:
-            raise
-        except Exception as exc:
-            raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+            pass
+        fh.seek(0)
+        return _parse(_Capped(fh, size), path, size)
+
+
+def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
+    """Frames and identifiers of one file from ``fh`` (positioned at its start)."""
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    forced = False
+    try:
+        ds = pydicom.dcmread(fh, stop_before_pixels=True, defer_size=_DEFER)
+    except InvalidDicomError:
+        fh.seek(0)
+        forced = True
+        try:
+            ds = pydicom.dcmread(fh, stop_before_pixels=True, force=True, defer_size=_DEFER)
+        except Exception:
+            raise _Skip("not a DICOM file or image") from None
+    except Exception as exc:
+        raise _Skip(f"broken DICOM header ({type(exc).__name__})") from None
+    try:
+        pos = fh.tell()
+        if forced and not (ds.get("Rows") and ds.get("Columns")):
+            raise _Skip("not a DICOM file or image")
+        implicit, little = ds.original_encoding
+        if implicit is None:
+            implicit, little = True, True
+        meta = getattr(ds, "file_meta", None)
+        syntax = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
+        if not syntax:
+            syntax = "1.2.840.10008.1.2" if implicit else ("1.2.840.10008.1.2.1" if little else "1.2.840.10008.1.2.2")
+        frames = _frames_from_dataset(_Fast(ds), path, syntax, full=ds)
+        ids = []
+        for kw in _ID_KEYWORDS:
+            v = _Fast(ds).get(kw)
+            if v:
+                ids.append(str(v))
+        compressed = syntax not in _NATIVE_SYNTAXES
+        off, length, kind = _pixel_element(fh, pos, implicit, little, size)
+        f0 = frames[0]
+        need = f0.frame_bytes * f0.nframes
+        if kind != "int":
+            for f in frames:
+                f.float_kind = kind
+                f.bits = 32 if kind == "f4" else 64
+            need = f0.rows * f0.cols * f0.samples * frames[0].bits // 8 * f0.nframes
+        if compressed and length != 0xFFFFFFFF and syntax != "1.2.840.10008.1.2.1.99":
+            compressed = False  # some writers label native data with a compressed syntax
+        if not compressed:
+            if f0.bits == 1:
+                compressed = True  # bit-packed: leave to pydicom
+            elif length == 0xFFFFFFFF:
+                raise _Skip("encapsulated pixel data under an uncompressed transfer syntax")
+            elif min(length, size - off) < need:
+                have = max(0, min(length, size - off))
+                raise _Skip(f"truncated: pixel data has {have} bytes, {need} expected for "
+                            f"{f0.nframes}x{f0.rows}x{f0.cols}x{f0.bits}-bit")
+        else:
+            if need > MAX_COMPRESSION * max(size - off, 1) + (1 << 20):
+                raise _Skip(f"header claims {need} bytes of pixels, too many for a {size}-byte file")
+        for f in frames:
+            f.offset = None if compressed else off
+            f.compressed = compressed
+            f.big_endian = not little and not compressed
+        return frames, ids
+    except _Skip:
+        raise
+    except Exception as exc:
+        raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
 
 def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -> list[Frame]:
