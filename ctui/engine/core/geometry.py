@@ -31,7 +31,9 @@ def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, floa
     return vals  # type: ignore[return-value]
 
 
-def _direction(value: Any) -> np.ndarray:
+def _direction(value: Any, *, orthonormal: bool = False) -> np.ndarray:
+    """3x3 float matrix; finite and invertible (``orthonormal``: unit columns at right angles,
+    as every file ctui writes has; a loaded volume may carry a slight shear)."""
     if value is None:
         return np.eye(3)
     try:
@@ -41,7 +43,10 @@ def _direction(value: Any) -> np.ndarray:
     if d.size != 9 or not np.all(np.isfinite(d)):
         raise CtuiError("direction: expected a 3x3 matrix of finite numbers")
     d = d.reshape(3, 3)
-    if abs(abs(np.linalg.det(d)) - 1.0) > 1e-3:
+    det = abs(np.linalg.det(d))
+    if det < 1e-6:
+        raise CtuiError("direction: the matrix is singular")
+    if orthonormal and (abs(det - 1.0) > 1e-3 or not np.allclose(d.T @ d, np.eye(3), atol=1e-3)):
         raise CtuiError("direction: the columns are not unit vectors at right angles")
     return d
 
@@ -83,8 +88,9 @@ class Geometry:
         """Inverse of :meth:`to_dict`; raises CtuiError naming the field that is wrong."""
         if not isinstance(d, dict):
             raise CtuiError("geometry: expected an object")
+        direction = _direction(d.get("direction"), orthonormal=True)  # files: strict
         return cls(d.get("shape_zyx"), d.get("spacing_zyx_mm", (1.0, 1.0, 1.0)),  # type: ignore[arg-type]
-                   d.get("origin_xyz_mm", (0.0, 0.0, 0.0)), d.get("direction"))
+                   d.get("origin_xyz_mm", (0.0, 0.0, 0.0)), direction)
 
     def to_dict(self) -> dict:
         return {

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.geometry import Geometry
+
 
 @dataclass
 class Volume:
@@ -78,6 +80,9 @@ class Volume:
         self.spacing = tuple(float(s) for s in self.spacing)  # type: ignore[assignment]
         self.origin = tuple(float(o) for o in self.origin)  # type: ignore[assignment]
         self.direction = np.asarray(self.direction, dtype=np.float64).reshape(3, 3)
+        for s in self.spacing:
+            if not (np.isfinite(s) and s > 0):
+                raise ValueError(f"Volume spacing must be positive and finite, got {self.spacing}")
         if self.window is None:
             from ctui.engine.core.windows import auto_window  # local: windows imports nothing heavy
 
@@ -95,12 +100,14 @@ class Volume:
         return np.array(self.spacing[::-1], dtype=np.float64)
 
     @property
+    def geometry(self) -> Geometry:
+        """The grid as a :class:`~ctui.engine.core.geometry.Geometry` (the one voxel <-> mm type)."""
+        return Geometry(self.shape, self.spacing, self.origin, self.direction)
+
+    @property
     def affine(self) -> np.ndarray:
         """4x4 matrix mapping homogeneous (i, j, k, 1) = (x, y, z) indices to LPS mm."""
-        a = np.eye(4)
-        a[:3, :3] = self.direction * self.spacing_xyz[None, :]
-        a[:3, 3] = self.origin
-        return a
+        return self.geometry.affine
 
     @property
     def slice_normal(self) -> np.ndarray:
@@ -109,15 +116,11 @@ class Volume:
 
     def index_to_mm(self, zyx: np.ndarray | tuple[float, float, float]) -> np.ndarray:
         """Voxel indices (..., 3) in (z, y, x) order -> patient mm (..., 3) in (x, y, z)."""
-        idx = np.asarray(zyx, dtype=np.float64)[..., ::-1]
-        return idx @ (self.direction * self.spacing_xyz[None, :]).T + np.asarray(self.origin)
+        return self.geometry.index_to_mm(zyx)
 
     def mm_to_index(self, xyz: np.ndarray | tuple[float, float, float]) -> np.ndarray:
         """Patient mm (..., 3) in (x, y, z) -> fractional voxel indices (..., 3) in (z, y, x)."""
-        p = np.asarray(xyz, dtype=np.float64) - np.asarray(self.origin)
-        m = self.direction * self.spacing_xyz[None, :]
-        ijk = p @ np.linalg.inv(m).T
-        return ijk[..., ::-1]
+        return self.geometry.mm_to_index(xyz)
 
     def voxel_volume_mm3(self) -> float:
         """Volume of one voxel in mm^3."""
@@ -128,7 +131,11 @@ class Volume:
         return tuple(n * s for n, s in zip(self.shape, self.spacing))  # type: ignore[return-value]
 
     def value_range(self) -> tuple[float, float]:
-        """(min, max) of the voxel values."""
+        """(min, max) of the voxel values (``meta["value_range"]`` for a headers-only
+        Volume, whose ``data`` is a placeholder: see ``ctui.engine.io.series.inspect``)."""
+        if self.meta.get("headers_only") and self.meta.get("value_range"):
+            lo, hi = self.meta["value_range"]
+            return float(lo), float(hi)
         return float(self.data.min()), float(self.data.max())
 
     def describe(self) -> dict[str, Any]:
