@@ -68,6 +68,15 @@ def test_measure_mesh_render_without_the_series(project, capsys):
         for key in ("voxels", "mesh", "area", "stl"):
             assert after[key] == before[key], key
         assert any("not found" in w for w in after["warnings"])
+        rc, out, err = _cli(capsys, "drift", proj, "--json")
+        assert rc == 0, err
+        assert json.loads(out)["centroids"]
+        rc, out, err = _cli(capsys, "export", proj, "--format", "nifti", "--out", d / "k.nii.gz")
+        assert rc == 0, err
+        from ctui.engine.io.labels import load_labels
+
+        lab, lvol = load_labels(d / "k.nii.gz")
+        assert np.array_equal(lab, p.labels) and lvol.geometry.same_grid(p.geometry)
         from ctui.engine.render import egl_available
 
         if egl_available():
