@@ -159,3 +159,42 @@ def test_lobster_components_all_closed():
     assert rep["boundary_edges"] == 0 and rep["non_manifold_edges"] == 0
     assert rep["closed_components"] == rep["components"]
     assert rep["winding_consistent"]
+
+
+@pytest.mark.parametrize("shape", ["line", "line2", "plate", "plate2"])
+@pytest.mark.parametrize("spacing", [(1.0, 1.0, 1.0), (3.0, 0.7, 0.7)])
+def test_thin_objects_keep_a_closed_surface(shape, spacing):
+    lab = np.zeros((16, 18, 18), np.uint8)
+    if shape == "line":
+        lab[8, 9, 3:15] = 1
+    elif shape == "line2":
+        lab[8:10, 9:11, 3:15] = 1
+    elif shape == "plate":
+        lab[8, 3:15, 3:15] = 1
+    else:
+        lab[8:10, 3:15, 3:15] = 1
+    m = label_surfaces(lab, spacing=spacing)[1]
+    rep = mesh_report(m)
+    assert rep["triangles"] > 0 and rep["watertight"] and rep["components"] == 1
+    voxels_ml = lab.sum() * np.prod(spacing) / 1000.0
+    assert abs(rep["volume_ml"] / voxels_ml - 1) < 0.06
+
+
+def test_noise_labels_bounded_with_progress_and_cancel():
+    from ctui.engine.core.progress import Cancelled
+
+    rng = np.random.default_rng(3)
+    lab = rng.integers(0, 64, (34, 40, 40)).astype(np.uint8)
+    lab[2:12, 5:25, 5:25] = 70  # one real object among the noise
+    seen = []
+    surf = label_surfaces(lab, spacing=(2.0, 1.0, 1.0), progress=lambda d, t, m="": seen.append((d, t)))
+    assert sorted(surf) == sorted(int(k) for k in np.unique(lab) if k)
+    assert seen and seen[-1][0] == seen[-1][1]
+    for k in (1, 33, 63):
+        assert "scattered" in surf[k].meta.get("note", "")
+        assert mesh_report(surf[k])["watertight"]
+    real = mesh_report(surf[70])
+    assert real["watertight"] and abs(real["volume_ml"] / (10 * 20 * 20 * 2 / 1000) - 1) < 0.01
+    assert "note" not in surf[70].meta
+    with pytest.raises(Cancelled):
+        label_surfaces(lab, spacing=(2.0, 1.0, 1.0), progress=lambda d, t, m="": d < 3)
