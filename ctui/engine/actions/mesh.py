@@ -70,7 +70,7 @@ def label_meshes(labels: np.ndarray, geometry: Geometry, ids: Sequence[int], *, 
             report(progress, n + 1, len(ids), f"object {k}")
         return out
     surf = label_surfaces(labels, spacing=g.spacing, origin=g.origin, direction=g.direction, smooth=not terraced,
-                          objects=list(ids))
+                          objects=list(ids), progress=progress)
     out = {k: surf[k] for k in ids if k in surf}
     for k, m in out.items():
         m.object_id = k
@@ -102,7 +102,8 @@ def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
     return connect_contours(per_slice, spacing=spacing, origin=origin, direction=direction, method=method)
 
 
-def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str) -> Mesh:
+def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str,
+                 progress: Progress | None = None) -> Mesh:
     vol = opened.volume
     assert vol is not None
     if iso is None:
@@ -112,7 +113,8 @@ def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str) ->
         mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,
                                 direction=vol.direction, method=tiling)
     else:
-        mesh = isosurface(vol.data, iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction, close=True)
+        mesh = isosurface(vol.data, iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction, close=True,
+                          progress=progress)
     if mesh.n_faces == 0:
         lo, hi = vol.value_range()
         raise CtuiError(f"no surface at --iso {iso:g} (values range {lo:g} .. {hi:g})", path=opened.path)
@@ -171,7 +173,7 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
         res.meshes = label_meshes(opened.labels, opened.geometry, res.objects, method=method, terraced=terraced,
                                   tiling=tiling, progress=progress)
     elif kind == "series":
-        res.meshes = {0: _series_mesh(opened, iso, method, tiling)}
+        res.meshes = {0: _series_mesh(opened, iso, method, tiling, progress)}
         res.iso = iso
     else:
         raise CtuiError(f"cannot mesh a {kind} file", path=opened.path)
