@@ -59,16 +59,33 @@ def slice_contours(mask2d: np.ndarray) -> list[np.ndarray]:
 
 
 def fill_contours(polys: Sequence[np.ndarray], shape: tuple[int, int]) -> np.ndarray:
-    """Even-odd fill of polygons (n, 2) in (x, y) pixel coordinates: bool (ny, nx) by pixel centre."""
-    from skimage.draw import polygon
+    """Even-odd fill of polygons (n, 2) in (x, y) pixel coordinates: bool (ny, nx), a pixel
+    is in when its centre is (half-open rule on edges).
 
-    out = np.zeros(shape, dtype=bool)
+    One vectorised scan line pass: every edge's crossings of the pixel-centre rows toggle
+    the parity from their column on (skimage.draw.polygon took 60 ms for a 600-point
+    organ contour, this 1 ms).
+    """
+    ny, nx = shape
+    toggles = np.zeros((ny, nx + 1), np.int32)
     for poly in polys:
-        if len(poly) < 3:
+        p = np.asarray(poly, dtype=np.float64)
+        if len(p) < 3:
             continue
-        rr, cc = polygon(poly[:, 1], poly[:, 0], shape=shape)
-        out[rr, cc] ^= True
-    return out
+        q = np.roll(p, -1, axis=0)
+        x0, y0, x1, y1 = p[:, 0], p[:, 1], q[:, 0], q[:, 1]
+        r0 = np.ceil(np.minimum(y0, y1)).astype(np.int64)
+        r1 = np.ceil(np.maximum(y0, y1)).astype(np.int64)  # rows r0 <= r < r1 cross the edge
+        r0, r1 = np.clip(r0, 0, ny), np.clip(r1, 0, ny)
+        n = r1 - r0
+        if n.sum() == 0:
+            continue
+        e = np.repeat(np.arange(len(p)), n)
+        rows = np.repeat(r0, n) + np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+        xc = x0[e] + (rows - y0[e]) * (x1[e] - x0[e]) / (y1[e] - y0[e])
+        cols = np.clip(np.ceil(xc), 0, nx).astype(np.int64)
+        np.add.at(toggles, (rows, cols), 1)
+    return (np.cumsum(toggles, axis=1)[:, :nx] % 2).astype(bool)
 
 
 # =========================================================================== write
@@ -85,20 +102,38 @@ def _image_ref(ds: Any) -> Any:
     return _item(ReferencedSOPClassUID=ds.SOPClassUID, ReferencedSOPInstanceUID=ds.SOPInstanceUID)
 
 
-def _fmt_mm(values: np.ndarray) -> list[str]:
-    # DS is at most 16 characters: 6 decimals of a mm is far below any voxel
-    return [f"{v:.6f}".rstrip("0").rstrip(".") if v else "0" for v in np.round(values.ravel(), 6)]
+def _contour_data(values: np.ndarray) -> Any:
+    """ContourData (3006,0050) as a raw DS element: pydicom's per-value validation takes ~75 us a
+    number (5 s for a 60-slice organ); joined text bytes are written as they are (4 ms).
+
+    DS is at most 16 characters: 6 decimals of a mm is far below any voxel.
+    """
+    from pydicom.dataelem import RawDataElement
+    from pydicom.tag import Tag
+
+    text = "\\".join(f"{v:.6f}".rstrip("0").rstrip(".") if v else "0" for v in np.round(values.ravel(), 6))
+    raw = text.encode("ascii")
+    if len(raw) % 2:
+        raw += b" "
+    return RawDataElement(Tag(0x30060050), "DS", len(raw), raw, 0, False, True)
 
 
 def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any]) -> list[Any]:
     m = labels == oid
     items = []
+    ys = np.flatnonzero(m.any(axis=(0, 2)))
+    xs = np.flatnonzero(m.any(axis=(0, 1)))
+    if ys.size == 0:
+        return items
+    y0, y1, x0, x1 = ys[0], ys[-1] + 1, xs[0], xs[-1] + 1  # trace inside the object's box only
     for z in np.flatnonzero(m.any(axis=(1, 2))):
-        for poly in slice_contours(m[z]):
-            zyx = np.column_stack([np.full(len(poly), float(z)), poly[:, 1], poly[:, 0]])
+        for poly in slice_contours(m[z, y0:y1, x0:x1]):
+            zyx = np.column_stack([np.full(len(poly), float(z)), poly[:, 1] + y0, poly[:, 0] + x0])
             mm = geometry.index_to_mm(zyx)
-            items.append(_item(ContourImageSequence=[_image_ref(sources[int(z)])], ContourGeometricType="CLOSED_PLANAR",
-                               NumberOfContourPoints=len(poly), ContourData=_fmt_mm(mm)))
+            item = _item(ContourImageSequence=[_image_ref(sources[int(z)])], ContourGeometricType="CLOSED_PLANAR",
+                         NumberOfContourPoints=len(poly))
+            item[0x30060050] = _contour_data(mm)
+            items.append(item)
     return items
 
 
@@ -205,6 +240,20 @@ class RtStructContents:
     referenced_instances: list[str] = field(default_factory=list)
 
 
+def _contour_points(item: Any) -> np.ndarray:
+    """ContourData as float64 (3n,), parsed from the raw text when pydicom has not converted it yet."""
+    elem = item.get_item(0x30060050) if 0x30060050 in item else None
+    if elem is None:
+        return np.zeros(0)
+    raw = elem.value
+    if isinstance(raw, bytes):
+        try:
+            return np.array(raw.decode("ascii").replace("\\", " ").split(), dtype=np.float64)
+        except (UnicodeDecodeError, ValueError):
+            return np.zeros(0)
+    return np.asarray([float(v) for v in np.atleast_1d(item.ContourData)], dtype=np.float64)
+
+
 def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
     """ROIs and their contours (patient mm) of an RTSTRUCT file; FormatError when it is not one."""
     import pydicom
@@ -223,7 +272,7 @@ def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
         color = tuple(int(c) for c in rc.ROIDisplayColor) if "ROIDisplayColor" in rc else None
         roi = RoiInfo(number=num, name=names.get(num) or f"ROI {num}", color=color)
         for c in rc.get("ContourSequence", []):
-            data = np.asarray([float(v) for v in c.get("ContourData", [])], dtype=np.float64)
+            data = _contour_points(c)
             if data.size < 3 or data.size % 3:
                 continue
             roi.contours.append(data.reshape(-1, 3))
