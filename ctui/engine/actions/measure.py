@@ -11,7 +11,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ctui.engine.actions import defaults
-from ctui.engine.actions.opened import Opened, open_input
+from ctui.engine.actions.opened import Opened, input_kind, open_input
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
 from ctui.engine.measure.report import plot_sections, write_sections_csv
@@ -86,9 +86,10 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
             raise CtuiError("no such file", path=p)
         if os.path.isdir(p):
             raise CtuiError("is a folder; give a .ctui project, a label file or a mesh", path=p)
+        if input_kind(p) not in ("project", "labels", "mesh"):
+            raise CtuiError("unknown input type (expected .ctui, .nii, .nii.gz, .nrrd, .seg.nrrd, a DICOM-SEG or "
+                            "RTSTRUCT file, .stl, .ply or .obj)", path=p)
         opened = open_input(p, require_labels=True, with_series=True if partial_volume else None)
-        if opened.kind not in ("project", "labels", "mesh"):
-            raise CtuiError("unknown input type (expected .ctui, .nii, .nii.gz, .nrrd, .stl, .ply or .obj)", path=p)
     if opened.kind == "mesh":
         if path is not None or between is not None:
             raise CtuiError("a mesh gives volume and area only (no --path/--between)", path=opened.path)
@@ -101,7 +102,8 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     oid = opened.pick_objects(object)[0]
     g = opened.geometry
     assert opened.labels is not None and g is not None
-    res = summary.measure_object(opened.labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
+    labels = opened.mask(oid) if oid in opened.masks else opened.labels  # overlapping imported segments
+    res = summary.measure_object(labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
                                  path=path, path_voxels=path_voxels, step_mm=step_mm,
                                  between=tuple(between) if between is not None else None, mesh=mesh, area=area,
                                  average_mm=average_mm, image=image)
