@@ -156,3 +156,17 @@ def test_place_on_grid_crops_and_offsets():
     far = Geometry((3, 4, 5), (2.0, 1.0, 1.0), tuple(dst.index_to_mm((9, 5, 7))))
     with pytest.raises(CtuiError, match="outside the series"):
         place_on_grid(box, far, dst)
+
+
+def test_dcmqi_seg_written_again_by_ctui(dcmqi, tmp_path):
+    """Real series: dcmqi's liver SEG opened over ct-3slice, exported as DICOM-SEG and RTSTRUCT, read back equal."""
+    from ctui.engine.actions.export import export
+
+    d, ct = dcmqi
+    opened = open_input(d / "ct-3slice", labels=d / "liver.dcm")
+    for fmt in ("dicom-seg", "rtstruct"):
+        out = tmp_path / f"{fmt}.dcm"
+        export(opened, format=fmt, out=out)
+        back = read_label_file(out, grid=ct)
+        assert [o["name"] for o in back.objects] == ["Liver"]
+        np.testing.assert_array_equal(back.labels, opened.labels)

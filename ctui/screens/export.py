@@ -27,6 +27,9 @@ KINDS = [
     ("labels-nii", "Label map: NIfTI (.nii.gz)", ".nii.gz"),
     ("labels-nrrd", "Label map: NRRD (.seg.nrrd, 3D Slicer segmentation)", ".seg.nrrd"),
     ("mric", "Contours: MRIC", ".mric"),
+    ("dicom-seg", "All objects: DICOM-SEG over the series (PACS, 3D Slicer)", ".dcm"),
+    ("rtstruct", "All objects: DICOM RTSTRUCT contours (radiotherapy planning)", ".dcm"),
+    ("csv", "Measurements of all objects: CSV", ".csv"),
     ("image", "Current slice view: PNG", ".png"),
 ]
 
@@ -113,6 +116,11 @@ def run_export(ws, kind: str, path: str) -> str:
     if kind == "mric":
         export_mric(s, path)
         return f"Wrote MRIC contours {path}"
+    if kind in ("dicom-seg", "rtstruct", "csv"):  # the action `ctui export` calls
+        from ctui.engine.actions.export import export
+
+        res = export(opened_of(s), format=kind, out=path)
+        return f"Wrote {path}: {len(res.objects)} objects" + "".join(f"; {w}" for w in res.warnings[:1])
     if kind == "image":
         iv = ws.main_view
         rgb = iv.rgb

@@ -262,6 +262,8 @@ def _prepared(sources: Sequence[Any], keep: bool) -> list[Any]:
     for kw in (*TYPE2_IDENTIFIERS, "StudyDate", "StudyTime"):
         if kw not in first:
             setattr(first, kw, "")
+    if "SpecificCharacterSet" in first and not first.SpecificCharacterSet:
+        del first.SpecificCharacterSet  # empty (default repertoire): highdicom refuses '' as a value
     blank_identifiers(first, keep=keep)
     return [first, *sources[1:]]
 
