@@ -202,6 +202,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     f = np.asarray(getattr(tm, "faces", np.zeros((0, 3))), np.int64)
     if len(f) == 0:
         raise FormatError(f"{p}: no triangles found")
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:  # e.g. an OBJ line "v 1 2" (fuzz finding)
+        raise FormatError(f"{p}: vertices need 3 coordinates and faces 3 corners (got {v.shape[1:]} and {f.shape[1:]})")
     if f.min() < 0 or f.max() >= len(v):
         raise FormatError(f"{p}: face indices out of range (0..{len(v) - 1})")
     if not np.isfinite(v).all():
