@@ -169,24 +169,26 @@ def centreline(
         # over about a quarter of the typical radius (at least half a voxel)
         r_med = float(np.median(dist[tuple(np.asarray(route, dtype=int).T)]))
         smooth_mm = max(0.5 * float(sp.max()), 0.25 * r_med)
-    path = spline_resample(pts, step_mm, smooth_mm=smooth_mm)
-    field = None
+    path = spline_resample(pts, step_mm, smooth_mm=smooth_mm)  # a smoothing spline may overshoot the ends
+    ends_free = straight_ends and endpoints is None
+    inside = _Inside(sub, lo, None, spacing=sp, origin=origin, direction=direction)
+    path = _inside_part(path, inside(path))
+    if ends_free:  # before recentring, so bent ends do not tilt the end sections
+        path = _end_at_caps(path, dist, inside, step_mm)
+    if (recentre and path_length(path) > 4 * step_mm) or ends_free:
+        inside.field = object_field(m, spacing=sp, origin=origin, direction=direction)
     if recentre and path_length(path) > 4 * step_mm:
-        field = object_field(m, spacing=sp, origin=origin, direction=direction)
-        path = recentre_path(path, field=field, step_mm=step_mm, iterations=recentre)
-    if straight_ends and endpoints is None:
-        if field is None:
-            field = object_field(m, spacing=sp, origin=origin, direction=direction)
-        inside = _Inside(sub, lo, field, spacing=sp, origin=origin, direction=direction)
+        path = recentre_path(path, field=inside.field, step_mm=step_mm, iterations=recentre)
+    if ends_free:
         path = _end_at_caps(path, dist, inside, step_mm)
     return path
 
 
 class _Inside:
-    """Point-in-object test in mm: the nearest voxel is in the component and the
-    smoothed indicator is at least one half (the border the sections measure)."""
+    """Point-in-object test in mm: the nearest voxel is in the component and (with a
+    field) the smoothed indicator is at least one half (the border the sections measure)."""
 
-    def __init__(self, sub, lo, field: ObjectField, *, spacing, origin, direction):
+    def __init__(self, sub, lo, field: ObjectField | None, *, spacing, origin, direction):
         self.sub, self.lo, self.field = sub, lo, field
         self.geo = dict(spacing=spacing, origin=origin, direction=direction)
         self.lim = np.asarray(sub.shape) - 1
@@ -201,7 +203,7 @@ class _Inside:
         ok = np.all((k >= 0) & (k <= self.lim), axis=1)
         kk = np.where(ok[:, None], k, 0)
         ok &= self.sub[kk[:, 0], kk[:, 1], kk[:, 2]]
-        return ok & (self.field.sample(q) >= 0.5)
+        return ok if self.field is None else ok & (self.field.sample(q) >= 0.5)
 
 
 def _extend(p0: np.ndarray, t: np.ndarray, inside: _Inside, reach: float, fine: float) -> np.ndarray:
@@ -220,40 +222,62 @@ def _extend(p0: np.ndarray, t: np.ndarray, inside: _Inside, reach: float, fine: 
                 a = mid
             else:
                 b = mid
-        out = np.vstack([out, p0 + max(a - 0.01 * fine, 0.0) * t])
+        if a > 0.01 * fine:
+            out = np.vstack([out, p0 + (a - 0.01 * fine) * t])
     return out
+
+
+def _inside_part(p: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """The path without its leading and trailing points where ``ok`` is False."""
+    if not ok.any():
+        return p
+    return p[int(np.argmax(ok)) : len(ok) - int(np.argmax(ok[::-1]))]
+
+
+def _tube_part(s: np.ndarray, r: np.ndarray) -> tuple[int, int]:
+    """(i0, i1): the first and last path points that are on the tube's axis.
+
+    From each end, a point is still in the bent end of the voxel route while it is
+    nearer the end than its own inscribed radius ``r`` (mm), or thinner (under 0.85
+    times) than the tube over the next two typical radii inwards: near a flat cap ``r``
+    is the distance to the cap, and a thin sheet of mask stuck to the end (where the
+    extremity voxel may lie) is thinner still."""
+    w = 2.0 * float(np.median(r))
+    n = len(s)
+    good = np.zeros(n, bool)
+    for i in range(n):
+        a = np.searchsorted(s, s[i] - w)
+        b = np.searchsorted(s, s[i] + w, side="right")
+        # inwards = towards the middle of the path
+        ahead = r[i:b] if s[i] < 0.5 * s[-1] else r[a : i + 1]
+        good[i] = r[i] >= 0.85 * float(ahead.max()) and min(s[i], s[-1] - s[i]) >= r[i]
+    if not good.any():
+        return 0, n - 1
+    return int(np.argmax(good)), n - 1 - int(np.argmax(good[::-1]))
 
 
 def _end_at_caps(path: np.ndarray, dist: np.ndarray, inside: _Inside, step_mm: float) -> np.ndarray:
     """Replace each end of a centred path, where it bends towards the extremity voxel on
-    the object's border, by the straight continuation of the path until it leaves the
-    object through the end cap; drop path points outside the object.
-
-    The bent part is where the arc length from the end is shorter than the local
-    distance to the border (the inscribed radius)."""
+    the object's border (:func:`_tube_part`), by the straight continuation of the path's
+    axis part until it leaves the object through the end cap; the path ends there,
+    inside the object."""
     from scipy import ndimage as ndi
 
-    p = np.asarray(path, dtype=np.float64)
+    p = _inside_part(np.asarray(path, dtype=np.float64), inside(path))
     if len(p) < 8:
         return p
     r = ndi.map_coordinates(dist, inside.index(p).T, order=1, mode="constant", cval=0.0)
-    s = arc_length(p)
-    ok_a = np.nonzero(s >= r)[0]
-    ok_b = np.nonzero(s[-1] - s >= r)[0]
-    if len(ok_a) == 0 or len(ok_b) == 0 or ok_b[-1] - ok_a[0] < 4:
+    i0, i1 = _tube_part(arc_length(p), r)
+    if i1 - i0 < 4:
         return p
-    i0, i1 = int(ok_a[0]), int(ok_b[-1])
     fine = 0.25 * float(min(inside.geo["spacing"]))
     parts = []
-    for i, j in ((i0, min(i0 + 2, len(p) - 1)), (i1, max(i1 - 2, 0))):
-        t = p[i] - p[j]
+    s = arc_length(p)
+    for i, j in ((i0, int(np.searchsorted(s, s[i0] + r[i0]))), (i1, int(np.searchsorted(s, s[i1] - r[i1])))):
+        t = p[i] - p[min(max(j, 0), len(p) - 1)]  # the axis' direction over one radius inwards
         t /= np.linalg.norm(t)
         parts.append(_extend(p[i], t, inside, 4 * r[i] + 8 * fine, fine))
-    middle = p[i0 : i1 + 1]
-    keep = inside(middle)
-    if keep.any():  # a centred path leaves the object only where the object is thinner than a voxel
-        middle = middle[int(np.argmax(keep)) : len(keep) - int(np.argmax(keep[::-1]))]
-    return resample_path(np.concatenate([parts[0][::-1], middle, parts[1]]), step_mm)
+    return resample_path(np.concatenate([parts[0][::-1], p[i0 : i1 + 1], parts[1]]), step_mm)
 
 
 def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = DEFAULT_SECTION_STEP_MM,
@@ -291,4 +315,5 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = D
             for k in range(3):  # the others move as their neighbours (held at the ends)
                 move[~good, k] = np.interp(s[~good], s[good], move[good, k])
         p = spline_resample(pts + move, step_mm, smooth_mm=smooth_mm)
+        p = _inside_part(p, field.sample(p) >= 0.5)  # moved ends may leave the object
     return p

@@ -100,6 +100,15 @@ class ObjectField:
         comp = np.asarray(directions, dtype=np.float64) @ self.direction  # components along the x, y, z index axes
         return np.sqrt(((comp * sig_xyz) ** 2).sum(axis=-1))
 
+    def plane_blur_mm(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Largest Gaussian sigma (mm) of the smoothing within planes spanned by unit
+        vectors u, v (k, 3) each: the tail of the blur around a section's region."""
+        sig_xyz = self.sigma_vox * np.asarray(self.spacing, dtype=np.float64)[::-1]
+        cu = np.asarray(u, dtype=np.float64) @ self.direction * sig_xyz
+        cv = np.asarray(v, dtype=np.float64) @ self.direction * sig_xyz
+        a, b, c = (cu * cu).sum(-1), (cu * cv).sum(-1), (cv * cv).sum(-1)
+        return np.sqrt(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b))
+
     def sample(self, xyz: np.ndarray) -> np.ndarray:
         """Indicator at patient positions (..., 3) mm (trilinear; 0 outside the crop)."""
         from scipy import ndimage as ndi

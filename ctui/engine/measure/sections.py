@@ -69,7 +69,7 @@ def _measure_planes(field: ObjectField, pts, u, v, *, h0: float, half0: float, m
     results: list[dict[str, Any]] = [{"inside": False} for _ in range(k)]
     half = np.full(k, half0)
     todo = np.arange(k)
-    tail_mm = 3.3 * field.sigma_vox * float(max(field.spacing))
+    tail_mm = 3.3 * field.plane_blur_mm(u, v)  # the blur's reach within each plane
     for rnd in range(5):
         if len(todo) == 0:
             break
@@ -80,7 +80,7 @@ def _measure_planes(field: ObjectField, pts, u, v, *, h0: float, half0: float, m
             n += (n + 1) % 2  # odd: a grid node on the path point
             h = 2 * hs / (n - 1)
             t = (np.arange(n) - (n - 1) / 2) * h
-            tail = int(math.ceil(tail_mm / h)) + 1
+            tails = np.ceil(tail_mm / h).astype(int) + 1
             for b0 in range(0, len(grp), batch):
                 ids = grp[b0 : b0 + batch]
                 ta = time.perf_counter()
@@ -88,7 +88,7 @@ def _measure_planes(field: ObjectField, pts, u, v, *, h0: float, half0: float, m
                 tb = time.perf_counter()
                 timings["sampling"] = timings.get("sampling", 0.0) + tb - ta
                 for j, i in enumerate(ids):
-                    r = section_of_plane(vals[j], h, tail)
+                    r = section_of_plane(vals[j], h, int(tails[i]))
                     if r.get("needs_larger") and rnd < 4:
                         retry.append(i)
                         continue
