@@ -3,8 +3,11 @@ screens read them from here, so both give the same numbers for the same object."
 
 from __future__ import annotations
 
-#: Distance between cross-sections along a path (mm), for `ctui measure` and the TUI's M screen.
-SECTION_STEP_MM = 0.5
+from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
+
+#: Distance between cross-sections along a path (mm), for `ctui measure` and the TUI's M screen:
+#: the measure package's own default (its package __init__ holds only constants: cheap to import).
+SECTION_STEP_MM = DEFAULT_SECTION_STEP_MM
 #: Section area estimate: "pv" (partial-volume integral) or "contour" (shoelace).
 SECTION_AREA = "pv"
 #: Thin-slab averaging of each section along the path (mm; 0 = single planes).
