@@ -30,6 +30,7 @@ import numpy as np
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.segment.fill3d import fill3d_seeds
+from ctui.engine.segment.necks import morph_ball
 
 
 def _sitk():
@@ -61,6 +62,64 @@ def _box(mask: np.ndarray, margin: tuple[int, int, int]) -> tuple[slice, slice, 
 def compete(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, *,
             spacing: tuple[float, float, float], connectivity: int = 8) -> np.ndarray:
     """Share ``region`` (bool (nz, ny, nx)) between foreground and background seeds (int (n, 3) z, y, x).
+
+    The same partition as a marker watershed on minus the region's distance map (the
+    boundary runs through the narrowest neck between the seeds), found faster: one
+    distance map d (mm, SimpleITK), then a bisection for the smallest r at which the
+    foreground and background seeds fall apart in {d > r} (each step a threshold and a
+    scanline fill); the background's part is the rest of {d > r} grown back by r plus
+    one voxel step (its rim and caps), the foreground what its seeds reach without
+    entering it. On a 100 x 200 x 200 region this
+    took 0.9 s against 9.1 s for SimpleITK's ``MorphologicalWatershedFromMarkers`` and
+    6.5 s for scikit-image's ``watershed`` on the same landscape, with the same result
+    (Dice 0.9999; benchmarks/segment_methods.py). When the seeds cannot be parted by a
+    neck (both deep inside one body), the watershed decides (:func:`compete_watershed`).
+    Returns bool, the foreground's share, connected to the foreground seeds.
+    """
+    fg = np.asarray(foreground, np.int64).reshape(-1, 3)
+    bg = np.asarray(background, np.int64).reshape(-1, 3)
+    reg = region.view(np.uint8) if region.dtype == bool and region.flags.c_contiguous else \
+        np.ascontiguousarray(region, dtype=np.uint8)
+    mine = fill3d_seeds(reg.view(bool), fg, connectivity=connectivity)
+    if not len(bg) or not mine[tuple(bg.T)].any():
+        return mine  # the background is not reached: nothing to share
+    check_allocation(reg.size * 6, what="the seed competition (distance map)")
+    sitk = _sitk()
+    dmap = sitk.SignedMaurerDistanceMap(_image(reg, spacing), insideIsPositive=True, squaredDistance=False,
+                                        useImageSpacing=True)
+    d = sitk.GetArrayViewFromImage(dmap)
+    bg = bg[mine[tuple(bg.T)]]  # the background seeds that matter
+    hi = float(min(d[tuple(fg.T)].max(), d[tuple(bg.T)].max()))
+    lo = 0.0
+
+    def apart(r: float) -> bool:
+        core = fill3d_seeds(d > r, fg[d[tuple(fg.T)] > r], connectivity=connectivity)
+        return not core[tuple(bg.T)].any()
+
+    if hi <= 0 or not apart(hi * 0.999):
+        return compete_watershed(region, fg, bg, spacing=spacing, connectivity=connectivity)
+    while hi - lo > 0.05:
+        mid = 0.5 * (lo + hi)
+        if apart(mid):
+            hi = mid
+        else:
+            lo = mid
+    thick = d > hi
+    fg_core = fill3d_seeds(thick, fg[d[tuple(fg.T)] > hi], connectivity=connectivity)
+    del dmap, d
+    thick &= ~fg_core  # every other thick part belongs to the background
+    bg_part = morph_ball(thick, hi + max(spacing), spacing, erode=False)  # + one voxel step: the rims and caps
+    del thick
+    bg_part &= reg.view(bool)
+    bg_part &= ~fg_core
+    free = reg.view(bool) & ~bg_part
+    del bg_part
+    return fill3d_seeds(free, fg, connectivity=connectivity)
+
+
+def compete_watershed(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, *,
+            spacing: tuple[float, float, float], connectivity: int = 8) -> np.ndarray:
+    """:func:`compete` by a marker watershed (SimpleITK), the reference and the fallback.
 
     Marker watershed on minus the region's distance map (mm): the boundary between the
     two shares runs through the narrowest part between them. Outside the region the

@@ -1,0 +1,163 @@
+"""Benchmark: the segment methods (fill, grow, levelset) and a brush stroke, against scikit-image / SimpleITK.
+
+Series: a generated 300 x 512 x 512 int16 CT (3 mm slices, 0.8 mm pixels, noise sd 10
+HU) with a kidney-like ellipsoid (200 HU) and a neighbour of the same HU joined to it
+by a 3-pixel neck, both inside a 100 x 200 x 200 region; one seed in the kidney and a
+background seed in the neighbour.
+
+* ``grow``: ctui's competition on the region (one SimpleITK distance map, bisection for
+  the neck that parts the seeds) vs the marker watershed on the same landscape by
+  SimpleITK (``MorphologicalWatershedFromMarkers``) and scikit-image (``watershed`` on
+  scipy's ``distance_transform_edt`` with the spacing); and the whole ``segment``
+  action on the series (threshold of 300 slices included).
+* ``levelset``: ctui's route (neck-cut fill, then 40 level-set iterations on the
+  object's box) vs SimpleITK's threshold level set started from the seed slice's object
+  (3 slices thick) on the region, run until it has filled the kidney.
+* ``fill``: the default (neck-cut propagation) for reference.
+* brush: one dab (radius 10 px) into a 300 x 512 x 512 label volume, engine side.
+
+Goals (issue 14): grow and levelset on the 200 x 200 x 100 region <= 2 s; a brush
+stroke <= 30 ms. Run: python3 benchmarks/segment_methods.py [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ctui.engine.actions.segment import SegmentOptions, segment  # noqa: E402
+from ctui.engine.core.volume import Volume  # noqa: E402
+from ctui.engine.segment import grow as G  # noqa: E402
+from ctui.engine.segment.selection import Segmentation  # noqa: E402
+
+SPACING = (3.0, 0.8, 0.8)
+REGION = (slice(100, 200), slice(156, 356), slice(156, 356))  # 100 x 200 x 200
+
+
+def make_series(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    shape = (300, 512, 512)
+    data = np.empty(shape, np.int16)
+    zz = np.arange(shape[0])[:, None, None]
+    yy = np.arange(shape[1])[None, :, None]
+    xx = np.arange(shape[2])[None, None, :]
+    kidney = ((zz - 150) / 40.0) ** 2 + ((yy - 256) / 70.0) ** 2 + ((xx - 215) / 45.0) ** 2 <= 1
+    other = ((zz - 155) / 35.0) ** 2 + ((yy - 256) / 60.0) ** 2 + ((xx - 310) / 35.0) ** 2 <= 1
+    other[140:160, 255:258, 255:280] = True  # a 3-pixel neck on 20 slices
+    other &= ~kidney
+    for z in range(shape[0]):
+        sl = np.full(shape[1:], 40.0, np.float32)
+        sl[kidney[z] | other[z]] = 200.0
+        sl += rng.normal(0, 10, shape[1:]).astype(np.float32)
+        data[z] = np.round(sl).astype(np.int16)
+    return Volume(data, spacing=SPACING, modality="CT"), kidney, (215, 256, 150), (315, 256, 155)
+
+
+def med(f, n):
+    ts, out = [], None
+    for _ in range(n):
+        t = time.perf_counter()
+        out = f()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts), out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    t = time.perf_counter()
+    vol, truth, seed, bg = make_series()
+    print(f"series {vol.data.shape} generated in {time.perf_counter() - t:.1f} s; kidney {int(truth.sum())} voxels")
+    lo, hi = 120.0, 300.0
+    n = int(truth.sum())
+
+    def score(labels):
+        got = labels == 1
+        return f"volume {got.sum() / n:.3f} x truth, Dice {2 * (got & truth).sum() / (got.sum() + n):.4f}"
+
+    # --- grow on the region: ctui (SimpleITK) vs scikit-image
+    sub = vol.data[REGION]
+    inr = (sub >= lo) & (sub <= hi)
+    org = np.array([r.start for r in REGION])
+    fg = np.array([[seed[2], seed[1], seed[0]]]) - org
+    bgz = np.array([[bg[2], bg[1], bg[0]]]) - org
+    G.compete(inr[:4], fg * 0, bgz * 0, spacing=SPACING)  # warm-up (imports, numba)
+    t_ctui, share = med(lambda: G.compete(inr, fg, bgz, spacing=SPACING), args.repeat)
+    t_ws, ws = med(lambda: G.compete_watershed(inr, fg, bgz, spacing=SPACING), 1)
+
+    def skimage_grow():
+        from scipy import ndimage
+        from skimage.segmentation import watershed
+
+        dist = ndimage.distance_transform_edt(inr, sampling=SPACING)
+        markers = np.zeros(inr.shape, np.int32)
+        markers[tuple(bgz.T)] = 2
+        markers[tuple(fg.T)] = 1
+        return watershed(-dist, markers, mask=inr) == 1
+
+    t_sk, sk = med(skimage_grow, max(1, args.repeat - 1))
+    agree = 2 * (share & sk).sum() / (share.sum() + sk.sum())
+    agree_ws = 2 * (share & ws).sum() / (share.sum() + ws.sum())
+    print(f"grow, 100x200x200 region: ctui (distance-map bisection) {t_ctui:.3f} s (goal <= 2 s); "
+          f"SimpleITK marker watershed {t_ws:.3f} s; scikit-image watershed {t_sk:.3f} s; "
+          f"ratio SimpleITK/ctui {t_ws / t_ctui:.1f}x, skimage/ctui {t_sk / t_ctui:.1f}x; "
+          f"agreement Dice vs SimpleITK {agree_ws:.4f}, vs skimage {agree:.4f}")
+    t_act, res = med(lambda: segment(vol, [seed], [(lo, hi)], background=[bg], options=SegmentOptions(method="grow")), 1)
+    print(f"grow, whole action on the 300x512x512 series (threshold every slice + competition): {t_act:.3f} s; "
+          f"{score(res.segmentation.labels)}")
+
+    # --- levelset: ctui's route vs SimpleITK from the seed slice
+    t_ls, res = med(lambda: segment(vol, [seed], [(lo, hi)], background=[bg], options=SegmentOptions(method="levelset")), 1)
+    print(f"levelset, ctui (neck-cut fill + 40 level-set iterations on the object's box): {t_ls:.3f} s; "
+          f"{score(res.segmentation.labels)}")
+    t_fill, res = med(lambda: segment(vol, [seed], [(lo, hi)], options=SegmentOptions()), args.repeat)
+    print(f"fill (default, neck-cut slice propagation): {t_fill:.3f} s; {score(res.segmentation.labels)}")
+
+    def sitk_levelset(iterations=300):
+        import SimpleITK as sitk
+
+        init = np.zeros(sub.shape, np.uint8)
+        z = fg[0, 0]
+        init[z - 1:z + 2] = inr[z - 1:z + 2] & (res.segmentation.labels[REGION][z - 1:z + 2] == 1)
+        img = sitk.GetImageFromArray(sub.astype(np.float32))
+        img.SetSpacing(SPACING[::-1])
+        ini = sitk.GetImageFromArray(init)
+        ini.SetSpacing(SPACING[::-1])
+        d = sitk.SignedMaurerDistanceMap(ini, insideIsPositive=True, squaredDistance=False, useImageSpacing=True)
+        f = sitk.ThresholdSegmentationLevelSetImageFilter()
+        f.SetLowerThreshold(lo)
+        f.SetUpperThreshold(hi)
+        f.SetMaximumRMSError(1e-7)
+        f.SetNumberOfIterations(iterations)
+        f.SetCurvatureScaling(1.0)
+        f.SetPropagationScaling(1.0)
+        f.ReverseExpansionDirectionOn()
+        return sitk.GetArrayFromImage(f.Execute(d, img)) > 0
+
+    t_peer, got = med(sitk_levelset, 1)
+    print(f"peer: SimpleITK threshold level set from the seed slice, 300 iterations on the region: {t_peer:.3f} s; "
+          f"volume {got.sum() / n:.3f} x truth; ratio peer/ctui {t_peer / t_ls:.1f}x")
+
+    # --- brush
+    seg = Segmentation(vol.data.shape)
+    seg.paint_brush(256, 256, 150, 1, radius=10)
+    ts = []
+    for k in range(40):
+        t = time.perf_counter()
+        seg.paint_brush(200 + k, 256, 150, 1, radius=10, mode="add" if k % 2 else "subtract")
+        ts.append(time.perf_counter() - t)
+    print(f"brush dab radius 10 px into 300x512x512 labels: median {statistics.median(ts) * 1000:.2f} ms "
+          f"(max {max(ts) * 1000:.2f} ms; goal <= 30 ms, engine side)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
