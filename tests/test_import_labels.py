@@ -170,3 +170,27 @@ def test_dcmqi_seg_written_again_by_ctui(dcmqi, tmp_path):
         back = read_label_file(out, grid=ct)
         assert [o["name"] for o in back.objects] == ["Liver"]
         np.testing.assert_array_equal(back.labels, opened.labels)
+
+
+def test_broken_or_foreign_label_files_are_one_line_errors(phantom, tmp_path):
+    from ctui.engine.actions.export import export
+    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.core.errors import FormatError
+
+    root, v, _ = phantom
+    labels = np.zeros(v.shape, np.uint8)
+    labels[8:12, 20:30, 20:30] = 1
+    save_project(tmp_path / "p.ctui", new_project(v, source_path=root / "series", labels=labels))
+    for fmt in ("dicom-seg", "rtstruct"):
+        good = tmp_path / f"{fmt}.dcm"
+        export(tmp_path / "p.ctui", format=fmt, out=good)
+        raw = good.read_bytes()
+        (tmp_path / "cut.dcm").write_bytes(raw[: len(raw) // 2])
+        with pytest.raises(FormatError):
+            read_label_file(tmp_path / "cut.dcm", grid=v)
+    ct_slice = sorted((root / "series").iterdir())[0]
+    with pytest.raises(FormatError, match="not a segmentation"):
+        read_label_file(ct_slice, grid=v)
+    (tmp_path / "notes.txt").write_text("hello")
+    with pytest.raises(FormatError, match="not a label file"):
+        read_label_file(tmp_path / "notes.txt", grid=v)

@@ -35,7 +35,7 @@ from ctui.engine.core.atomic import atomic_path
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
-from ctui.engine.core.privacy import is_identifying
+from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
@@ -158,6 +158,8 @@ def blank_identifiers(ds: Any, *, keep: bool = False) -> Any:
     """Empty the type-2 patient identifiers and drop the other identifying attributes (in place)."""
     if keep:
         return ds
+    ids = [str(ds.get(kw) or "") for kw in (*TYPE2_IDENTIFIERS, "OtherPatientIDs")]
+    scrub_dataset_text(ds, ids)  # a StudyDescription copied from the source may hold the name
     for kw in TYPE2_IDENTIFIERS:
         if kw in ds:
             setattr(ds, kw, "")
@@ -298,20 +300,32 @@ class SegSegment:
 class SegContents:
     """A DICOM-SEG read back.
 
-    ``masks`` is bool (S, nz, ny, nx), one mask per entry of ``segments``, on ``geometry``
-    (ctui convention: slice axis along row x column). ``referenced_instances`` lists the
-    SOPInstanceUIDs of the source images the SEG references; ``referenced_series`` their
-    SeriesInstanceUID(s).
+    Each segment's voxels are kept as a bounding box on ``geometry`` (ctui convention: slice
+    axis along row x column) and the bool crop inside it (memory grows with the objects,
+    not with the number of segments times the volume); :meth:`mask` gives one segment's
+    full mask. ``referenced_instances`` lists the SOPInstanceUIDs of the source images the
+    SEG references; ``referenced_series`` their SeriesInstanceUID(s).
     """
 
     segments: list[SegSegment]
-    masks: np.ndarray
     geometry: Geometry
     segmentation_type: str
+    boxes: list[tuple[slice, slice, slice] | None] = field(default_factory=list)
+    crops: list[np.ndarray | None] = field(default_factory=list)
     frame_of_reference: str = ""
     referenced_series: list[str] = field(default_factory=list)
     referenced_instances: list[str] = field(default_factory=list)
     number_of_frames: int = 0
+
+    def mask(self, k: int) -> np.ndarray:
+        """Segment ``k`` (index into ``segments``) as bool (z, y, x) on ``geometry``."""
+        out = np.zeros(self.geometry.shape, dtype=bool)
+        if self.boxes[k] is not None:
+            out[self.boxes[k]] = self.crops[k]
+        return out
+
+    def voxel_counts(self) -> list[int]:
+        return [0 if c is None else int(np.count_nonzero(c)) for c in self.crops]
 
 
 def _rgb(desc: Any) -> tuple[int, int, int] | None:
@@ -346,42 +360,56 @@ def geometry_from_hd(affine: np.ndarray, shape: Sequence[int]) -> tuple[Geometry
     return Geometry(tuple(int(s) for s in shape[:3]), tuple(sp), tuple(origin), direction), flipped
 
 
+def _crop(mask: np.ndarray) -> tuple[tuple[slice, slice, slice] | None, np.ndarray | None]:
+    if not mask.any():
+        return None, None
+    box = tuple(slice(int(ix[0]), int(ix[-1]) + 1) for ix in
+                (np.flatnonzero(mask.any(axis=(1, 2))), np.flatnonzero(mask.any(axis=(0, 2))),
+                 np.flatnonzero(mask.any(axis=(0, 1)))))
+    return box, mask[box].copy()  # type: ignore[return-value]
+
+
 def read_seg(path: str | os.PathLike) -> SegContents:
-    """Read a DICOM-SEG (BINARY, FRACTIONAL thresholded at half, or LABELMAP).
+    """Read a DICOM-SEG (BINARY, FRACTIONAL thresholded at half, or LABELMAP), one segment at a time.
 
     Overlapping BINARY segments are kept apart: one mask per segment. A LABELMAP's
     segment 0 (background) is left out. Raises FormatError for a file that is not a SEG
-    or whose frames do not form a regular volume.
+    or whose frames do not form a regular volume. Peak memory: one volume of the SEG's
+    grid (1 byte a voxel, 4 for FRACTIONAL) plus the segments' crops.
     """
     import highdicom as hd
 
     p = Path(path)
     try:
         seg = hd.seg.segread(str(p))
-    except Exception as exc:  # noqa: BLE001 - pydicom/highdicom raise many types on foreign files
-        raise FormatError(f"not a readable DICOM-SEG ({' '.join(str(exc).split())[:160]})", path=p) from None
-    numbers = [int(n) for n in seg.segment_numbers if n != 0]  # a LABELMAP's 0 is its background
-    try:
-        vol = seg.get_volume(combine_segments=False, segment_numbers=numbers, dtype=np.float32)
-    except (ValueError, RuntimeError) as exc:
-        raise FormatError(f"the SEG's frames do not form a regular volume ({' '.join(str(exc).split())[:160]})",
-                          path=p) from None
-    arr = np.asarray(vol.array)
-    if arr.ndim == 3:
-        arr = arr[..., None]
-    geom, flipped = geometry_from_hd(vol.affine, arr.shape[:3])
-    masks = np.moveaxis(arr >= 0.5, -1, 0)
-    if flipped:
-        masks = masks[:, ::-1]
-    segments = []
-    for n in numbers:
-        d = seg.get_segment_description(n)
-        segments.append(SegSegment(number=int(n), label=str(d.SegmentLabel), color=_rgb(d),
-                                   algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
-    refs = seg.get_source_image_uids()
-    return SegContents(
-        segments=segments, masks=np.ascontiguousarray(masks), geometry=geom,
-        segmentation_type=str(seg.SegmentationType), frame_of_reference=str(seg.get("FrameOfReferenceUID", "")),
-        referenced_series=sorted({str(r[1]) for r in refs}), referenced_instances=[str(r[2]) for r in refs],
-        number_of_frames=int(seg.get("NumberOfFrames", 0) or 0),
-    )
+        numbers = [int(n) for n in seg.segment_numbers if n != 0]  # a LABELMAP's 0 is its background
+        if not numbers:
+            raise FormatError("the DICOM-SEG holds no segment", path=p)
+        fractional = str(seg.SegmentationType) == "FRACTIONAL"
+        out = SegContents([], Geometry((1, 1, 1)), str(seg.SegmentationType),
+                          frame_of_reference=str(seg.get("FrameOfReferenceUID", "")),
+                          number_of_frames=int(seg.get("NumberOfFrames", 0) or 0))
+        for n in numbers:
+            vol = seg.get_volume(segment_numbers=[n], combine_segments=False,
+                                 dtype=np.float32 if fractional else np.uint8)
+            arr = np.asarray(vol.array)
+            arr = arr[..., 0] if arr.ndim == 4 else arr
+            out.geometry, flipped = geometry_from_hd(vol.affine, arr.shape[:3])
+            mask = arr >= 0.5 if fractional else arr != 0
+            box, crop = _crop(mask[::-1] if flipped else mask)
+            out.boxes.append(box)
+            out.crops.append(crop)
+            d = seg.get_segment_description(n)
+            out.segments.append(SegSegment(number=n, label=str(d.get("SegmentLabel", "")), color=_rgb(d),
+                                           algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
+        refs = seg.get_source_image_uids()
+    except FormatError:
+        raise
+    except MemoryError:
+        raise FormatError("not enough memory to read this DICOM-SEG", path=p) from None
+    except Exception as exc:  # noqa: BLE001 - pydicom/highdicom raise many types on foreign or broken files
+        raise FormatError(f"not a readable DICOM-SEG or its frames do not form a regular volume "
+                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})", path=p) from None
+    out.referenced_series = sorted({str(r[1]) for r in refs})
+    out.referenced_instances = [str(r[2]) for r in refs]
+    return out

@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -191,38 +191,38 @@ def _ids(numbers: Sequence[int]) -> list[int]:
     return list(range(1, len(nums) + 1))
 
 
-def assemble(masks: Sequence[np.ndarray], numbers: Sequence[int], names: Sequence[str],
+def assemble(mask_of: Callable[[int], np.ndarray], numbers: Sequence[int], names: Sequence[str],
              colors: Sequence[Any]) -> tuple[np.ndarray, list[dict], dict[int, np.ndarray], list[str]]:
     """One label map from per-segment masks: later segments win overlaps (see module docstring).
 
+    ``mask_of(k)`` gives segment k's full bool mask on the target grid; it is called once
+    per segment, and once more for the segments that overlap another (their masks are
+    kept), so memory stays at the label map plus one mask, plus the overlapping ones.
     Returns (labels uint8, objects, masks of overlapping objects, warnings).
     """
     ids = _ids(numbers)
-    shape = masks[0].shape if len(masks) else (1, 1, 1)
-    labels = np.zeros(shape, np.uint8)
-    cover = np.zeros(shape, np.uint8)  # how many segments claim each voxel (capped)
-    for m in masks:
-        cover += m & (cover < 255)
-    overlapping: dict[int, np.ndarray] = {}
-    warnings: list[str] = []
-    objects = []
-    for k, (m, oid) in enumerate(zip(masks, ids)):
+    labels: np.ndarray | None = None
+    objects, involved = [], set()
+    for k, oid in enumerate(ids):
+        m = mask_of(k)
+        if labels is None:
+            labels = np.zeros(m.shape, np.uint8)
+        under = labels[m]
+        hit = np.flatnonzero(np.bincount(under, minlength=256)[1:]) + 1
+        if hit.size:
+            involved |= {oid, *(int(h) for h in hit)}
         labels[m] = oid
         color = tuple(int(c) for c in colors[k]) if colors[k] is not None else object_color(oid)
         objects.append({"id": oid, "name": names[k] or f"object {oid}", "color": list(color),
                         "source_number": int(numbers[k])})
-    if cover.max(initial=0) > 1:
-        multi = cover > 1
-        for k, (m, oid) in enumerate(zip(masks, ids)):
-            if np.any(m & multi):
-                overlapping[oid] = np.ascontiguousarray(m)
-        pairs = []
-        for a in range(len(masks)):
-            for b in range(a + 1, len(masks)):
-                if ids[a] in overlapping and ids[b] in overlapping:
-                    n = int(np.count_nonzero(masks[a] & masks[b]))
-                    if n:
-                        pairs.append(f"{names[a] or ids[a]}/{names[b] or ids[b]} {n}")
+    assert labels is not None
+    overlapping = {oid: np.ascontiguousarray(mask_of(k)) for k, oid in enumerate(ids) if oid in involved}
+    warnings = []
+    if overlapping:
+        name = {o["id"]: o["name"] for o in objects}
+        keys = sorted(overlapping, key=ids.index)
+        pairs = [f"{name[a]}/{name[b]} {n}" for i, a in enumerate(keys) for b in keys[i + 1:]
+                 if (n := int(np.count_nonzero(overlapping[a] & overlapping[b])))]
         warnings.append("overlapping segments (voxels): " + ", ".join(pairs) + "; the label map shows the later "
                         "segment there, measurements use each segment's own mask")
     return labels, objects, overlapping, warnings
@@ -233,12 +233,13 @@ def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
     from ctui.engine.io.dicomseg import read_seg
 
     c = read_seg(p)
-    masks = c.masks
-    geom = c.geometry
-    if grid is not None:
-        masks = place_on_grid(masks, c.geometry, grid, path=p)
-        geom = grid
-    labels, objects, overlap, warnings = assemble(list(masks), [s.number for s in c.segments],
+    geom = grid if grid is not None else c.geometry
+
+    def mask_of(k: int) -> np.ndarray:
+        m = c.mask(k)
+        return m if grid is None else place_on_grid(m, c.geometry, grid, path=p)
+
+    labels, objects, overlap, warnings = assemble(mask_of, [s.number for s in c.segments],
                                                   [s.label for s in c.segments], [s.color for s in c.segments])
     return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, warnings, str(p))
 
@@ -250,19 +251,23 @@ def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
         raise CtuiError("an RTSTRUCT holds contours only: open it over the series it was drawn on "
                         "(ctui open SERIES --labels FILE)", path=p)
     c = read_rtstruct(p)
-    masks, warnings = [], []
-    for roi in c.rois:
-        m, off = roi_mask(roi, grid)
-        if off:
-            warnings.append(f"ROI {roi.name}: {off} contours are not on a slice of the series and were left out")
-        masks.append(m)
-    if not masks:
-        raise CtuiError("the RTSTRUCT holds no ROI contour", path=p)
-    if masks and all(not m.any() for m in masks):
+    if not c.rois:
+        raise CtuiError("the RTSTRUCT holds no ROI", path=p)
+    warnings: list[str] = []
+    placed = {"any": False}
+
+    def mask_of(k: int) -> np.ndarray:
+        m, off = roi_mask(c.rois[k], grid)
+        placed["any"] |= bool(m.any())
+        if off and not any(w.startswith(f"ROI {c.rois[k].name}:") for w in warnings):
+            warnings.append(f"ROI {c.rois[k].name}: {off} contours are not on a slice of the series and were left out")
+        return m
+
+    labels, objects, overlap, w = assemble(mask_of, [r.number for r in c.rois], [r.name for r in c.rois],
+                                           [r.color for r in c.rois])
+    if not placed["any"]:
         raise CtuiError("no contour of the RTSTRUCT lies on a slice of the series: it was drawn on another series",
                         path=p)
-    labels, objects, overlap, w = assemble(masks, [r.number for r in c.rois], [r.name for r in c.rois],
-                                           [r.color for r in c.rois])
     return ImportedLabels(labels, objects, grid, "rtstruct", overlap, warnings + w, str(p))
 
 

@@ -265,6 +265,14 @@ def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
         raise FormatError(f"not a readable DICOM file ({' '.join(str(exc).split())[:160]})", path=p) from None
     if str(ds.get("SOPClassUID", "")) != RTSTRUCT_SOP_CLASS and ds.get("Modality") != "RTSTRUCT":
         raise FormatError("not an RT Structure Set", path=p)
+    try:
+        return _rtstruct_contents(ds)
+    except (AttributeError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise FormatError(f"corrupted RT Structure Set ({type(exc).__name__}: {' '.join(str(exc).split())[:160]})",
+                          path=p) from None
+
+
+def _rtstruct_contents(ds: Any) -> RtStructContents:
     names = {int(r.ROINumber): str(r.get("ROIName", "")) for r in ds.get("StructureSetROISequence", [])}
     rois: list[RoiInfo] = []
     for rc in ds.get("ROIContourSequence", []):
