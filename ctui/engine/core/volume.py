@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.errors import CtuiError
+
 from ctui.engine.core.geometry import Geometry
 
 
@@ -81,8 +83,8 @@ class Volume:
         self.origin = tuple(float(o) for o in self.origin)  # type: ignore[assignment]
         self.direction = np.asarray(self.direction, dtype=np.float64).reshape(3, 3)
         for s in self.spacing:
-            if not (np.isfinite(s) and s > 0):
-                raise ValueError(f"Volume spacing must be positive and finite, got {self.spacing}")
+            if not (np.isfinite(s) and s > 0):  # a loader's bug or a header it let through: never NaN in JSON
+                raise CtuiError(f"voxel size must be positive and finite, got {self.spacing} (dz, dy, dx) mm")
         if self.window is None:
             from ctui.engine.core.windows import auto_window  # local: windows imports nothing heavy
 

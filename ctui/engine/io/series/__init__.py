@@ -39,7 +39,7 @@ from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_key
 
-__all__ = ["load", "scan", "estimate", "LoadError"]
+__all__ = ["load", "inspect", "scan", "estimate", "LoadError"]
 
 _MHD = {".mhd", ".mha"}
 _RESEARCH = (".nii", ".nii.gz", ".nrrd", ".nhdr")
@@ -137,6 +137,7 @@ def load(
     offset: int | None = None,
     resample: bool = True,
     memory_limit: int | None = None,
+    headers_only: bool = False,
     **options: Any,
 ) -> Volume:
     """Load a series, image stack or raw volume.
@@ -168,6 +169,9 @@ def load(
         DICOM: resample unevenly spaced slices onto a regular grid (default True).
     memory_limit : int, optional
         Bytes the volume may use (default: 90% of available memory).
+    headers_only : bool
+        DICOM: describe the volume from the headers and three sample slices (see
+        :func:`inspect`); other inputs load whole.
 
     Returns
     -------
@@ -261,14 +265,27 @@ def load(
     ordered = dicom._ordered_series(found)
     summaries = [dicom.series_summary(s, ids=ids) for s in ordered]
     chosen = dicom.pick_series(ordered, series, path_label)
-    vol = dicom.load_series(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
-                            spacing=spacing, all_series=summaries, **common)
+    loader = dicom.inspect_series if headers_only else dicom.load_series
+    vol = loader(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
+                 spacing=spacing, all_series=summaries, **common)
     if len(ordered) > 1:
         idx = ordered.index(chosen)
         vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "
                             f"({len(chosen.frames)} images); choose another with series=N (--series N)")
     vol.meta["series_index"] = ordered.index(chosen)
     return vol
+
+
+def inspect(path: str | os.PathLike | Sequence[str | os.PathLike], **options: Any) -> Volume:
+    """What :func:`load` would give, without decoding the pixels (``ctui info``).
+
+    DICOM: headers and three sample slices only; ``data`` is a zero-byte read-only
+    placeholder of the volume's shape and dtype (``np.broadcast_to``), ``meta`` has
+    ``headers_only: True`` and ``value_range`` (of the sampled slices, which
+    ``Volume.value_range()`` returns). Other inputs are loaded whole. Options as
+    :func:`load`.
+    """
+    return load(path, headers_only=True, **options)
 
 
 def _rel(p: Path, base: Path | None) -> str:

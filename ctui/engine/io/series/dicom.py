@@ -134,9 +134,10 @@ def _skip_frame(skipped: list[dict[str, str]], f: Frame, base: Path | None, reas
 
 def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dict[str, str]], crop: Any = None,
                    downsample: Any = None, resample: bool = True, spacing: Any = None,
-                   memory_limit: int | None = None, dtype: np.dtype | None = None) -> Prepared:
+                   memory_limit: int | None = None, dtype: np.dtype | None = None, check: bool = True) -> Prepared:
     """Everything about a series that headers tell: order, geometry, output grid and
-    dtype; files left out go to ``skipped``. Checks the memory the load will need."""
+    dtype; files left out go to ``skipped``. Checks the memory the load will need
+    (unless ``check`` is False: describing a series allocates nothing)."""
     frames = _dominant(s.frames, skipped, base)
     usable = []
     for f in frames:  # compressed files without a decoder: skip each with the reason
@@ -183,7 +184,8 @@ def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     final = grid.out_shape(len(zsel))
     # the decoded stack plus the largest regridded copy are alive at once
     nbytes = (int(np.prod(out_shape)) + (int(np.prod(final)) if final != out_shape else 0)) * dtype.itemsize
-    check_memory(nbytes, shape=final, path=path, limit=memory_limit)
+    if check:
+        check_memory(nbytes, shape=final, path=path, limit=memory_limit)
     return Prepared(frames=sorted_frames, geo=geo, plan=plan, full_shape=full_shape, zsel=zsel, dtype=dtype,
                     optimistic=optimistic, grid=grid, warnings=warnings, pixel_spacing=(dy, dx), dz_user=dz_user)
 
@@ -300,6 +302,33 @@ def load_series(
     return _volume(out, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series)
 
 
+def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dict[str, str]], ids: set[str],
+                   crop: Any = None, downsample: Any = None, resample: bool = True, spacing: Any = None,
+                   all_series: list[dict[str, Any]] | None = None, **_: Any) -> Volume:
+    """The Volume :func:`load_series` would give, from headers and three sample slices
+    (first, middle, last): ``data`` is a zero-byte read-only placeholder of the final
+    shape and dtype; ``meta["headers_only"]`` is True and ``meta["value_range"]`` the
+    sampled slices' range (``ctui info`` on 300 slices of 512x512 reads no other pixel)."""
+    prep = prepare_series(s, path=path, base=base, skipped=skipped, crop=crop, downsample=downsample,
+                          resample=resample, spacing=spacing, check=False)
+    plan, zsel, f0 = prep.plan, prep.zsel, prep.frames[0]
+    ny, nx = plan.out_shape(prep.full_shape)[1:]
+    picks = sorted({zsel[0], zsel[len(zsel) // 2], zsel[-1]})
+    sample = np.empty((len(picks), ny, nx), prep.dtype)
+    full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
+    ok = [k for k, zi in enumerate(picks)
+          if _decode_frame(prep.frames[zi], sample[k], plan.y, plan.x, full_plane, False, [], k) is None]
+    sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)
+    grid = prep.grid
+    shape = grid.out_shape(len(zsel))
+    placeholder = np.broadcast_to(np.zeros((), prep.dtype), shape)
+    vol = _volume(placeholder, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series,
+                  sample=sample)
+    vol.meta["headers_only"] = True
+    vol.meta["value_range"] = [float(sample.min()), float(sample.max())]
+    return vol
+
+
 def _grid_origin(prep: Prepared, grid: GridPlan, zsel: list[int]) -> np.ndarray:
     """Patient position (x, y, z) of voxel (0, 0, 0) of the output grid."""
     geo, plan = prep.geo, prep.plan
@@ -318,7 +347,8 @@ def _grid_origin(prep: Prepared, grid: GridPlan, zsel: list[int]) -> np.ndarray:
 
 
 def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *, s: Series, path: Any,
-            skipped: list[dict[str, str]], ids: set[str], all_series: list[dict[str, Any]] | None) -> Volume:
+            skipped: list[dict[str, str]], ids: set[str], all_series: list[dict[str, Any]] | None,
+            sample: np.ndarray | None = None) -> Volume:
     f0 = prep.frames[0]
     plan = prep.plan
     dy, dx = prep.pixel_spacing
@@ -331,7 +361,7 @@ def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *,
     if window is None:
         from ctui.engine.core.windows import auto_window
 
-        window = auto_window(out, modality=f0.modality)
+        window = auto_window(out if sample is None else sample, modality=f0.modality)
     if f0.photometric == "MONOCHROME1":
         warnings.append("MONOCHROME1 (inverted grey) image: values inverted so that higher is brighter")
     if not plan.is_full(prep.full_shape):

@@ -19,9 +19,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ctui.engine.io.series._common import rel
+from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
 
-PIXEL_TAGS = {0x7FE00010: "int", 0x7FE00008: "f4", 0x7FE00009: "f8"}
-_LONG_VRS = {b"OB", b"OW", b"OF", b"OD", b"OL", b"OV", b"UN", b"SQ", b"UT", b"UC", b"UR"}
 _NATIVE_SYNTAXES = {
     "1.2.840.10008.1.2",  # implicit VR little endian
     "1.2.840.10008.1.2.1",  # explicit VR little endian
@@ -149,7 +148,6 @@ def _vec(v: Any, n: int) -> np.ndarray | None:
     return a
 
 
-_BIN = {"US": "H", "SS": "h", "UL": "I", "SL": "i", "FL": "f", "FD": "d"}
 
 
 class _Fast:
@@ -159,10 +157,6 @@ class _Fast:
     character set go through pydicom."""
 
     _PYDICOM = {"SQ", "PN", "LO", "SH", "ST", "LT", "UT", "UC"}
-
-    _TEXT = {"PN", "LO", "SH", "ST", "LT", "UT", "UC"}
-    #: character sets whose text decodes with one Python codec (no ISO 2022 escapes)
-    _CODECS = {"": "latin-1", "ISO_IR 6": "latin-1", "ISO_IR 100": "latin-1", "ISO_IR 192": "utf-8"}
 
     def __init__(self, ds: Any) -> None:
         self.ds = ds
@@ -176,7 +170,7 @@ class _Fast:
             cs = "?"
         # text VRs decoded here when the character set is a plain one (pydicom's decoding
         # of person names and long strings was a third of the header time)
-        self.codec = self._CODECS.get(cs)
+        self.codec = CODECS.get(cs)
 
     _TAGS: dict[str, Any] = {}
 
@@ -201,33 +195,13 @@ class _Fast:
             vr = str(elem.VR) if elem.VR else dictionary_VR(tag)
         except KeyError:
             return default
-        if elem.value is None or vr == "SQ" or (vr in self._PYDICOM and (self.codec is None or vr not in self._TEXT)):
+        if elem.value is None or vr == "SQ" or (vr in self._PYDICOM and (self.codec is None or vr not in TEXT_VRS)):
             try:
                 return self.ds[tag].value
             except Exception:
                 return default
-        raw = bytes(elem.value)
-        if vr in self._TEXT:
-            text = raw.decode(self.codec, errors="replace").strip("\x00 ")
-            if not text:
-                return default
-            if vr in ("ST", "LT", "UT"):  # no value multiplicity
-                return text
-            parts = [t.strip() for t in text.split("\\")]
-            return parts[0] if len(parts) == 1 else parts
-        if vr in _BIN:
-            code = _BIN[vr]
-            size = struct.calcsize(code)
-            n = len(raw) // size
-            if n == 0:
-                return default
-            vals = struct.unpack(("<" if elem.is_little_endian else ">") + code * n, raw[: n * size])
-            return vals[0] if n == 1 else list(vals)
-        text = raw.decode("latin-1").strip("\x00 ")
-        if not text:
-            return default
-        parts = [t.strip() for t in text.split("\\")]
-        return parts[0] if len(parts) == 1 else parts
+        v = decode_raw(vr, bytes(elem.value), elem.is_little_endian, self.codec or "latin-1")
+        return default if v is None else v
 
     def __contains__(self, keyword: str) -> bool:
         return self.get(keyword) is not None
@@ -359,6 +333,13 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
         # reads and tells on a file cost more than the parsing: 300 CT headers 2x faster);
         # a header longer than that is parsed from the file itself
         head = fh.read(_HEAD_BYTES)
+        quick = quick_parse(head)
+        if quick is not None:
+            try:
+                return _checked_frames(quick, path, size, quick.syntax, quick.implicit, True, quick.pixel_pos,
+                                       io.BytesIO(head))
+            except _Skip:
+                pass  # judged again through pydicom: same reasons for the files that are really bad
         if len(head) >= size:
             return _parse(io.BytesIO(head), path, size)
         try:
@@ -397,10 +378,22 @@ def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
         syntax = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
         if not syntax:
             syntax = "1.2.840.10008.1.2" if implicit else ("1.2.840.10008.1.2.1" if little else "1.2.840.10008.1.2.2")
-        frames = _frames_from_dataset(_Fast(ds), path, syntax, full=ds)
+        return _checked_frames(_Fast(ds), path, size, syntax, implicit, little, pos, fh)
+    except _Skip:
+        raise
+    except Exception as exc:
+        raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+
+
+def _checked_frames(ds: Any, path: str, size: int, syntax: str, implicit: bool, little: bool, pos: int,
+                    fh: Any) -> tuple[list[Frame], list[str]]:
+    """Frames of a parsed header (``ds.get(keyword)``), the pixel data element at ``pos``
+    in ``fh`` checked against the file's ``size``; and the identifiers found."""
+    try:
+        frames = _frames_from_dataset(ds, path, syntax)
         ids = []
         for kw in _ID_KEYWORDS:
-            v = _Fast(ds).get(kw)
+            v = ds.get(kw)
             if v:
                 ids.append(str(v))
         compressed = syntax not in _NATIVE_SYNTAXES
@@ -437,7 +430,7 @@ def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
         raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
 
-def _frames_from_dataset(ds: Any, path: str, syntax: str, *, full: Any = None) -> list[Frame]:
+def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
     rows, cols = int(ds.get("Rows") or 0), int(ds.get("Columns") or 0)
     if rows <= 0 or cols <= 0:
         raise _Skip("no image (Rows/Columns missing)")
