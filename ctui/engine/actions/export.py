@@ -242,10 +242,9 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     if fmt == "dicom-seg":
         from ctui.engine.io.dicomseg import write_seg
 
-        if src.masks:
-            res.warnings.append("overlapping objects: DICOM-SEG is written from the label map (the later object "
-                                "holds each overlapped voxel)")
-        write_seg(p, labels, _dicom_sources(src), objects=objs, keep_identifiers=keep_identifiers, progress=sub)
+        masks = {k: m for k, m in src.masks.items() if k in ids}  # overlapping segments stay overlapping
+        write_seg(p, labels, _dicom_sources(src), objects=objs, keep_identifiers=keep_identifiers, masks=masks,
+                  progress=sub)
     elif fmt == "rtstruct":
         from ctui.engine.io.rtstruct import write_rtstruct
 

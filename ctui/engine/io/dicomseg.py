@@ -202,7 +202,8 @@ def _segment_description(n: int, obj: dict) -> Any:
 
 def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any], *,
               objects: Sequence[dict] | None = None, keep_identifiers: bool = False,
-              series_description: str = "ctui segmentation", progress: Progress | None = None) -> Path:
+              series_description: str = "ctui segmentation", masks: dict[int, np.ndarray] | None = None,
+              progress: Progress | None = None) -> Path:
     """Write ``labels`` as a BINARY DICOM-SEG over the source images.
 
     Parameters
@@ -212,6 +213,8 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     sources : the series' headers from :func:`source_datasets` (slice order).
     objects : dicts with ``id``, ``name``, ``color`` (r, g, b 0..255), as in a project.
     keep_identifiers : keep the patient name/ID/birth date copied from the source.
+    masks : {object id: bool (z, y, x)} full masks of objects that overlap others (imported
+        segments): then every segment is written from its own mask, overlaps kept.
 
     Returns the written path. Raises CtuiError when ``labels`` holds no object.
     """
@@ -221,13 +224,23 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
 
     lab = np.asarray(labels)
     objs = _objects_in(lab, objects)
+    masks = masks or {}
+    known = {o["id"] for o in objs}
+    for oid in sorted(k for k in masks if k not in known and masks[k].any()):  # hidden under later segments
+        info = next((o for o in objects or [] if int(o.get("id", -1)) == oid), {})
+        objs.append({"id": oid, "name": str(info.get("name") or f"object {oid}"),
+                     "color": tuple(int(c) for c in info.get("color", object_color(oid)))[:3]})
+    objs.sort(key=lambda o: o["id"])
     if not objs:
         raise CtuiError("no object in the labels: nothing to write", path=path)
     report(progress, 0.05, 1.0, "DICOM-SEG: segments")
-    lut = np.zeros(256, np.uint8)
-    for n, o in enumerate(objs, start=1):
-        lut[o["id"]] = n
-    seg_array = lut[lab]
+    if masks:  # overlapping segments: one bool plane per segment (S x the volume, only for such imports)
+        seg_array = np.stack([masks[o["id"]] if o["id"] in masks else lab == o["id"] for o in objs], axis=-1)
+    else:
+        lut = np.zeros(256, np.uint8)
+        for n, o in enumerate(objs, start=1):
+            lut[o["id"]] = n
+        seg_array = lut[lab]
     if len(sources) == 1 and seg_array.shape[0] > 1:
         seg_array = _multiframe_order(seg_array, sources[0])
     descs = [_segment_description(n, o) for n, o in enumerate(objs, start=1)]
