@@ -85,3 +85,18 @@ def test_batch_on_a_running_scheduler(manifest):
         res = run_batch(root / "one.csv", out=root / "one-results.csv", scheduler=cluster.scheduler_address)
     assert (res.ran, res.failed) == (1, 0)
     assert float(res.rows[0]["volume_voxels_ml"]) == pytest.approx(truths["case0"], rel=0.03)
+
+
+def test_batch_cli(manifest, capsys):
+    import json
+
+    from ctui.cli import main
+
+    root, truths = manifest
+    lines = (root / "jobs.csv").read_text().splitlines()
+    (root / "cli.csv").write_text("\n".join([lines[0], lines[1], lines[-1]]) + "\n")
+    rc = main(["batch", str(root / "cli.csv"), "--out", str(root / "cli-results.csv"), "--threads", "--workers", "1",
+               "--json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert rc == 1 and rep["failed"] == 1 and rep["jobs"] == 2  # a failed job: exit status 1, the rest written
+    assert [r["status"] for r in rep["rows"]] == ["ok", "failed"]
