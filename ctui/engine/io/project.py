@@ -2,9 +2,12 @@
 
 A project is ONE file: a zip archive (deflate) holding
 
-* ``project.json``: format name and version, source path and options, pipeline
-  (``Pipeline.to_dict()``), objects (id, name, colour, seeds, tolerance/range...),
-  propagation settings, drift corrections, window and free metadata;
+* ``project.json``: format name and version, source path and options, the source
+  series' geometry (shape, spacing, origin, direction), modality, SeriesInstanceUID and
+  voxel hash (:func:`source_identity`), pipeline (``Pipeline.to_dict()``), objects (id,
+  name, colour, seeds, tolerance/range...), propagation settings, drift corrections,
+  window and free metadata: the one schema of :mod:`ctui.engine.io.projectschema`,
+  validated field by field on open;
 * ``labels.npy``: the label volume (uint8, (z, y, x)), when there is one.
 
 It is written atomically (temporary file in the same folder, fsync, rename), so a
