@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.mesh.mc_tables import NTRI, TRI_TABLE
 
@@ -24,7 +25,8 @@ _EDGE_START = np.array(
      (1, 0, 0, 0), (1, 0, 0, 1), (1, 1, 0, 0), (1, 1, 0, 1),
      (2, 0, 0, 0), (2, 0, 0, 1), (2, 0, 1, 0), (2, 0, 1, 1)], dtype=np.int64)
 _NTRI8 = NTRI.astype(np.uint8)
-_SLAB_VOXELS = 1 << 22  # about 4 M voxels per slab
+_SLAB_VOXELS = 1 << 21  # about 2 M voxels per slab
+_CHUNK = 1 << 18  # edges or cells per vectorised step (a few hundred bytes each in temporaries)
 
 
 def _cases(ins: np.ndarray) -> np.ndarray:
@@ -38,14 +40,25 @@ def _cases(ins: np.ndarray) -> np.ndarray:
     return case
 
 
-def _slab_edges(ins: np.ndarray, z0: int, n_planes: int, shape: tuple[int, int, int]) -> tuple[np.ndarray, ...]:
-    """Crossed edges starting in planes z0 .. z0 + n_planes - 1: (key, axis, z, y, x), sorted by key."""
+def _slab_edges(ins: np.ndarray, z0: int, n_planes: int, shape: tuple[int, int, int], kept_bytes: int
+                ) -> tuple[np.ndarray, ...]:
+    """Crossed edges starting in planes z0 .. z0 + n_planes - 1: (key, axis, z, y, x), sorted by key.
+
+    Checks first that this slab's working memory, its output and the final copy of
+    everything kept so far (``kept_bytes``) fit, so a huge surface stops with a message."""
     nz, ny, nx = shape
     keys, axes, zs, ys, xs = [], [], [], [], []
     p = ins[:n_planes]
     crossings = [p[:, :, :-1] != p[:, :, 1:], p[:, :-1, :] != p[:, 1:, :]]
     mz = min(n_planes, ins.shape[0] - 1)  # z-edges: not from the volume's last plane
     crossings.append(ins[:mz] != ins[1: mz + 1])
+    n = sum(int(np.count_nonzero(c)) for c in crossings)
+    # per edge: ~120 bytes of temporaries here and in the vertex step; out: position, normal,
+    # key (32 bytes) and about two triangles' keys and ids (2 x 36 bytes); all kept to
+    # the end, where they are concatenated once more
+    out = n * (32 + 72)
+    check_allocation(n * 120 + out + (kept_bytes + out), what=f"a surface of over {2 * n:,} triangles",
+                     hint="raise --iso or crop the series")
     for axis, cross in enumerate(crossings):
         z, y, x = np.nonzero(cross)
         z = z + z0
@@ -107,24 +120,32 @@ def _vertices(data, level, axis, z, y, x, m, org, ginv, with_normals):
     return pos, norms
 
 
-def _slab_faces(case: np.ndarray, z0: int, shape: tuple[int, int, int]) -> np.ndarray:
-    """Edge keys (k, 3) of the triangles of the slab's cells, in raster and table order."""
-    nz, ny, nx = shape
-    flat = np.flatnonzero(_NTRI8[case])
-    if len(flat) == 0:
-        return np.zeros((0, 3), np.int64)
-    c = case.ravel()[flat]
-    cz, cy, cx = np.unravel_index(flat, case.shape)
-    cz = cz + z0
+def _cells_faces(c: np.ndarray, cz: np.ndarray, cy: np.ndarray, cx: np.ndarray, ny: int, nx: int) -> np.ndarray:
+    """Edge keys (k, 3) of the triangles of cells (cz, cy, cx) with cases ``c``, in order."""
     nt = NTRI[c]
-    cell = np.repeat(np.arange(len(flat)), nt)
+    cell = np.repeat(np.arange(len(c)), nt)
     k = np.arange(len(cell)) - np.repeat(np.cumsum(nt) - nt, nt)
-    edges = TRI_TABLE[c[cell], k]  # (T, 3) edge ids 0..11
-    st = _EDGE_START[edges]  # (T, 3, 4)
-    zz = cz[cell][:, None] + st[..., 1]
-    yy = cy[cell][:, None] + st[..., 2]
-    xx = cx[cell][:, None] + st[..., 3]
-    return ((zz * ny + yy) * 3 + st[..., 0]) * nx + xx
+    st = _EDGE_START[TRI_TABLE[c[cell], k]]  # (T, 3, 4): axis, dz, dy, dx of each corner's edge
+    key = (cz[cell][:, None] + st[..., 1]) * ny
+    key += cy[cell][:, None] + st[..., 2]
+    key *= 3
+    key += st[..., 0]
+    key *= nx
+    key += cx[cell][:, None] + st[..., 3]
+    return key
+
+
+def _slab_faces(case: np.ndarray, z0: int, shape: tuple[int, int, int]) -> np.ndarray:
+    """Edge keys (k, 3) of the triangles of the slab's cells, in raster and table order
+    (in chunks of cells, so the temporaries stay small on noisy data)."""
+    _, ny, nx = shape
+    flat = np.flatnonzero(_NTRI8[case])
+    out = []
+    for i in range(0, len(flat), _CHUNK):
+        f = flat[i: i + _CHUNK]
+        cz, cy, cx = np.unravel_index(f, case.shape)
+        out.append(_cells_faces(case.ravel()[f], cz + z0, cy, cx, ny, nx))
+    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
 
 
 def marching_cubes_numpy(data: np.ndarray, thr, level: float, m: np.ndarray, org: np.ndarray, ginv: np.ndarray,
@@ -136,17 +157,19 @@ def marching_cubes_numpy(data: np.ndarray, thr, level: float, m: np.ndarray, org
     nz, ny, nx = shape
     step = max(1, _SLAB_VOXELS // max(ny * nx, 1))
     keys, poss, nrms, fkeys = [], [], [], []
+    kept = 0
     for z0 in range(0, nz - 1, step):
         z1 = min(z0 + step, nz - 1)  # cells between planes z0 .. z1
         ins = data[z0: z1 + 1] > thr
         last = z1 == nz - 1
         n_planes = (z1 - z0) + (1 if last else 0)
-        key, axis, z, y, x = _slab_edges(ins, z0, n_planes, shape)
+        key, axis, z, y, x = _slab_edges(ins, z0, n_planes, shape, kept)
         pos = np.empty((len(key), 3), np.float32)
         nrm = np.empty((len(key), 3), np.float32) if normals else None
         for ax in range(3):
-            sel = np.flatnonzero(axis == ax)
-            if len(sel):
+            sel_all = np.flatnonzero(axis == ax)
+            for i in range(0, len(sel_all), _CHUNK):
+                sel = sel_all[i: i + _CHUNK]
                 p, n = _vertices(data, level, ax, z[sel], y[sel], x[sel], m, org, ginv, normals)
                 pos[sel] = p
                 if normals:
@@ -156,6 +179,7 @@ def marching_cubes_numpy(data: np.ndarray, thr, level: float, m: np.ndarray, org
         if normals:
             nrms.append(nrm)
         fkeys.append(_slab_faces(_cases(ins), z0, shape))
+        kept += key.nbytes + pos.nbytes + (nrm.nbytes if normals else 0) + fkeys[-1].nbytes
         report(progress, z1, nz - 1, "marching cubes")
     all_keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
     verts = np.concatenate(poss) if poss else np.zeros((0, 3), np.float32)
