@@ -91,3 +91,31 @@ def test_demo_writes_series_and_truth(tmp_path):
     (tmp_path / "file").write_text("x")
     r = ctui("demo", tmp_path / "file")
     assert r.returncode == 2 and "not a folder" in r.stderr
+
+
+def test_info_reads_headers_and_three_slices_only(tmp_path, monkeypatch):
+    """`ctui info` (actions.describe_series) decodes three sample slices, not the series,
+    and reports the geometry a full load gives (here a tilted, unevenly spaced series)."""
+    import numpy as np
+
+    from ctui.engine.actions.info import describe_series
+    from ctui.engine.io.series import dicom, load
+    from test_load_geometry import write_slices
+
+    t = np.radians(15.0)
+    row, col = (1.0, 0.0, 0.0), (0.0, float(np.cos(t)), float(np.sin(t)))
+    z = [0, 1, 2, 3, 4, 5, 8, 11, 14, 17, 20, 23]
+    images = [np.full((24, 20), 10 * k, np.int16) for k in range(len(z))]
+    write_slices(tmp_path / "s", images, [[0.0, 0.0, float(v)] for v in z], iop=(*row, *col))
+    full = load(tmp_path / "s")
+    calls = []
+    real = dicom._decode_frame
+    monkeypatch.setattr(dicom, "_decode_frame", lambda *a, **k: calls.append(1) or real(*a, **k))
+    vol, d = describe_series(tmp_path / "s")
+    assert len(calls) == 3
+    assert vol.shape == full.shape and vol.data.strides == (0, 0, 0)  # a zero-byte placeholder
+    assert vol.spacing == pytest.approx(full.spacing) and vol.origin == pytest.approx(full.origin)
+    assert np.allclose(vol.direction, full.direction) and vol.warnings == full.warnings
+    assert d["value_range"] == [0.0, 110.0] and d["meta"]["headers_only"] is True
+    assert any("grown" in w for w in d["warnings"]) and any("regular" in w for w in d["warnings"])
+    json.dumps(d, allow_nan=False, default=str)
