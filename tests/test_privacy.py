@@ -57,6 +57,9 @@ def write_series(folder: Path, *, broken: bool = True, secrets: dict | None = No
         ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
         ds.StudyInstanceUID = "1.2.826.0.1.3680043.8.498.78"
         ds.SeriesInstanceUID = "1.2.826.0.1.3680043.8.498.79"
+        ds.FrameOfReferenceUID = "1.2.826.0.1.3680043.8.498.80"  # DICOM-SEG/RTSTRUCT exports need it
+        ds.SeriesNumber = 3
+        ds.StudyDate, ds.StudyTime = "20240101", "120000"
         for kw, v in (SECRETS if secrets is None else secrets).items():
             setattr(ds, kw, v)
         ds.Modality = "CT"
@@ -280,6 +283,9 @@ def test_named_series_reaches_no_output(named_series, tmp_path, capsys, monkeypa
         ["mesh", s, "--iso", "150", "--out", o("iso.obj"), "--json"],
         ["measure", o("p.ctui"), "--json", "--path", "auto", "--csv", o("sec.csv"), "--plot", o("sec.png")],
         ["measure", o("m.nii.gz"), "--json"],
+        *[["export", o("p.ctui"), "--format", fmt, "--out", o(f"e.{ext}"), "--json"]
+          for fmt, ext in (("dicom-seg", "seg.dcm"), ("rtstruct", "rt.dcm"), ("csv", "csv"), ("nrrd", "nrrd"),
+                           ("obj", "obj"), ("mric", "mric"))],
     ]
     if egl_available():
         plan += [["render", s, "--mode", "mip", "--out", o("mip.png"), "--size", "64x48"],

@@ -134,6 +134,32 @@ def scrub_text_obj(obj: Any, identifiers: Iterable[Any]) -> Any:
     return walk(obj)
 
 
+#: DICOM free-text attributes that exports may copy from the source (study module and
+#: friends) and that often hold a name: scrubbed of the source's identifiers.
+FREE_TEXT_KEYWORDS: tuple[str, ...] = (
+    "StudyDescription", "SeriesDescription", "ProtocolName", "ImageComments", "RequestedProcedureDescription",
+    "PerformedProcedureStepDescription", "AdmittingDiagnosesDescription", "ReasonForStudy", "StudyComments",
+)
+
+
+def scrub_dataset_text(ds: Any, identifiers: Iterable[Any]) -> Any:
+    """Scrub :data:`FREE_TEXT_KEYWORDS` of a pydicom Dataset (in place) with
+    :func:`scrub_text`; returns ``ds``. ``identifiers``: the source's PatientName, IDs..."""
+    pat = _pattern(identifiers)
+    if pat is None:
+        return ds
+    for kw in FREE_TEXT_KEYWORDS:
+        try:
+            v = ds.get(kw)
+        except Exception:  # noqa: BLE001 - a malformed value: drop it rather than copy it
+            v = None
+        if isinstance(v, str) and v:
+            new = pat.sub(_REPLACEMENT, v)
+            if new != v:
+                setattr(ds, kw, new)
+    return ds
+
+
 def _path_forms(paths: Iterable[Any]) -> list[str]:
     forms: set[str] = set()
     for p in paths:
