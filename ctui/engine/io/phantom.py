@@ -141,7 +141,37 @@ def make_phantom(
         raise ValueError("phantom grid too small in-plane for the body (needs >= 250 x 190 mm)")
     ss = max(1, int(supersample))
     xc, yc, zc = _grid(nx, dx), _grid(ny, dy), _grid(nz, dz)
+    vol = _body_spine_tube(xc, yc, zc, (dz, dy, dx), ss)
+    _add_kidneys(vol, xc, yc, zc, (dz, dy, dx), ss)
+    drift_map = DRIFT if drift else {}
+    _shift_slices(vol, drift_map)
 
+    rng = np.random.default_rng(seed)
+    if noise_sd > 0:
+        vol += rng.normal(0.0, noise_sd, size=vol.shape)
+    stored = np.clip(np.rint(vol + 1024.0), 0, 65535).astype(np.uint16)
+    data = (stored.astype(np.int32) - 1024).astype(np.int16)
+
+    origin = (float(xc[0]), float(yc[0]), float(zc[0]))
+    volume = Volume(
+        data=data,
+        spacing=(dz, dy, dx),
+        origin=origin,
+        direction=np.eye(3),
+        modality="CT",
+        window=(40.0, 400.0),
+        source="ctui synthetic phantom",
+        slice_positions=zc.copy(),
+        meta={"synthetic": True},
+    )
+    truth = _truth(volume, xc, yc, zc, drift_map, noise_sd, seed)
+    return volume, truth
+
+
+def _body_spine_tube(xc, yc, zc, spacing, ss: int) -> np.ndarray:
+    """HU (z, y, x) float64: air, the body, the spine and the stepped tube (partial-volume edges)."""
+    dz, dy, dx = spacing
+    nz, ny, nx = len(zc), len(yc), len(xc)
     # start with air, add body (z-invariant elliptical cylinder)
     bx, by = BODY["center_xy"]
     ax, ay = BODY["semi_axes_xy"]
@@ -166,7 +196,12 @@ def make_phantom(
             continue
         cov = _disk_cover(xc, yc, dx, dy, lambda X, Y, rad=rad: (X - tx0) ** 2 + (Y - ty0) ** 2 <= rad * rad, ss)
         vol += fz[:, None, None] * cov[None] * (TUBE["hu"] - BODY_HU)
+    return vol
 
+
+def _add_kidneys(vol: np.ndarray, xc, yc, zc, spacing, ss: int) -> None:
+    """Add the two kidneys (ellipsoids) to ``vol`` in place."""
+    dz, dy, dx = spacing
     # kidneys: ellipsoids, supersampled in their bounding boxes (at most 4^3: the
     # 6-D broadcast grows as ss^3)
     ss3 = min(ss, 4)
@@ -187,8 +222,10 @@ def make_phantom(
         cov = (q <= 1.0).mean(axis=(3, 4, 5))
         vol[np.ix_(iz, iy, ix)] += cov * (k["hu"] - BODY_HU)
 
-    # drift: shift whole slices (content as if the patient moved), air fills in
-    drift_map = DRIFT if drift else {}
+
+def _shift_slices(vol: np.ndarray, drift_map: dict) -> None:
+    """Shift whole slices in place (content as if the patient moved), air fills in."""
+    nz, ny, nx = vol.shape
     for z, (sy, sx) in drift_map.items():
         if 0 <= z < nz:
             sl = np.full((ny, nx), AIR_HU)
@@ -198,30 +235,71 @@ def make_phantom(
             ]
             vol[z] = sl
 
-    rng = np.random.default_rng(seed)
-    if noise_sd > 0:
-        vol += rng.normal(0.0, noise_sd, size=vol.shape)
-    stored = np.clip(np.rint(vol + 1024.0), 0, 65535).astype(np.uint16)
-    data = (stored.astype(np.int32) - 1024).astype(np.int16)
-
-    origin = (float(xc[0]), float(yc[0]), float(zc[0]))
-    volume = Volume(
-        data=data,
-        spacing=(dz, dy, dx),
-        origin=origin,
-        direction=np.eye(3),
-        modality="CT",
-        window=(40.0, 400.0),
-        source="ctui synthetic phantom",
-        slice_positions=zc.copy(),
-        meta={"synthetic": True},
-    )
-    truth = _truth(volume, xc, yc, zc, drift_map, noise_sd, seed)
-    return volume, truth
-
 
 def _index(volume: Volume, xyz: tuple[float, float, float]) -> list[int]:
     return [int(round(v)) for v in volume.mm_to_index(np.asarray(xyz, float))]
+
+
+def _kidneys_truth(volume: Volume, zmid: float) -> list[dict[str, Any]]:
+    pi = float(np.pi)
+    objects: list[dict[str, Any]] = []
+    for label, k in enumerate(KIDNEYS, start=2):
+        a, b, c = k["semi_axes"]
+        cx, cy, cz = k["center"]
+        objects.append(
+            {
+                "name": k["name"],
+                "label": label,
+                "hu": k["hu"],
+                "volume_ml": 4.0 / 3.0 * pi * a * b * c / 1000.0,
+                "shape": "ellipsoid",
+                "center_xyz_mm": [cx, cy, cz],
+                "semi_axes_xyz_mm": [a, b, c],
+                "cross_section_mm2": pi * a * b,
+                "cross_section_note": "largest axial cross-section (at the centre z)",
+                "hu_range": [(k["hu"] + BODY_HU) / 2, (k["hu"] + SPINE["hu"]) / 2],
+                "seed_zyx": _index(volume, (cx, cy, zmid)),
+            }
+        )
+    return objects
+
+
+def _tube_truth(volume: Volume, zmid: float) -> dict[str, Any]:
+    pi = float(np.pi)
+    bounds = [s[0] for s in TUBE["steps"]] + [TUBE["end_z"]]
+    start = TUBE["steps"][0][0]
+    steps = []
+    tube_ml = 0.0
+    for i, (z0, rad) in enumerate(TUBE["steps"]):
+        length = bounds[i + 1] - z0
+        tube_ml += pi * rad * rad * length / 1000.0
+        steps.append(
+            {
+                "start_mm": z0 - start,
+                "start_z_mm": z0,
+                "length_mm": length,
+                "radius_mm": rad,
+                "radius_px": rad / volume.spacing[2],
+                "cross_section_mm2": pi * rad * rad,
+            }
+        )
+    return (
+        {
+            "name": "tube",
+            "label": 5,
+            "hu": TUBE["hu"],
+            "volume_ml": tube_ml,
+            "shape": "solid rod along z with stepped circular cross-section",
+            "axis": {
+                "point_xyz_mm": [*TUBE["center_xy"], start],
+                "direction_xyz": [0.0, 0.0, 1.0],
+                "length_mm": TUBE["end_z"] - start,
+            },
+            "steps": steps,
+            "hu_range": [(TUBE["hu"] + BODY_HU) / 2, 4000.0],
+            "seed_zyx": _index(volume, (*TUBE["center_xy"], zmid)),
+        }
+    )
 
 
 def _truth(volume, xc, yc, zc, drift_map, noise_sd, seed) -> dict[str, Any]:
@@ -248,24 +326,7 @@ def _truth(volume, xc, yc, zc, drift_map, noise_sd, seed) -> dict[str, Any]:
             "seed_zyx": _index(volume, (-90.0, 0.0, zmid)),
         }
     )
-    for label, k in enumerate(KIDNEYS, start=2):
-        a, b, c = k["semi_axes"]
-        cx, cy, cz = k["center"]
-        objects.append(
-            {
-                "name": k["name"],
-                "label": label,
-                "hu": k["hu"],
-                "volume_ml": 4.0 / 3.0 * pi * a * b * c / 1000.0,
-                "shape": "ellipsoid",
-                "center_xyz_mm": [cx, cy, cz],
-                "semi_axes_xyz_mm": [a, b, c],
-                "cross_section_mm2": pi * a * b,
-                "cross_section_note": "largest axial cross-section (at the centre z)",
-                "hu_range": [(k["hu"] + BODY_HU) / 2, (k["hu"] + SPINE["hu"]) / 2],
-                "seed_zyx": _index(volume, (cx, cy, zmid)),
-            }
-        )
+    objects += _kidneys_truth(volume, zmid)
     r = SPINE["radius"]
     objects.append(
         {
@@ -281,40 +342,7 @@ def _truth(volume, xc, yc, zc, drift_map, noise_sd, seed) -> dict[str, Any]:
             "seed_zyx": _index(volume, (*SPINE["center_xy"], zmid)),
         }
     )
-    bounds = [s[0] for s in TUBE["steps"]] + [TUBE["end_z"]]
-    start = TUBE["steps"][0][0]
-    steps = []
-    tube_ml = 0.0
-    for i, (z0, rad) in enumerate(TUBE["steps"]):
-        length = bounds[i + 1] - z0
-        tube_ml += pi * rad * rad * length / 1000.0
-        steps.append(
-            {
-                "start_mm": z0 - start,
-                "start_z_mm": z0,
-                "length_mm": length,
-                "radius_mm": rad,
-                "radius_px": rad / volume.spacing[2],
-                "cross_section_mm2": pi * rad * rad,
-            }
-        )
-    objects.append(
-        {
-            "name": "tube",
-            "label": 5,
-            "hu": TUBE["hu"],
-            "volume_ml": tube_ml,
-            "shape": "solid rod along z with stepped circular cross-section",
-            "axis": {
-                "point_xyz_mm": [*TUBE["center_xy"], start],
-                "direction_xyz": [0.0, 0.0, 1.0],
-                "length_mm": TUBE["end_z"] - start,
-            },
-            "steps": steps,
-            "hu_range": [(TUBE["hu"] + BODY_HU) / 2, 4000.0],
-            "seed_zyx": _index(volume, (*TUBE["center_xy"], zmid)),
-        }
-    )
+    objects.append(_tube_truth(volume, zmid))
     return {
         "description": "ctui synthetic CT phantom (not a patient)",
         "units": {"volume": "ml", "length": "mm", "values": "HU"},
