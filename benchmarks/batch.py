@@ -12,13 +12,15 @@ time including the cluster's start, jobs per minute, the speed-up of 2 workers o
 and each run's mean volume against the phantom's analytic kidney volume.
 
 The peer here is the 1-worker run: the speed-up shows what Dask's second worker buys on
-this machine (at most 2x on two idle cores; less when the cores are shared).
+this machine (at most 2x on two idle cores; less when the cores are shared: compare the
+per-job wall time with its CPU time, and ``uptime``'s load, printed first).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 import shutil
 import sys
 import tempfile
@@ -69,6 +71,7 @@ def main() -> int:
     root = Path(tempfile.mkdtemp(prefix="ctui-batch-bench-"))
     try:
         manifest, truth_ml = make_series(root, args.jobs, args.slices, args.size)
+        print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())} on {os.cpu_count()} CPUs")
         print(f"{args.jobs} jobs, series {args.slices}x{args.size}x{args.size}, "
               f"{'threads' if args.threads else 'processes'}; left kidney {truth_ml:.2f} ml (analytic)")
         times = {}
@@ -77,9 +80,10 @@ def main() -> int:
             ok = [r for r in rows if r["status"] == "ok"]
             vol = sum(float(r["volume_mesh_ml"]) for r in ok) / max(len(ok), 1)
             job_s = sum(float(r["seconds"]) for r in ok) / max(len(ok), 1)
+            cpu_s = sum(float(r["cpu_seconds"]) for r in ok) / max(len(ok), 1)
             times[w] = dt
             print(f"  {w} worker{'s' if w > 1 else ' '}: {dt:7.2f} s wall ({args.jobs / dt * 60:6.1f} jobs/min), "
-                  f"{len(ok)}/{len(rows)} ok, {job_s:.2f} s per job on its worker, mean mesh volume {vol:.2f} ml "
+                  f"{len(ok)}/{len(rows)} ok, {job_s:.2f} s ({cpu_s:.2f} s CPU) per job on its worker, mean mesh volume {vol:.2f} ml "
                   f"({100 * (vol - truth_ml) / truth_ml:+.2f}%)")
         print(f"speed-up 2 workers / 1 worker: {times[1] / times[2]:.2f}x")
     finally:

@@ -46,8 +46,10 @@ from ctui.engine.core.progress import Progress, report
 MANIFEST_COLUMNS = ("series", "seed", "range", "method", "mode", "background", "filter", "outdir", "sections", "name")
 RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
                   "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
-                  "slices", "project", "mesh", "seconds")
+                  "slices", "project", "mesh", "seconds", "cpu_seconds")
 METHODS = ("fill", "grow", "levelset")
+#: thread-count variables set to 1 in local worker processes: N workers use N cores, not N x all
+SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 MODES = ("slice", "3d")
 
 
@@ -169,7 +171,7 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
 
 def run_job(job: Job) -> dict:
     """Run one job (on a Dask worker); returns its RESULTS row. Never raises: a failure is a row."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     row: dict[str, Any] = {"job": job.key, "name": job.name, "series": job.series, "seed": ",".join(map(str, job.seed)),
                            "range": f"{job.range[0]:g}:{job.range[1]:g}", "method": f"{job.method}/{job.mode}"}
     try:
@@ -181,6 +183,7 @@ def run_job(job: Job) -> dict:
         msg = " ".join(str(exc).split()) or type(exc).__name__
         row.update(status="failed", error=msg if isinstance(exc, CtuiError) else f"{type(exc).__name__}: {msg}")
     row["seconds"] = round(time.perf_counter() - t0, 3)
+    row["cpu_seconds"] = round(time.process_time() - c0, 3)  # the worker process's CPU (all its threads)
     return row
 
 
@@ -269,8 +272,9 @@ def _client(scheduler: str | None, workers: int | None, processes: bool) -> tupl
         except (OSError, TimeoutError) as exc:
             raise CtuiError(f"cannot reach the Dask scheduler at {scheduler} ({' '.join(str(exc).split())[:120]})") \
                 from None
+    extra = {"env": dict.fromkeys(SINGLE_THREAD_ENV, "1")} if processes else {}  # one core per job
     cluster = LocalCluster(n_workers=max(1, int(workers or 1)), threads_per_worker=1, processes=processes,
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           dashboard_address=None, silence_logs=logging.ERROR, **extra)
     return Client(cluster), cluster
 
 
