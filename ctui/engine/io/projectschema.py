@@ -40,6 +40,8 @@ PROPAGATION_KEYS: dict[str, tuple] = {
     "low": (int, float), "high": (int, float), "tolerance": (int, float), "leak_factor": (int, float),
     "connectivity": (int,), "neighbourhood": (int,), "min_area": (int,), "current": (int,),
     "direction": (str,), "mode": (str,), "range": (list, type(None)), "per_object": (list,),
+    "leak_min_pixels": (int,), "on_leak": (str,), "confine": (bool,), "overwrite": (bool,),
+    "max_slices": (int,), "neck_mm": (int, float), "slices": (list,),
 }
 #: Loader options a project may record (see ctui.engine.io.series.load).
 SOURCE_OPTION_KEYS = ("series", "spacing", "shape", "dtype", "offset", "crop", "downsample", "resample")
@@ -138,13 +140,15 @@ def _propagation(prop: dict, field: str = "propagation") -> None:
             continue
         v = prop[key]
         f = f"{field}.{key}"
-        if not isinstance(v, types) or isinstance(v, bool):
+        if not isinstance(v, types) or (isinstance(v, bool) and bool not in types):
             raise _Bad(f, f"expected {'/'.join(t.__name__ for t in types)}, got {_short(v)}")
         if key == "range" and v is not None:
             _numbers(v, f, (2,))
         if key == "connectivity" and v not in (4, 6, 8, 18, 26):
             raise _Bad(f, f"expected 4 or 8, got {v}")
-        if key in ("direction", "mode"):
+        if key == "slices":
+            _numbers(v, f, (2,), integer=True)
+        if key in ("direction", "mode", "on_leak"):
             _text(v, f, limit=32)
         if key == "per_object":
             if field != "propagation":
