@@ -124,3 +124,12 @@ def test_good_project_round_trips_geometry(tmp_path):
     p = load_project(f)
     assert p.geometry.spacing == (2.0, 0.5, 0.5) and p.geometry.origin == (1.0, 2.0, 3.0)
     assert p.modality == "CT" and p.voxel_hash == "blake2b-128:00" and p.version == 2
+
+
+def test_schema_types_every_propagation_setting():
+    """The CLI (PropagationSettings) and the TUI write propagation in the one schema."""
+    from ctui.engine.io.projectschema import PROPAGATION_KEYS
+    from ctui.engine.segment.propagate import PropagationSettings
+
+    assert set(PropagationSettings(100.0, 300.0).to_dict()) <= set(PROPAGATION_KEYS)
+    assert {"tolerance", "range", "connectivity", "current", "mode"} <= set(PROPAGATION_KEYS)  # the TUI's keys
