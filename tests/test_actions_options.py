@@ -59,3 +59,14 @@ def test_one_section_step_for_cli_and_tui():
     measure.register(parser.add_subparsers())
     args = parser.parse_args(["measure", "x.ctui"])
     assert args.step == defaults.SECTION_STEP_MM == 0.5
+
+
+def test_one_path_from_an_error_to_the_cli_line():
+    from ctui.cli import error_line
+
+    assert error_line(CtuiError("bad spacing", path="/a/b.nii")) == ("/a/b.nii: bad spacing", 2)
+    assert error_line(KeyboardInterrupt()) == ("interrupted", 130)
+    assert error_line(MemoryError())[1] == 2
+    msg, code = error_line(PermissionError(13, "Permission denied", "/x/out.stl"))
+    assert code == 2 and msg == "/x/out.stl: Permission denied"
+    assert error_line(ValueError("a bug")) is None  # a bug keeps its traceback
