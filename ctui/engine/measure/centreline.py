@@ -44,12 +44,13 @@ def _crop(mask: np.ndarray, margin: int = 1):
     return sl, np.array(lo)
 
 
-def _farthest(cost: np.ndarray, start, spacing) -> tuple[int, ...]:
+def _farthest(cost: np.ndarray, start, spacing, allowed: np.ndarray) -> tuple[int, ...]:
+    """The ``allowed`` voxel farthest from ``start`` along paths through finite ``cost``."""
     from skimage.graph import MCP_Geometric
 
     m = MCP_Geometric(cost, fully_connected=True, sampling=tuple(spacing))
     acc, _ = m.find_costs([tuple(int(v) for v in start)])
-    acc = np.where(np.isfinite(acc), acc, -1.0)
+    acc = np.where(np.isfinite(acc) & allowed, acc, -1.0)
     return tuple(int(v) for v in np.unravel_index(int(np.argmax(acc)), acc.shape))
 
 
@@ -85,10 +86,15 @@ def _voxel_route(sub: np.ndarray, dist: np.ndarray, ends, sp: np.ndarray, power:
     from skimage.graph import MCP_Geometric
 
     if ends is None:
+        # the extremities among the core voxels (deeper than the largest voxel side), so
+        # the route does not end in a sheet of mask one slice thick stuck to the object
+        core = dist > float(sp.max())
+        if core.sum() < max(8, 0.05 * sub.sum()):
+            core = sub
         unit = np.where(sub, 1.0, np.inf)
         deepest = np.unravel_index(int(np.argmax(dist)), dist.shape)
-        a = _farthest(unit, deepest, sp)
-        ends = [a, _farthest(unit, a, sp)]
+        a = _farthest(unit, deepest, sp, core)
+        ends = [a, _farthest(unit, a, sp, core)]
     if ends[0] == ends[1]:
         raise CtuiError("centreline: the object has no two distinct ends (too small)")
     cost = np.full(sub.shape, np.inf)
@@ -240,17 +246,23 @@ def _tube_part(s: np.ndarray, r: np.ndarray) -> tuple[int, int]:
     From each end, a point is still in the bent end of the voxel route while it is
     nearer the end than its own inscribed radius ``r`` (mm), or thinner (under 0.85
     times) than the tube over the next two typical radii inwards: near a flat cap ``r``
-    is the distance to the cap, and a thin sheet of mask stuck to the end (where the
-    extremity voxel may lie) is thinner still."""
-    w = 2.0 * float(np.median(r))
+    is the distance to the cap, and a sheet of mask stuck to the end (where the
+    extremity voxel may lie) is thinner still. ``r`` is first smoothed by a running
+    median over a typical radius (the distance map of thick slices is uneven)."""
+    from scipy import ndimage as ndi
+
     n = len(s)
+    med = float(np.median(r))
+    step = float(s[-1]) / max(n - 1, 1)
+    rs = ndi.median_filter(r, size=max(3, int(round(med / max(step, 1e-9))) | 1), mode="nearest")
+    w = 2.0 * med
     good = np.zeros(n, bool)
     for i in range(n):
-        a = np.searchsorted(s, s[i] - w)
-        b = np.searchsorted(s, s[i] + w, side="right")
-        # inwards = towards the middle of the path
-        ahead = r[i:b] if s[i] < 0.5 * s[-1] else r[a : i + 1]
-        good[i] = r[i] >= 0.85 * float(ahead.max()) and min(s[i], s[-1] - s[i]) >= r[i]
+        if s[i] < 0.5 * s[-1]:  # inwards = towards the middle of the path
+            ahead = rs[i : np.searchsorted(s, s[i] + w, side="right")]
+        else:
+            ahead = rs[np.searchsorted(s, s[i] - w) : i + 1]
+        good[i] = rs[i] >= 0.85 * float(ahead.max()) and min(s[i], s[-1] - s[i]) >= r[i]
     if not good.any():
         return 0, n - 1
     return int(np.argmax(good)), n - 1 - int(np.argmax(good[::-1]))
