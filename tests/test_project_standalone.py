@@ -155,3 +155,15 @@ def test_unversioned_v1_project_still_opens(tmp_path):
     assert p.version == 1 and p.geometry.spacing == (2.0, 0.5, 0.5) and p.geometry.origin == (1.0, 2.0, 3.0)
     opened = open_input(f)
     assert opened.object_ids == [3] and opened.geometry.voxel_volume_mm3 == 0.5
+
+
+def test_labels_only_stand_in_series(project):
+    """What the TUI opens when the series is gone and the user picks "labels only"."""
+    from ctui.engine.actions.opened import labels_only_volume
+    from ctui.engine.io.project import load_project
+
+    d, series, proj = project
+    p = load_project(proj)
+    vol = labels_only_volume(p)
+    assert vol.shape == p.labels.shape and vol.geometry.same_grid(p.geometry) and not vol.data.any()
+    assert vol.meta["labels_only"] and vol.modality == "CT" and vol.window == p.window

@@ -238,3 +238,18 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     project.set_source(volume)
     return Opened("project", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
                   notes=list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)
+
+
+def labels_only_volume(project: Project, path: str = "") -> Volume:
+    """A stand-in series for a project whose series is gone (the TUI's "open labels only"):
+    zeros (int16, memory of one label map x2) on the recorded geometry, with its modality
+    and window; ``meta["labels_only"]`` is True. CtuiError when the project records no
+    geometry or no labels."""
+    g = project.geometry
+    if g is None or project.labels is None:
+        raise CtuiError("the project records no geometry or labels: it cannot open without its series", path=path)
+    data = np.zeros(g.shape, np.int16)
+    return Volume(data, spacing=g.spacing, origin=g.origin, direction=g.direction,
+                  modality=project.modality or "OT", window=tuple(project.window) if project.window else (0.0, 1.0),
+                  source=str(project.source_path or ""), meta={"labels_only": True},
+                  warnings=[f"source series {project.source_path or '(none)'} not found: labels only (no grey levels)"])
