@@ -597,3 +597,62 @@ def test_cli_flythrough_auto_on_a_one_object_project(renderer, tmp_path):
         fr = np.asarray(im.convert("RGB")).astype(int)
     bg = np.array([18, 18, 23])
     assert (np.abs(fr - bg).sum(axis=2) > 12).mean() > 0.7
+
+
+def test_surface_render_frames_the_object_not_the_series(renderer):
+    """A 10 mm ball in a 200 mm series: in surface mode it fills the image (issue 17's
+    tiny object); ``frame="series"`` shows the whole box as before."""
+    ball = icosphere(10.0, centre=(60.0, 60.0, 40.0), subdiv=3)
+    vol = SceneVolume(np.zeros((40, 100, 100), np.int16), spacing=(2.0, 2.0, 2.0))
+    scene = Scene(meshes=[SceneMesh(ball)], volume=vol, mode="surface")
+    scene.options.background = BG
+    size = (200, 200)
+    objects = fg_mask(renderer.render(scene, size=size))
+    scene.options.frame = "series"
+    series = fg_mask(renderer.render(scene, size=size))
+    # framed: the view spans the ball's bounding-box diagonal (20 * sqrt(3) * 1.05 mm),
+    # so the ball is 55 % of the image; framing the series' 300 mm box shrinks it ~8x
+    rows = np.flatnonzero(objects.any(axis=1))
+    assert rows[-1] - rows[0] > 0.5 * size[1]
+    assert 0 < series.sum() < objects.sum() / 30
+
+
+def test_slice_plane_outside_the_framed_object_is_not_clipped(renderer):
+    ball = icosphere(10.0, centre=(60.0, 60.0, 40.0), subdiv=3)
+    d = np.full((40, 100, 100), 500, np.int16)
+    scene = Scene(meshes=[SceneMesh(ball)], volume=SceneVolume(d, spacing=(2.0, 2.0, 2.0)), mode="surface")
+    scene.options.background = BG
+    scene.options.slice_plane = SlicePlane(axis="z", index=20)
+    scene.options.window = (0.0, 100.0)  # the slice shows white
+    scene.camera.elevation = 60.0
+    img = renderer.render(scene, size=(160, 160))
+    assert fg_mask(img).mean() > 0.95  # the plane fills the view around the ball, unclipped
+
+
+def test_oversized_images_and_animations_refused_before_rendering(renderer, monkeypatch, tmp_path):
+    from ctui.engine.core.errors import CtuiError
+    from ctui.engine.render.outputs import turntable_frames
+
+    monkeypatch.setenv("CTUI_MEMORY_LIMIT", str(2 * 1024 ** 3))
+    scene = Scene.from_meshes(icosphere(5.0, subdiv=2))
+    with pytest.raises(CtuiError, match="8192x8192"):
+        renderer.submit(scene, (8192, 8192))
+    with pytest.raises(CtuiError, match="2000 frames"):
+        turntable_frames(scene, 2000, (800, 600), renderer=renderer)
+    assert renderer.render(scene, size=(64, 48)).shape == (48, 64, 3)  # still fine afterwards
+
+
+def test_cli_render_huge_size_one_line(renderer, tmp_path):
+    import os
+
+    from ctui.engine.io.meshes import save_mesh
+
+    save_mesh(tmp_path / "b.stl", icosphere(5.0, subdiv=2))
+    env = dict(os.environ, CTUI_MEMORY_LIMIT=str(2 * 1024 ** 3))
+    res = subprocess.run([sys.executable, "-m", "ctui.cli", "render", str(tmp_path / "b.stl"), "--out",
+                          str(tmp_path / "b.png"), "--size", "8192x8192"], env=env, capture_output=True, text=True,
+                         cwd=ROOT, timeout=300)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "8192x8192" in lines[0] and "Traceback" not in res.stderr
+    assert not (tmp_path / "b.png").exists()

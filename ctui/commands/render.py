@@ -44,6 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--slice", default=None, metavar="AXIS[:INDEX]",
                    help="show a slice plane in place (axis z|y|x; needs a series or project source)")
     p.add_argument("--background", default=None, help="R,G,B 0..255 (default dark grey)")
+    p.add_argument("--frame", choices=("auto", "objects", "series"), default="auto",
+                   help="what the camera frames: auto (the objects in surface modes, the volume in volume "
+                        "modes), objects, or series (the whole volume box)")
     p.add_argument("--flythrough", default=None, metavar="auto|X,Y,Z;X,Y,Z;...",
                    help="endoscopic fly-through along a path in patient mm, or 'auto': the centreline of "
                         "the project object given with --object; --out a .gif/.apng or a folder for PNG frames")
@@ -98,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         antialias=args.aa, wire_overlay=args.wire_overlay,
         window=_pair(args.window, "--window (want C,W)") if args.window else None,
         background=_pair(args.background, "--background (want R,G,B)", 3) if args.background else None,
-        slice_plane=args.slice, preset=args.preset)
+        slice_plane=args.slice, preset=args.preset, frame=args.frame)
     print(res.summary())
     for note in res.notes:
         print(f"note: {note}")

@@ -95,7 +95,7 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
                 perspective: bool = False, light: Sequence[float] | None = None, shadows: bool = False,
                 antialias: str = "fxaa", wire_overlay: bool = False, window: Sequence[float] | None = None,
                 background: Sequence[float] | None = None, slice_plane: str | None = None,
-                preset: str | None = None) -> tuple[Scene, str]:
+                preset: str | None = None, frame: str = "auto") -> tuple[Scene, str]:
     """(Scene, mode) for ``opened``; colours from the project's objects."""
     kind = opened.kind
     mode = mode or ("dvr" if kind == "series" and iso is None else "surface")
@@ -126,6 +126,7 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
         scene.light = Light(azimuth=light[0], elevation=light[1])
     o = scene.options
     o.shadows, o.antialias, o.wireframe_overlay = bool(shadows), antialias, bool(wire_overlay)
+    o.frame = frame  # "auto": the objects in surface modes (not the whole series), the volume in volume modes
     if window is not None:
         o.window = tuple(window)
     if background is not None:

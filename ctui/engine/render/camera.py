@@ -134,9 +134,13 @@ def setup_camera(scene: Scene, size: tuple[int, int]) -> CameraSetup:
         eye = target + back * dist
         view = look_at(eye, target, up)
     forward = -back
-    # depth range from the scene's bounding sphere as seen from the eye
+    # depth range from the bounding sphere of everything drawn (the volume box and a slice
+    # plane too, when the camera frames the objects only)
+    lo_all, hi_all = scene.bounds(everything=True)
+    centre = (lo_all + hi_all) / 2.0
+    radius_all = max(float(np.linalg.norm(hi_all - lo_all)) / 2.0, 1e-3)
     d_c = float(np.dot(centre - eye, forward))
-    span = radius + float(np.linalg.norm(centre - target)) + 1e-3
+    span = radius_all + float(np.linalg.norm(centre - target)) + 1e-3
     far = max(d_c + span * 1.05, 1e-2)
     if cam.projection == "perspective":
         near = max(d_c - span * 1.05, far * 1e-4)

@@ -21,12 +21,32 @@ from concurrent.futures import Future
 from typing import Any, Callable
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.limits import check_allocation
 
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri"
 
 
 class EGLUnavailable(CtuiError):
     """No offscreen OpenGL (EGL) context could be created."""
+
+
+#: memory one image takes while it is rendered, per pixel: colour, depth, the
+#: transparency accumulation (RGBA float) and revealage, composite and FXAA targets,
+#: the volume targets and the read-back copies (in RAM with Mesa's software renderer)
+BYTES_PER_PIXEL = 56
+MSAA_BYTES_PER_PIXEL = 4 * 28  # 4 samples of colour, depth and the float OIT targets
+
+
+def check_image_size(size: tuple[int, int], *, msaa: bool = False, max_side: int | None = None) -> None:
+    """Refuse (CtuiError, one line) an image this context or the process's memory cannot
+    hold, before any GL object is made (``--size 8192x8192`` on a small machine)."""
+    w, h = int(size[0]), int(size[1])
+    if w < 1 or h < 1:
+        raise CtuiError(f"image size {w}x{h}: width and height must be at least 1")
+    if max_side and (w > max_side or h > max_side):
+        raise CtuiError(f"image size {w}x{h}: this OpenGL context draws at most {max_side} pixels a side")
+    check_allocation(float(w) * h * (BYTES_PER_PIXEL + (MSAA_BYTES_PER_PIXEL if msaa else 0)),
+                     what=f"rendering a {w}x{h} image", hint="use a smaller --size")
 
 
 def _egl_message(exc: BaseException) -> str:
@@ -75,7 +95,8 @@ class Renderer:
 
             self.engine = GLEngine(ctx)
             self.info = {"renderer": ctx.info.get("GL_RENDERER", "?"), "version": ctx.info.get("GL_VERSION", "?"),
-                         "vendor": ctx.info.get("GL_VENDOR", "?"), "max_samples": self.engine.max_samples}
+                         "vendor": ctx.info.get("GL_VENDOR", "?"), "max_samples": self.engine.max_samples,
+                         "max_side": _max_side(ctx)}
         except BaseException as exc:  # noqa: BLE001 - reported to the caller
             self._error = exc if isinstance(exc, CtuiError) else EGLUnavailable(_egl_message(exc))
             self._ready.set()
@@ -126,6 +147,8 @@ class Renderer:
         """Queue ``scene`` for rendering at ``size`` = (width, height); the Future's
         result is an (h, w, 3) uint8 RGB array. The scene is snapshotted now, so the
         caller may keep changing its copy."""
+        check_image_size(size, msaa=getattr(scene.options, "antialias", "") == "msaa",
+                         max_side=self.info.get("max_side"))
         snap = scene.snapshot()
         return self.call(_render_job, snap, (int(size[0]), int(size[1])), supersede_key=supersede_key)
 
@@ -139,6 +162,18 @@ class Renderer:
             self._closed = True
             self._queue.put(None)
             self._thread.join(timeout=10)
+
+
+def _max_side(ctx) -> int | None:
+    """The largest image side the context can render to (texture, renderbuffer, viewport)."""
+    sides = []
+    for key in ("GL_MAX_TEXTURE_SIZE", "GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_VIEWPORT_DIMS"):
+        v = ctx.info.get(key)
+        if isinstance(v, (tuple, list)):
+            sides += [int(x) for x in v]
+        elif v:
+            sides.append(int(v))
+    return min(sides) if sides else None
 
 
 def _render_job(engine, scene, size):

@@ -10,6 +10,7 @@ import numpy as np
 
 from ctui.engine.core.atomic import atomic_write, write_bytes
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.limits import check_allocation
 from ctui.engine.render.scene import Camera, Scene
 
 
@@ -35,6 +36,19 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     return Path(path)
 
 
+#: bytes per pixel per frame of an animation held until it is written: the RGB frame, and
+#: while encoding its palette (GIF) or RGB (APNG) image
+ANIMATION_BYTES_PER_PIXEL = 7
+
+
+def check_frames(n: int, size: tuple[int, int]) -> None:
+    """Refuse (CtuiError) ``n`` frames of ``size`` that will not fit in memory, before rendering
+    (``--turntable 2000`` on a small machine)."""
+    w, h = int(size[0]), int(size[1])
+    check_allocation(float(n) * w * h * ANIMATION_BYTES_PER_PIXEL, what=f"{n} frames of {w}x{h}",
+                     hint="use fewer frames or a smaller --size")
+
+
 def turntable_frames(scene: Scene, n: int, size: tuple[int, int], *, renderer=None,
                      start: float | None = None, degrees: float = 360.0) -> list[np.ndarray]:
     """``n`` images with the camera's azimuth stepped by degrees/n (all frames queued at
@@ -44,6 +58,7 @@ def turntable_frames(scene: Scene, n: int, size: tuple[int, int], *, renderer=No
     n = int(n)
     if n < 1:
         raise CtuiError(f"turntable needs at least 1 frame, got {n}")
+    check_frames(n, size)
     r = renderer or get_renderer()
     a0 = scene.camera.azimuth if start is None else start
     futs = []
@@ -156,6 +171,7 @@ def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, siz
     light dimmed to 30%, no shadows), as an endoscope's own lamp."""
     from ctui.engine.render.context import get_renderer
 
+    check_frames(int(n_frames), size)
     r = renderer or get_renderer()
     futs = []
     for cam in flythrough_cameras(path_mm, n_frames, fov_deg=fov_deg):

@@ -142,6 +142,8 @@ class RenderOptions:
         pixels, per-pixel otherwise), "pixel" or "vertex".
     empty_space_skipping : skip volume bricks that cannot contribute (on; off only
         for measuring its effect).
+    frame : what the camera frames, see :data:`FRAMES` (default "auto": the objects in
+        surface modes, so a small object in a large series fills the image).
     """
 
     shadows: bool = False
@@ -162,6 +164,13 @@ class RenderOptions:
     shadow_map_size: int = 2048
     lighting: str = "auto"
     empty_space_skipping: bool = True
+    frame: str = "auto"
+
+
+#: what the camera frames (``RenderOptions.frame``): "auto" = the visible meshes in the
+#: surface modes and the volume box in the volume modes (or when there is no mesh);
+#: "objects" = the meshes; "series" = the volume box and the meshes
+FRAMES = ("auto", "objects", "series")
 
 
 @dataclass
@@ -284,14 +293,19 @@ class Scene:
         )
 
     # ------------------------------------------------------------------ geometry
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(min_xyz, max_xyz) mm of the visible meshes and the volume box."""
+    def bounds(self, *, everything: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(min_xyz, max_xyz) mm of what the camera frames (``options.frame``): the visible
+        meshes, and the volume box in volume modes, with ``frame="series"``, when there
+        is no mesh, or with ``everything`` (the camera's depth range)."""
         pts = []
         for m in self.mesh_items():
             if m.visible and m.mesh.n_vertices:
                 lo, hi = mesh_bounds(m.mesh)
                 pts += [lo, hi]
-        if self.volume is not None:
+        frame = getattr(self.options, "frame", "auto")
+        with_volume = (everything or not pts or frame == "series"
+                       or (frame == "auto" and self.mode in VOLUME_MODES))
+        if self.volume is not None and with_volume:
             c = self.volume.corners()
             pts += [c.min(0), c.max(0)]
         if not pts:
