@@ -378,7 +378,7 @@ def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, b
     box = seg.object_bbox(oid)
     if box is None:
         return
-    margin = [max(1, int(np.ceil(8.0 / sp))) for sp in spacing]
+    margin = [max(1, int(np.ceil(4.0 / sp))) for sp in spacing]
     nz, ny, nx = seg.labels.shape
     big = tuple(slice(max(b.start - m, 0), min(b.stop + m, n)) for b, m, n in zip(box, margin, (nz, ny, nx)))
     origin = np.array([b.start for b in big])
@@ -390,7 +390,7 @@ def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, b
         return  # the level set needs a body at least 3 slices thick
     bgz = np.array([[b[2], b[1], b[0]] for b in bg]).reshape(-1, 3) - origin
     off, m = _grow.levelset(image, init, low=s.low, high=s.high, spacing=spacing, background=bgz,
-                            curvature=opts.curvature, margin_mm=8.0, connectivity=s.connectivity)
+                            curvature=opts.curvature, margin_mm=4.0, connectivity=s.connectivity)
     full = np.zeros(init.shape, bool)
     full[off[0]:off[0] + m.shape[0], off[1]:off[1] + m.shape[1], off[2]:off[2] + m.shape[2]] = m
     if s.slices is not None:
