@@ -61,7 +61,7 @@ def _load_volume_file(p: Path, **kw: Any) -> Volume:
         from ctui.engine.io.series.research import load_nrrd
 
         return load_nrrd(p, **kw)
-    from ctui.engine.io.series.stacks import load_mhd
+    from ctui.engine.io.series.metaimage import load_mhd
 
     return load_mhd(p, **kw)
 
@@ -206,36 +206,33 @@ def load(
                                 f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
         else:
             base = p.parent
-            if not stat.S_ISREG(p.stat().st_mode):
-                raise LoadError("not a regular file (FIFO, device or socket)", path=p)
-            if not os.access(p, os.R_OK):
-                raise LoadError("cannot read (permission denied)", path=p)
-            if p.stat().st_size == 0:
-                raise LoadError("empty file", path=p)
-            suf = p.suffix.lower()
-            if _is_volume_file(p) and shape is None:
-                return _with_series(_load_volume_file(p, skipped=skipped, spacing=spacing, **common))
-            if shape is not None:
-                from ctui.engine.io.series.stacks import load_raw
-
-                return _with_series(load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset,
-                                         base=base, skipped=skipped, **common))
-            if suf in IMAGE_SUFFIXES:
-                from ctui.engine.io.series.stacks import load_images
-
-                return _with_series(load_images([p], path=p, base=base, skipped=skipped, spacing=spacing, **common))
+            vol = _load_one_file(p, shape=shape, dtype=dtype, spacing=spacing, offset=offset, skipped=skipped,
+                                 common=common)
+            if vol is not None:
+                return _with_series(vol)
             files = [p]
         path_label = p
     else:
         base = single
         path_label = f"{base}/ ({len(files)} files)" if base else f"{len(files)} files"
     kind = _classify(files, shape=shape)
+    if kind != "dicom":
+        return _with_series(_load_files(kind, files, single=single, base=base, path_label=path_label, shape=shape,
+                                        dtype=dtype, spacing=spacing, offset=offset, skipped=skipped, common=common))
+    return _load_dicom(files, base=base, path_label=path_label, skipped=skipped, series=series, spacing=spacing,
+                       resample=resample, headers_only=headers_only, progress=progress, common=common)
+
+
+def _load_files(kind: str, files: list[Path], *, single: Path | None, base: Path | None, path_label: Any,
+                shape: Any, dtype: Any, spacing: Any, offset: Any, skipped: list[dict[str, str]],
+                common: dict[str, Any]) -> Volume:
+    """Files classified as raw data, an image stack or one volume file ("mhd")."""
     if kind == "raw":
-        from ctui.engine.io.series.stacks import load_raw
+        from ctui.engine.io.series.raw import load_raw
 
         one = len(files) == 1 and not (single and single.is_dir())
-        return _with_series(load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape,
-                                 dtype=dtype, spacing=spacing, offset=offset, base=base, skipped=skipped, **common))
+        return load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape, dtype=dtype,
+                        spacing=spacing, offset=offset, base=base, skipped=skipped, **common)
     if kind == "images":
         from ctui.engine.io.series.stacks import load_images
 
@@ -243,10 +240,39 @@ def load(
         for f in files:
             if f.suffix.lower() not in IMAGE_SUFFIXES:
                 skipped.append({"file": _rel(f, base), "reason": "not an image file (by extension)"})
-        return _with_series(load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common))
-    if kind == "mhd":
-        vf = next(f for f in files if _is_volume_file(f))
-        return _with_series(_load_volume_file(vf, skipped=skipped, spacing=spacing, **common))
+        return load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common)
+    vf = next(f for f in files if _is_volume_file(f))
+    return _load_volume_file(vf, skipped=skipped, spacing=spacing, **common)
+
+
+def _load_one_file(p: Path, *, shape: Any, dtype: Any, spacing: Any, offset: Any, skipped: list[dict[str, str]],
+                   common: dict[str, Any]) -> Volume | None:
+    """A single file given by itself: a volume file, raw data or one image; None for
+    DICOM (or anything else, tried as DICOM)."""
+    if not stat.S_ISREG(p.stat().st_mode):
+        raise LoadError("not a regular file (FIFO, device or socket)", path=p)
+    if not os.access(p, os.R_OK):
+        raise LoadError("cannot read (permission denied)", path=p)
+    if p.stat().st_size == 0:
+        raise LoadError("empty file", path=p)
+    if _is_volume_file(p) and shape is None:
+        return _load_volume_file(p, skipped=skipped, spacing=spacing, **common)
+    if shape is not None:
+        from ctui.engine.io.series.raw import load_raw
+
+        return load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset, base=p.parent,
+                        skipped=skipped, **common)
+    if p.suffix.lower() in IMAGE_SUFFIXES:
+        from ctui.engine.io.series.stacks import load_images
+
+        return load_images([p], path=p, base=p.parent, skipped=skipped, spacing=spacing, **common)
+    return None
+
+
+def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skipped: list[dict[str, str]],
+                series: Any, spacing: Any, resample: bool, headers_only: bool, progress: Any,
+                common: dict[str, Any]) -> Volume:
+    """The DICOM part of :func:`load`: headers, series choice, then decode (or inspect)."""
     from ctui.engine.io.series import dicom
 
     n_files = len(files)
@@ -351,7 +377,8 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if kind == "mhd":
         vf = next(f for f in files if _is_volume_file(f))
         if vf.suffix.lower() in _MHD:
-            from ctui.engine.io.series.stacks import mhd_spacing, parse_spacing, read_mhd_header
+            from ctui.engine.io.series.metaimage import mhd_spacing, read_mhd_header
+            from ctui.engine.io.series.stacks import parse_spacing
 
             hdr, _ = read_mhd_header(vf)
             try:

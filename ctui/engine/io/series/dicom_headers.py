@@ -491,7 +491,11 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
         base.pixel_spacing = (float(ps[0]), float(ps[1]))
     if nframes == 1:
         return [base]
-    # ---- multi-frame: functional groups
+    return _multiframe(ds, base, nframes)
+
+
+def _multiframe(ds: Any, base: Frame, nframes: int) -> list[Frame]:
+    """One Frame per frame of a multi-frame file, from its functional groups."""
     shared = _seq_item(ds, "SharedFunctionalGroupsSequence")
     try:
         per = ds.get("PerFrameFunctionalGroupsSequence")

@@ -119,7 +119,7 @@ def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progres
         inter is None or inter == 0.0 or not np.isfinite(inter))
     compressed = str(path).lower().endswith(".gz")
     if not compressed and not scaled and dt.kind in "uif" and len(shape) <= 4 and hasattr(proxy, "offset"):
-        from ctui.engine.io.series.stacks import load_raw
+        from ctui.engine.io.series.raw import load_raw
 
         off = int(getattr(proxy, "offset", hdr.get_data_offset()))
         if getattr(proxy, "order", "F") != "F":
@@ -203,7 +203,7 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
     datafile = hdr.get("data file") or hdr.get("datafile")
     full = (nz, ny, nx)
     if encoding == "raw" and int(hdr.get("line skip", 0) or 0) == 0:
-        from ctui.engine.io.series.stacks import load_raw
+        from ctui.engine.io.series.raw import load_raw
 
         skip = int(hdr.get("byte skip", 0) or 0)
         if datafile is None:
