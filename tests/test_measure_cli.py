@@ -79,11 +79,27 @@ def test_measure_auto_path_text_output(label_file, capsys):
     rc, out, err = _run(capsys, p, "--object", 2, "--path", "auto", "--step", 2, "--no-mesh", "--json")
     assert rc == 0, err
     doc = json.loads(out)
-    # the automatic centreline runs along one of the two tubes (largest component = first tube)
-    assert 28.0 < doc["path_length_mm"] < 34.5
-    a = np.array([r["area_mm2"] for r in doc["sections"][2:-2]], dtype=float)
-    assert np.nanmedian(a) == pytest.approx(math.pi * 4, rel=0.05)
+    # the automatic centreline runs along one of the two tubes (largest component = first tube),
+    # from end face to end face of its voxels (x 5.25 .. 34.75 mm)
+    assert doc["path_length_mm"] == pytest.approx(29.5, abs=0.6)
+    # every section reported is a cross-section: the end caps' sections are left out
+    a = np.array([r["area_mm2"] for r in doc["sections"]], dtype=float)
+    assert len(a) >= 12 and np.all(np.isfinite(a))
+    assert np.abs(a / (math.pi * 4) - 1).max() < 0.06, a
     assert labels1.any()
+
+
+def test_measure_default_step_is_the_measure_package_default():
+    import argparse
+
+    from ctui.commands import measure as cmd
+    from ctui.engine.actions import defaults
+    from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
+
+    ap = argparse.ArgumentParser()
+    cmd.register(ap.add_subparsers())
+    args = ap.parse_args(["measure", "x.nii.gz"])
+    assert args.step == DEFAULT_SECTION_STEP_MM == defaults.SECTION_STEP_MM
 
 
 def test_measure_project_input(tmp_path, capsys):

@@ -367,3 +367,60 @@ def test_slab_average_reduces_binary_scatter_and_keeps_steps():
     rows = sections_along_path(stepped, path, spacing=SP, step_mm=0.5, average_mm=1.0)
     st = find_steps(*_areas(rows), margin_mm=3.0)
     assert len(st) == 1 and st[0]["s_mm"] == pytest.approx(7.0, abs=1.0)
+
+
+# ------------------------------------------------------------------ section status (issue 17)
+def test_cap_sections_flagged_and_writers_report_only_ok_rows(tmp_path):
+    """A path that starts outside a rod, crosses its end face and runs along it: the
+    sections outside and at the end face are flagged, the rest are true sections, and
+    the CSV / JSON / plot writers report only those; they refuse to write over an input."""
+    import json
+
+    from ctui.engine.core.errors import CtuiError
+    from ctui.engine.measure.report import flag_summary, sections_table
+
+    r = 2.5
+    inside, c, a = _cylinder((10.1, 10.2, 15.0), (0, 0, 1), r, 10.0)  # z 5 .. 25 mm
+    m = _soft(inside, (60, 40, 40), ss=(2, 8, 8))
+    path = np.array([[10.1, 10.2, z] for z in np.arange(1.0, 20.01, 0.25)])  # enters at z = 5 (s = 4)
+    rows = sections_along_path(m, path, spacing=SP, step_mm=0.5)
+    s = np.array([rr["s_mm"] for rr in rows])
+    status = np.array([rr["status"] for rr in rows])
+    assert set(status[s < 3.5]) == {"outside"}
+    assert np.all(status[(s > 4.2) & (s < 4.6)] == "cap")  # within a blur width of the end face
+    assert np.all(status[s > 6.0] == "ok")
+    ok = status == "ok"
+    area = np.array([rr["area_mm2"] for rr in rows])
+    assert np.abs(area[ok] / (math.pi * r * r) - 1).max() < 0.01  # the first one reported too
+    summary = flag_summary(rows)
+    assert summary["counts"]["outside"] == int((status == "outside").sum())
+    assert summary["ranges"][0]["status"] == "outside" and summary["ranges"][1]["status"] == "cap"
+    assert len(sections_table(rows)) == ok.sum()
+    write_sections_csv(tmp_path / "s.csv", rows)
+    assert (tmp_path / "s.csv").read_text().count("\n") == ok.sum() + 1
+    write_sections_json(tmp_path / "s.json", rows)
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert len(doc["sections"]) == ok.sum() and doc["section_flags"]["counts"].get("cap", 0) >= 1
+    src = tmp_path / "seg.nii.gz"
+    src.write_bytes(b"labels")
+    for writer in (write_sections_csv, write_sections_json, plot_sections):
+        with pytest.raises(CtuiError, match="refusing to overwrite"):
+            writer(src, rows, inputs=[src])
+    assert src.read_bytes() == b"labels"
+
+
+def test_stepped_rod_is_not_a_branch_but_a_side_branch_is():
+    """A calibre step is above the medians of one side only (ok); a stub joining the
+    rod makes the sections it crosses stand out on both sides (branch)."""
+    shape = (100, 44, 44)
+    x, y, z = _grid(shape)
+    rho = np.hypot(x - 11.1, y - 10.9)
+    m = (rho <= np.where(z < 25, 3.0, 2.0)) & (z > 3) & (z < 47)
+    m |= (np.abs(z - 14.0) <= 1.5) & (np.abs(y - 10.9) <= 1.5) & (x >= 11.1) & (x <= 20.0)  # stub along +x
+    path = np.array([[11.1, 10.9, zz] for zz in np.arange(4.0, 46.01, 0.25)])
+    rows = sections_along_path(m, path, spacing=SP, step_mm=0.5)
+    s = np.array([rr["s_mm"] for rr in rows]) + 4.0  # z of each section
+    status = np.array([rr["status"] for rr in rows])
+    assert np.any((status == "branch") & (np.abs(s - 14.0) <= 1.5))
+    assert not np.any((status == "branch") & (np.abs(s - 14.0) > 3.0))
+    assert np.all(status[(s > 20) & (s < 30)] == "ok")  # the step at z = 25 is a step

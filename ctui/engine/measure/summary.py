@@ -48,6 +48,22 @@ def _path_of(path, mask, *, step_mm, path_voxels, spacing, origin, direction) ->
     return np.asarray(path, dtype=np.float64)
 
 
+def _sections_part(out: dict[str, Any], path: np.ndarray, field, *, step_mm, area, average_mm, between) -> None:
+    """Fill ``out``'s path, section and between-planes keys (see :func:`measure_object`)."""
+    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)
+    out["path_mm"] = path
+    out["path_length_mm"] = path_length(path)
+    out["rows"] = rows
+    out["sections"] = sections_table(rows)
+    out["section_flags"] = flag_summary(rows)
+    out["warnings"] += _flag_warnings(out["section_flags"]["counts"], len(rows), out["object"])
+    if between is not None:
+        s1, s2 = between
+        vb = volume_between(None, path, s1, s2, field=field)
+        out["between"] = {"volume_ml": vb["volume_ml"], "area1_mm2": vb["area1_mm2"], "area2_mm2": vb["area2_mm2"]}
+        out["warnings"] += vb["warnings"]
+
+
 def measure_object(
     labels: np.ndarray,
     object_id: int,
@@ -98,8 +114,8 @@ def measure_object(
     ({``voxels``, ``mesh``}), ``volume_difference_percent``, ``area_mm2``,
     ``path_length_mm``, ``sections`` (list of {s_mm, area_mm2, eq_diameter_mm,
     min_diameter_mm, max_diameter_mm}, the "ok" sections only), ``section_flags``
-    ({counts, ranges} of the others: :func:`ctui.engine.measure.report.flag_summary`), ``between`` ({volume_ml, area1_mm2,
-    area2_mm2} or None), ``centroid_mm``, ``principal_axes_mm``, ``warnings``; plus,
+    ({counts, ranges} of the others: :func:`ctui.engine.measure.report.flag_summary`),
+    ``between`` ({volume_ml, area1_mm2, area2_mm2} or None), ``centroid_mm``, ``principal_axes_mm``, ``warnings``; plus,
     not for JSON: ``stats`` (:func:`object_stats`), ``path_mm`` (n, 3) and ``rows``
     (full section dicts with ``contour_mm`` (k, 3) and ``point_mm``, for drawing;
     pass them to :func:`ctui.engine.measure.report.plot_sections` for the area plot).
@@ -136,16 +152,5 @@ def measure_object(
         field = partial_volume_field(out["partial_volume"], spacing=spacing, origin=origin, direction=direction)
     else:
         field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
-    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)
-    out["path_mm"] = path
-    out["path_length_mm"] = path_length(path)
-    out["rows"] = rows
-    out["sections"] = sections_table(rows)
-    out["section_flags"] = flag_summary(rows)
-    out["warnings"] += _flag_warnings(out["section_flags"]["counts"], len(rows), object_id)
-    if between is not None:
-        s1, s2 = between
-        vb = volume_between(None, path, s1, s2, field=field)
-        out["between"] = {"volume_ml": vb["volume_ml"], "area1_mm2": vb["area1_mm2"], "area2_mm2": vb["area2_mm2"]}
-        out["warnings"] += vb["warnings"]
+    _sections_part(out, path, field, step_mm=step_mm, area=area, average_mm=average_mm, between=between)
     return out
