@@ -9,16 +9,18 @@ from a small phantom series, plus real files from ../shared/data when present
 (multi-frame MR, an MR slice without file meta, a MetaImage header, dcmqi NRRD label
 maps). Mutations: byte-level (flips, interesting integers, cuts, inserts), text-header
 edits (a value replaced by nan/inf/0/-1/huge, lines dropped or doubled), gzip payloads
-mutated and recompressed (so the CRC does not reject everything), and structured
-project.json edits (a field replaced by a hostile value).
+mutated and recompressed (so the CRC does not reject everything), structured
+project.json edits (a field replaced by a hostile value), and a quarter of the cases
+drawn by hypothesis (integer edits, insertions, cuts; derandomized in CI).
 
 Each case runs ``ctui.cli.main(argv)`` in a child FORKED from a warm server process
 (imports done once: ~0.1 s a case instead of ~1.5 s for a fresh interpreter), with
-``RLIMIT_AS`` capped and a 30 s alarm. Rules (a break of any one is a finding):
+``RLIMIT_AS`` capped, 30 s of CPU (RLIMIT_CPU) and a wall-clock alarm. Rules (a break of any one is a finding):
 
 * ``traceback``: an uncaught exception (or exit status other than 0, 2);
 * ``message``: exit 2 whose stderr is not one line ``ctui CMD: ...`` naming a file;
-* ``slow``: no result within 30 s;
+* ``slow``: no result within 30 s of CPU time (RLIMIT_CPU; the tests share a loaded
+  machine, so wall time is only bounded by a 300 s alarm for hangs that use no CPU);
 * ``alloc``: MemoryError (the cap was hit before a size check refused), or the child
   died of a signal (SIGSEGV/SIGABRT/SIGKILL from an allocation failure in C);
 * ``wrong``: exit 0 with a result the input contradicts (an oracle per format: shape
@@ -60,7 +62,8 @@ import pytest
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 SHARED = Path(os.environ.get("CTUI_SHARED_DATA", ROOT.parent / "shared" / "data"))
-TIMEOUT_S = 30
+TIMEOUT_S = 30  # CPU seconds a case may use (RLIMIT_CPU: a loaded machine does not make a case "slow")
+WALL_S = int(os.environ.get("CTUI_FUZZ_WALL_S", "300"))  # wall-clock alarm: hangs that use no CPU
 CAP_MB = int(os.environ.get("CTUI_FUZZ_AS_MB", "2048"))  # address space a case may add to the warm server's
 INTERESTING_TEXT = ["nan", "NaN", "inf", "-inf", "0", "-0", "-1", "1e308", "-1e308", "1e-300", "99999999",
                     "2147483648", "4294967296", "65535", "", "x", "1,2", "3 3", "0 0 0", "-5 4 3", "1e9 1 1"]
@@ -420,8 +423,10 @@ def _child(argv: list[str], case_dir: Path, cap: int) -> None:  # pragma: no cov
         os.dup2(err.fileno(), 2)
         sys.stdout, sys.stderr = out, err
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+        resource.setrlimit(resource.RLIMIT_CPU, (TIMEOUT_S + 1, TIMEOUT_S + 2))
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
-        signal.alarm(TIMEOUT_S)
+        signal.signal(signal.SIGXCPU, signal.SIG_DFL)
+        signal.alarm(WALL_S)
         from ctui.cli import main
 
         code = int(main(argv) or 0)
@@ -454,19 +459,22 @@ def run_case(seed: Seed, data: bytes, case_dir: Path) -> Outcome:
     pid = os.fork()
     if pid == 0:  # pragma: no cover
         _child(argv, case_dir, cap)
-    _, status = os.waitpid(pid, 0)
+    _, status, usage = os.wait4(pid, 0)
     dt = time.monotonic() - t0
+    cpu = usage.ru_utime + usage.ru_stime
     stdout = (case_dir / ".stdout").read_text(errors="replace")
     stderr = (case_dir / ".stderr").read_text(errors="replace")
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
-        if sig == signal.SIGALRM:
-            return Outcome("slow", -sig, dt, f"no result within {TIMEOUT_S} s")
+        if sig in (signal.SIGALRM, signal.SIGXCPU):
+            return Outcome("slow", -sig, cpu, f"no result within {TIMEOUT_S} s of CPU ({WALL_S} s of wall clock); "
+                           f"used {cpu:.1f} s CPU in {dt:.0f} s")
         return Outcome("alloc" if sig in (signal.SIGSEGV, signal.SIGABRT, signal.SIGKILL, signal.SIGBUS) else "traceback",
                        -sig, dt, f"killed by signal {signal.Signals(sig).name}: {stderr.strip()[-300:]}")
     rc = os.WEXITSTATUS(status)
-    if dt > TIMEOUT_S:
-        return Outcome("slow", rc, dt, f"{dt:.1f} s")
+    if cpu > TIMEOUT_S:
+        return Outcome("slow", rc, cpu, f"{cpu:.1f} s of CPU")
+    dt = cpu  # the figure reported as a case's time: its CPU seconds (independent of the machine's load)
     if "Traceback (most recent call last)" in stderr or rc not in (0, 2):
         last = [ln for ln in stderr.strip().splitlines() if ln.strip()][-3:]
         kind = "alloc" if "MemoryError" in stderr else "traceback"
@@ -515,8 +523,43 @@ def warm_up(seeds: list[Seed], work: Path) -> None:
             pass
 
 
+def hypothesis_inputs(seeds: list[Seed], n: int) -> list[tuple[Seed, bytes, str]]:
+    """``n`` structured mutations drawn by hypothesis (derandomized: the same cases every
+    CI run unless CTUI_FUZZ_RANDOM=1): a seed, up to 6 little-endian 1/2/4-byte edits of
+    interesting values, an optional insertion and an optional cut."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    interesting = st.sampled_from([0, 1, 2, 3, 0x7F, 0x80, 0xFF, 0x100, 0x7FFF, 0x8000, 0xFFFF, 0x10000,
+                                   0x7FFFFFFF, 0x80000000, 0xFFFFFFFF])
+    frac = st.floats(0, 1, allow_nan=False)
+    edit = st.tuples(frac, st.one_of(interesting, st.integers(0, 2**32 - 1)), st.sampled_from([1, 2, 4]))
+    drawn: list[tuple[Seed, bytes, str]] = []
+
+    @settings(max_examples=n, deadline=None, database=None, derandomize=os.environ.get("CTUI_FUZZ_RANDOM") != "1",
+              suppress_health_check=list(HealthCheck))
+    @given(k=st.integers(0, len(seeds) - 1), edits=st.lists(edit, max_size=6),
+           insert=st.one_of(st.none(), st.tuples(frac, st.binary(max_size=40))), cut=st.one_of(st.none(), frac))
+    def draw(k, edits, insert, cut):
+        seed = seeds[k]
+        b = bytearray(seed.files[seed.main])
+        for f, val, width in edits:
+            off = int(f * max(len(b) - width, 0))
+            if off + width <= len(b):
+                struct.pack_into({1: "<B", 2: "<H", 4: "<I"}[width], b, off, val & ((1 << (8 * width)) - 1))
+        if insert is not None:
+            i = int(insert[0] * len(b))
+            b[i:i] = insert[1]
+        if cut is not None:
+            del b[int(cut * len(b)):]
+        drawn.append((seed, bytes(b), "hypothesis"))
+
+    draw()
+    return drawn[:n]
+
+
 def campaign(n_cases: int, out: Path, *, seed_value: int = 0, log: Callable[[str], None] | None = None,
-             report_every: int = 0) -> dict:
+             report_every: int = 0, hypothesis_share: float = 0.25) -> dict:
     """Run ``n_cases`` mutated cases over all seeds (round robin); return the summary.
 
     Findings are copied to ``out/findings/<kind>-<n>-<name>`` with a ``README`` line
@@ -534,6 +577,7 @@ def campaign(n_cases: int, out: Path, *, seed_value: int = 0, log: Callable[[str
     t0 = time.monotonic()
     # every seed unmutated first: they must all give exit 0 and pass the oracle
     plan = [(s, s.files[s.main], "valid") for s in seeds]
+    plan += hypothesis_inputs(seeds, max(0, int(hypothesis_share * (n_cases - len(plan)))))
     i = 0
     while i < n_cases:
         if plan:
