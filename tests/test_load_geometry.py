@@ -174,3 +174,35 @@ def test_huge_rows_columns_refused_against_memory(tmp_path, monkeypatch):
         load(p)
     msg = str(exc.value)
     assert "\n" not in msg and str(p) in msg and "memory" in msg
+
+
+def test_series_over_rlimit_as_refused_before_allocating(tmp_path):
+    """Under a process address-space limit (RLIMIT_AS, as `ulimit -v` or a batch
+    scheduler sets) a series that does not fit stops with a one-line message, not a
+    MemoryError or a crash: the check respects the process's limit, not free RAM."""
+    import subprocess
+    import sys
+
+    images = [np.full((256, 256), k, np.int16) for k in range(40)]  # 5.2 MB of voxels
+    write_slices(tmp_path / "big", images, [[0.0, 0.0, 1.0 * k] for k in range(40)])
+    child = f"""
+import resource, sys
+from pathlib import Path
+import numpy as np
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.io.series import load, inspect
+vm = next(int(l.split()[1]) * 1024 for l in Path('/proc/self/status').read_text().splitlines() if l.startswith('VmSize'))
+vol = inspect({str(tmp_path / 'big')!r})  # headers + 3 slices: fits
+resource.setrlimit(resource.RLIMIT_AS, (vm + (4 << 20), resource.RLIM_INFINITY))
+try:
+    load({str(tmp_path / 'big')!r})
+except CtuiError as exc:
+    print("REFUSED", exc)
+    sys.exit(0)
+print("LOADED")
+"""
+    # 4 MB of address space over what is mapped after the imports; the series needs 5.2 MB
+    r = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120,
+                       env={**__import__("os").environ, "CTUI_THREADS": "1"})
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "REFUSED" in r.stdout and "memory" in r.stdout and "\n" not in r.stdout.strip(), r.stdout

@@ -314,6 +314,8 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     plan, zsel, f0 = prep.plan, prep.zsel, prep.frames[0]
     ny, nx = plan.out_shape(prep.full_shape)[1:]
     picks = sorted({zsel[0], zsel[len(zsel) // 2], zsel[-1]})
+    check_memory(len(picks) * ny * nx * prep.dtype.itemsize, shape=(len(picks), ny, nx), path=path,
+                 what=f"{len(picks)} sample slices of {ny}x{nx}")
     sample = np.empty((len(picks), ny, nx), prep.dtype)
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
     ok = [k for k, zi in enumerate(picks)
