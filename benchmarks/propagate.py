@@ -8,7 +8,13 @@ pipeline, threshold the whole volume, scipy.ndimage.label in 3D, keep the seed's
 component. Also timed: ctui's own 3D mode, and one-slice preview (both filters, full
 512x512 slice, cache off) which the TUI needs under 30 ms.
 
-Run: python3 benchmarks/propagate.py [--repeat N] [--slices 300] [--size 512]
+Memory (``--memory``): the peak resident memory of ctui's propagation (slice and 3D
+mode) and of the whole ``segment`` action (fill, grow) above the memory held once the
+series is loaded, as a multiple of the series' size, each phase measured from a reset
+peak (``/proc/self/clear_refs``); the peer's (scipy label) likewise. Goal (issue 15):
+at most 2x the series.
+
+Run: python3 benchmarks/propagate.py [--repeat N] [--slices 300] [--size 512] [--memory]
 Goal: ctui propagation <= 1 s.
 """
 
@@ -84,11 +90,66 @@ def peer_scipy(vol: Volume, pipeline: Pipeline, seed_zyx, low: float, high: floa
     return comp, {"filter": t1 - t0, "label": t2 - t1, "total": t2 - t0}
 
 
+def _rss_mib(field: str) -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _reset_peak() -> bool:
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def memory(vol: Volume, p: Pipeline, seed, low: float, high: float) -> None:
+    """Peak RSS above the loaded series for each phase, as a multiple of the series size."""
+    import gc
+
+    from ctui.engine.actions.segment import SegmentOptions, segment
+
+    series = vol.data.nbytes / 2**20
+    # before (commit 7eafd76, same harness): propagate slice 0.01x, 3d 1.01x, propagate + accept +
+    # the report's np.bincount of the labels 4.77x; `ctui segment` of this series saved as NIfTI
+    # (/usr/bin/time -v, peak minus a load-only run): slice mode 4.7x, 3D mode 6.8x.
+    phases = {
+        "propagate, slice mode": lambda: propagate(vol, p, threshold_fill(p.final_slice(vol, seed[2]), seed[0], seed[1],
+                                                                        low=low, high=high), seed[2],
+                                                   PropagationSettings(low=low, high=high)),
+        "propagate, 3d mode": lambda: propagate(vol, p, threshold_fill(p.final_slice(vol, seed[2]), seed[0], seed[1],
+                                                                     low=low, high=high), seed[2],
+                                                PropagationSettings(low=low, high=high, mode="3d")),
+        "segment action, fill (labels + accept)": lambda: segment(vol, [seed], [(low, high)], pipeline=p),
+        "segment action, 3d": lambda: segment(vol, [seed], [(low, high)], pipeline=p,
+                                              options=SegmentOptions(mode="3d")),
+        "segment action, grow": lambda: segment(vol, [seed], [(low, high)], pipeline=p,
+                                                options=SegmentOptions(method="grow")),
+        "peer: filters + scipy.ndimage.label": lambda: peer_scipy(vol, p, (seed[2], seed[1], seed[0]), low, high),
+    }
+    for name, run in phases.items():
+        gc.collect()
+        base = _rss_mib("VmRSS")
+        if not _reset_peak():
+            print("memory: /proc/self/clear_refs not writable; skipped")
+            return
+        out = run()
+        peak = _rss_mib("VmHWM")
+        del out
+        print(f"memory, {name}: peak {peak - base:.0f} MiB above the loaded series = {(peak - base) / series:.2f}x "
+              f"the series ({series:.0f} MiB; goal <= 2x)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--slices", type=int, default=300)
     ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--memory", action="store_true", help="only the memory measurements")
     args = ap.parse_args()
 
     t = time.perf_counter()
@@ -103,6 +164,11 @@ def main() -> int:
     # warm-up (OpenCV/numba initialisation)
     start = threshold_fill(p.final_slice(vol, z0), seed[0], seed[1], low=low, high=high)
     propagate(vol, p, start, z0, PropagationSettings(low=low, high=high, max_slices=5))
+    if args.memory:
+        propagate(vol, p, start, z0, PropagationSettings(low=low, high=high, mode="3d", max_slices=2))
+        del truth
+        memory(vol, p, seed, low, high)
+        return 0
 
     # one-slice preview (cache cleared each time)
     prev = []
