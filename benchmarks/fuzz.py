@@ -1,6 +1,6 @@
 """The long command-fuzzing campaign (issue 16): ``python benchmarks/fuzz.py --cases 10000``.
 
-Runs the engine of tests/test_fuzz_cli.py (mutated ctui projects, NIfTI, NRRD, MRIC,
+Runs the engine of tests/fuzz_cli.py (mutated ctui projects, NIfTI, NRRD, MRIC,
 meshes, DICOM, and real files from ../shared/data through `ctui info/measure/mesh`, each
 case in a fork with RLIMIT_AS capped and a 30 s alarm) on ONE core, and prints the
 figures: cases, tracebacks, runs over 30 s, allocations over the cap, exit-0 wrong
@@ -36,7 +36,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=1, help="random seed of the mutations (CI uses 0)")
     ap.add_argument("--report-every", type=int, default=250)
     a = ap.parse_args()
-    from test_fuzz_cli import FINDINGS, campaign
+    from fuzz_cli import FINDINGS, campaign
 
     res = campaign(a.cases, Path(a.out), seed_value=a.seed, report_every=a.report_every,
                    log=lambda s: print(s, file=sys.stderr, flush=True))

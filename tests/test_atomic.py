@@ -20,10 +20,9 @@ def test_atomic_write_replaces_whole_file(tmp_path):
 def test_atomic_write_failure_keeps_previous(tmp_path):
     p = tmp_path / "a.txt"
     write_bytes(p, b"previous")
-    with pytest.raises(RuntimeError):
-        with atomic_write(p, "w") as fh:
-            fh.write("partial")
-            raise RuntimeError("crash in the middle")
+    with pytest.raises(RuntimeError), atomic_write(p, "w") as fh:
+        fh.write("partial")
+        raise RuntimeError("crash in the middle")
     assert p.read_bytes() == b"previous"
     assert os.listdir(tmp_path) == ["a.txt"]
 

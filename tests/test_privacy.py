@@ -145,7 +145,7 @@ def test_every_command_and_export_is_clean(series, tmp_path):
     home.mkdir()
     env = {**os.environ, "HOME": str(home), "XDG_CACHE_HOME": str(home / ".cache"), "CTUI_AUTOSAVE_DIR": str(home / "autosave"), "PYTHONWARNINGS": "default"}
     seed = f"{CENTRE[2]},{CENTRE[1]},{CENTRE[0]}"
-    o = lambda name: str(out / name)  # noqa: E731
+    o = lambda name: str(out / name)
     plan = [
         ("info", ["info", str(series), "--json"]),
         ("info", ["info", str(series)]),
@@ -182,8 +182,8 @@ def test_every_command_and_export_is_clean(series, tmp_path):
             failures.append(f"ctui {' '.join(args)} -> {r.returncode}: {r.stderr.strip()[-300:]}")
     # engine-level exports and autosave of the project the CLI wrote
     from ctui.engine.io.labels import save_labels
-    from ctui.engine.io.series import load
     from ctui.engine.io.project import autosave, load_project, save_project
+    from ctui.engine.io.series import load
 
     if (out / "p.ctui").exists():
         proj = load_project(out / "p.ctui")
@@ -237,7 +237,7 @@ def test_hide_path():
 @pytest.fixture(scope="module")
 def named_series(tmp_path_factory) -> Path:
     return write_series(tmp_path_factory.mktemp("named") / FOLDER, broken=False, secrets=NAMED,
-                        description=f"CT {NAME.replace('^', ' ')} abdomen", study_description=f"Qwerty study 1970",
+                        description=f"CT {NAME.replace('^', ' ')} abdomen", study_description="Qwerty study 1970",
                         private_text=f"{NAME} 19700101")
 
 
@@ -270,7 +270,7 @@ def test_named_series_reaches_no_output(named_series, tmp_path, capsys, monkeypa
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     s = str(named_series)
     seed = f"{CENTRE[2]},{CENTRE[1]},{CENTRE[0]}"
-    o = lambda name: str(out / name)  # noqa: E731
+    o = lambda name: str(out / name)
     plan = [
         ["info", s], ["info", s, "--json"],
         ["segment", s, "--seed", seed, "--range", "200:400", "--project", o("p.ctui"), "--mask", o("m.nii.gz"),

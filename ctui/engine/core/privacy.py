@@ -22,8 +22,9 @@ import io
 import os
 import re
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 #: DICOM keywords (PS3.15 basic profile subset) that identify a patient, an
 #: operator or an institution. Compared case-insensitively, ignoring '_' and ' '.
@@ -67,12 +68,7 @@ def scrub(obj: Any) -> Any:
 #: Words that may appear in a name or an ID but are common in descriptions and
 #: never scrubbed on their own (upper-case compared).
 COMMON_WORDS: frozenset[str] = frozenset(
-    """
-    ABDOMEN ABD AND ANON ANONYMOUS AXIAL BODY BONE BRAIN CARDIAC CENTER CENTRE CHEST CLINIC CONTRAST
-    CORONAL DEFAULT DEMO DEPT DOCTOR DYNAMIC FEMALE FOR HEAD HOSPITAL KNEE LEFT LIVER LUNG MALE MEDICAL
-    NAME NECK NONE NULL OTHER PATIENT PELVIS PHANTOM POST PRE RADIOLOGY RIGHT SAGITTAL SCAN SCOUT SERIES
-    SOFT SPINE STUDY TEST THE THORAX TISSUE UNKNOWN VENOUS WITH WITHOUT
-    """.split()
+    ["ABDOMEN", "ABD", "AND", "ANON", "ANONYMOUS", "AXIAL", "BODY", "BONE", "BRAIN", "CARDIAC", "CENTER", "CENTRE", "CHEST", "CLINIC", "CONTRAST", "CORONAL", "DEFAULT", "DEMO", "DEPT", "DOCTOR", "DYNAMIC", "FEMALE", "FOR", "HEAD", "HOSPITAL", "KNEE", "LEFT", "LIVER", "LUNG", "MALE", "MEDICAL", "NAME", "NECK", "NONE", "NULL", "OTHER", "PATIENT", "PELVIS", "PHANTOM", "POST", "PRE", "RADIOLOGY", "RIGHT", "SAGITTAL", "SCAN", "SCOUT", "SERIES", "SOFT", "SPINE", "STUDY", "TEST", "THE", "THORAX", "TISSUE", "UNKNOWN", "VENOUS", "WITH", "WITHOUT"]
 )
 _SPLIT = re.compile(r"[^0-9A-Za-z\u00C0-\uFFFF]+")
 _REPLACEMENT = "[removed]"
