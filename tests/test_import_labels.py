@@ -206,3 +206,33 @@ def test_overlapping_segments_written_back_overlapping(dcmqi, tmp_path):
     back = read_label_file(tmp_path / "again.dcm", grid=ct)
     assert [o["name"] for o in back.objects] == ["GREEN", "ORANGE", "PURPLE", "LIGHT_BLUE", "DARK_BLUE"]
     assert back.voxel_counts() == {1: 9602, 2: 11888, 3: 10743, 4: 6693, 5: 4713}
+
+
+def test_fuzzed_seg_and_rtstruct_never_crash(phantom, tmp_path):
+    """Flipped bytes and cut files: a one-line CtuiError or a clean read, never a traceback."""
+    from ctui.engine.actions.export import export
+    from ctui.engine.actions.project import new_project, save_project
+
+    root, v, _ = phantom
+    labels = np.zeros(v.shape, np.uint8)
+    labels[8:12, 20:30, 20:30] = 1
+    labels[9, 24:26, 24:26] = 0
+    save_project(tmp_path / "p.ctui", new_project(v, source_path=root / "series", labels=labels))
+    rng = np.random.default_rng(7)
+    for fmt in ("dicom-seg", "rtstruct"):
+        good = tmp_path / f"{fmt}.dcm"
+        export(tmp_path / "p.ctui", format=fmt, out=good)
+        raw = bytearray(good.read_bytes())
+        for n in range(25):
+            bad = bytearray(raw)
+            for i in rng.integers(132, len(bad), size=int(rng.integers(1, 8))):
+                bad[i] = int(rng.integers(0, 256))
+            if n % 5 == 4:
+                bad = bad[: int(rng.integers(132, len(bad)))]
+            (tmp_path / "f.dcm").write_bytes(bytes(bad))
+            try:
+                imp = read_label_file(tmp_path / "f.dcm", grid=v)
+            except CtuiError as exc:
+                assert "\n" not in str(exc)
+            else:
+                assert imp.labels.shape == v.shape

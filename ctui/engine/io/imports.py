@@ -85,11 +85,10 @@ def label_kind(path: str | os.PathLike) -> str:
     if p.is_dir():
         raise FormatError("is a folder: give the label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)", path=p)
     import pydicom
-    from pydicom.errors import InvalidDicomError
 
     try:
         ds = pydicom.dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
-    except (InvalidDicomError, OSError, ValueError, EOFError, TypeError, AttributeError, KeyError) as exc:
+    except Exception as exc:  # noqa: BLE001 - pydicom raises many types (struct.error...) on foreign/broken files
         raise FormatError(f"not a label file: expected DICOM-SEG, RTSTRUCT, .nii, .nii.gz or .nrrd "
                           f"({' '.join(str(exc).split())[:120]})", path=p) from None
     from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, SEG_SOP_CLASS

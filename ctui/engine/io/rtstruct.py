@@ -267,7 +267,7 @@ def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
         raise FormatError("not an RT Structure Set", path=p)
     try:
         return _rtstruct_contents(ds)
-    except (AttributeError, KeyError, ValueError, TypeError, IndexError) as exc:
+    except Exception as exc:  # noqa: BLE001 - lazily parsed elements of a broken file raise many types
         raise FormatError(f"corrupted RT Structure Set ({type(exc).__name__}: {' '.join(str(exc).split())[:160]})",
                           path=p) from None
 
@@ -281,7 +281,7 @@ def _rtstruct_contents(ds: Any) -> RtStructContents:
         roi = RoiInfo(number=num, name=names.get(num) or f"ROI {num}", color=color)
         for c in rc.get("ContourSequence", []):
             data = _contour_points(c)
-            if data.size < 3 or data.size % 3:
+            if data.size < 3 or data.size % 3 or not np.all(np.isfinite(data)):
                 continue
             roi.contours.append(data.reshape(-1, 3))
             imgs = c.get("ContourImageSequence", [])
