@@ -31,10 +31,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ctui.engine.segment.pipeline import Pipeline  # noqa: E402
-from ctui.engine.segment.propagate import PropagationSettings, propagate  # noqa: E402
-from ctui.engine.segment.selection import Segmentation, in_range, threshold_fill  # noqa: E402
-from ctui.engine.core.volume import Volume  # noqa: E402
+from ctui.engine.core.volume import Volume
+from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.segment.propagate import PropagationSettings, propagate
+from ctui.engine.segment.selection import Segmentation, threshold_fill
 
 
 def make_series(nz: int, n: int, seed: int = 0) -> tuple[Volume, np.ndarray]:

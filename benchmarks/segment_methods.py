@@ -34,10 +34,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ctui.engine.actions.segment import SegmentOptions, segment  # noqa: E402
-from ctui.engine.core.volume import Volume  # noqa: E402
-from ctui.engine.segment import grow as G  # noqa: E402
-from ctui.engine.segment.selection import Segmentation  # noqa: E402
+from ctui.engine.actions.segment import SegmentOptions, segment
+from ctui.engine.core.volume import Volume
+from ctui.engine.segment import grow as G
+from ctui.engine.segment.selection import Segmentation
 
 SPACING = (3.0, 0.8, 0.8)
 REGION = (slice(100, 200), slice(156, 356), slice(156, 356))  # 100 x 200 x 200

@@ -5,8 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ctui.engine.segment.drift import (analyze_drift, apply_corrections, correct_segmentation, corrected_volume,
-                               corrections_from_report, invert_corrections, plot_drift, slice_centroids, smooth_fit)
+from ctui.engine.segment.drift import (
+    analyze_drift,
+    apply_corrections,
+    correct_segmentation,
+    corrected_volume,
+    corrections_from_report,
+    invert_corrections,
+    plot_drift,
+    slice_centroids,
+    smooth_fit,
+)
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.propagate import PropagationSettings, propagate_object
 from ctui.engine.segment.selection import Segmentation

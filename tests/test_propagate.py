@@ -8,10 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from ctui.engine.segment.pipeline import Pipeline
-from ctui.engine.segment.propagate import PropagationSettings, iter_propagation, propagate, propagate_object
-from ctui.engine.segment.selection import Segmentation
 from ctui.engine.core.volume import Volume
+from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.segment.propagate import (
+    PropagationSettings,
+    iter_propagation,
+    propagate,
+    propagate_object,
+)
+from ctui.engine.segment.selection import Segmentation
 
 
 def _load_or_skip(path):
@@ -260,7 +265,7 @@ def test_window8_domain_kidney(phantom):
     k = [o for o in truth["objects"] if o["name"] == "kidney_left"][0]
     centre, width = 40.0, 400.0
     p = Pipeline(domain="window8", window=(centre, width))
-    to8 = lambda hu: (hu - (centre - width / 2)) * 255.0 / width  # noqa: E731
+    to8 = lambda hu: (hu - (centre - width / 2)) * 255.0 / width
     lo8 = to8(k["hu_range"][0])
     seg = Segmentation(vol.shape)
     z, y, x = k["seed_zyx"]

@@ -28,8 +28,9 @@ memory available before they are allocated.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -38,10 +39,16 @@ from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Cancelled, Progress, report
 from ctui.engine.segment import grow as _grow
 from ctui.engine.segment.fill3d import fill3d_seeds
-from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
+from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_3d
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.propagate import PropagationSettings, propagate_object
-from ctui.engine.segment.selection import Segmentation, fill_range, in_range, label_counts, threshold_fill
+from ctui.engine.segment.selection import (
+    Segmentation,
+    fill_range,
+    in_range,
+    label_counts,
+    neck_fill,
+)
 
 METHODS = ("fill", "grow", "levelset")
 Seed = tuple[int, int, int]
@@ -145,15 +152,10 @@ def _seed_fill(final: np.ndarray, seed: Seed, th: Threshold, opts: SegmentOption
         lo, hi = fill_range(0.0, low=th[0], high=th[1])
     else:
         lo, hi = fill_range(float(final[y, x]), tolerance=float(th))
-    mask = threshold_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity)
+    mask = neck_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity, neck_mm=opts.neck_mm,
+                     spacing_yx=spacing_yx)
     if not mask.any():
         raise CtuiError(f"seed {x},{y},{z}: its value {float(final[y, x]):g} is outside the range [{lo:g}, {hi:g}]")
-    if opts.neck_mm > 0:
-        ref = np.zeros(mask.shape, bool)
-        ref[y, x] = True
-        cut, status = cut_necks_2d(mask, ref, neck_mm=opts.neck_mm, spacing_yx=spacing_yx, connectivity=opts.connectivity)
-        if status in ("ok", "cut"):
-            mask = cut
     if int(mask.sum()) < opts.min_area:
         raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
                         f"{opts.min_area} px")

@@ -87,10 +87,8 @@ def _scanline_fill_py(inr, seeds, out, eight):  # pragma: no cover - compiled by
                 b = xr
             if zz < 0 or zz >= nz or yy < 0 or yy >= ny:
                 continue
-            if a < 0:
-                a = 0
-            if b > nx - 1:
-                b = nx - 1
+            a = max(a, 0)
+            b = min(b, nx - 1)
             inseg = False
             for xx in range(a, b + 1):
                 if inr[zz, yy, xx] != 0 and out[zz, yy, xx] == 0:

@@ -25,7 +25,8 @@ lists, odd sides), as the prototype's kernel editor made.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import cv2
 import numpy as np

@@ -94,15 +94,11 @@ def compete(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, 
     hi = float(min(d[tuple(fg.T)].max(), d[tuple(bg.T)].max()))
     lo = 0.0
 
-    def apart(r: float) -> bool:
-        core = fill3d_seeds(d > r, fg[d[tuple(fg.T)] > r], connectivity=connectivity)
-        return not core[tuple(bg.T)].any()
-
-    if hi <= 0 or not apart(hi * 0.999):
+    if hi <= 0 or not _apart(d, hi * 0.999, fg, bg, connectivity):
         return compete_watershed(region, fg, bg, spacing=spacing, connectivity=connectivity)
     while hi - lo > 0.05:
         mid = 0.5 * (lo + hi)
-        if apart(mid):
+        if _apart(d, mid, fg, bg, connectivity):
             hi = mid
         else:
             lo = mid
@@ -117,6 +113,12 @@ def compete(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, 
     free = reg.view(bool) & ~bg_part
     del bg_part
     return fill3d_seeds(free, fg, connectivity=connectivity)
+
+
+def _apart(d: np.ndarray, r: float, fg: np.ndarray, bg: np.ndarray, connectivity: int) -> bool:
+    """Whether no background seed is connected to a foreground seed in {d > r}."""
+    core = fill3d_seeds(d > r, fg[d[tuple(fg.T)] > r], connectivity=connectivity)
+    return not core[tuple(bg.T)].any()
 
 
 def compete_watershed(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, *,

@@ -65,7 +65,7 @@ class Step:
         return {"name": self.name, "stage": int(self.stage), "params": params, "enabled": bool(self.enabled)}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Step":
+    def from_dict(cls, d: dict[str, Any]) -> Step:
         return cls(name=str(d["name"]), stage=int(d.get("stage", 1)), params=dict(d.get("params", {})), enabled=bool(d.get("enabled", True)))
 
     def reach(self) -> int | None:
@@ -195,7 +195,7 @@ class Pipeline:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any] | None) -> "Pipeline":
+    def from_dict(cls, d: dict[str, Any] | None) -> Pipeline:
         d = d or {}
         w = d.get("window")
         return cls([Step.from_dict(s) for s in d.get("steps", [])], domain=d.get("domain", "hu"),

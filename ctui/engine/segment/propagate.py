@@ -49,8 +49,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Generator
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Generator
+from typing import Any
 
 import cv2
 import numpy as np
@@ -110,7 +111,7 @@ class PropagationSettings:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "PropagationSettings":
+    def from_dict(cls, d: dict[str, Any]) -> PropagationSettings:
         names = set(cls.__dataclass_fields__)
         return cls(**{k: v for k, v in d.items() if k in names})
 

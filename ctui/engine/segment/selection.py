@@ -44,7 +44,7 @@ class ObjectInfo:
                 "seeds": [list(s) for s in self.seeds], **self.settings}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "ObjectInfo":
+    def from_dict(cls, d: dict[str, Any]) -> ObjectInfo:
         known = {"id", "name", "color", "seeds"}
         return cls(id=int(d["id"]), name=str(d.get("name", f"object {d['id']}")),
                    color=tuple(int(c) for c in d.get("color", object_color(int(d["id"])))),  # type: ignore[arg-type]
@@ -131,6 +131,22 @@ def threshold_fill(image: np.ndarray, x: int, y: int, *, low: float, high: float
         return np.zeros(image.shape, bool)
     cv2.floodFill(m, None, (int(x), int(y)), 2, 0, 0, connectivity)
     return m == 2
+
+
+def neck_fill(image: np.ndarray, x: int, y: int, *, low: float, high: float, connectivity: int = 8,
+              neck_mm: float = 0.0, spacing_yx: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """:func:`threshold_fill` at (x, y), then cut at necks narrower than ``neck_mm`` (mm; pixel
+    size ``spacing_yx`` (dy, dx)): only what joins the seed through a neck at least that wide
+    is kept, so a fill into a neighbour of the same values stops at the bridge. bool (ny, nx);
+    ``neck_mm=0`` is the plain fill. The TUI's Enter and ``ctui segment`` both use it."""
+    mask = threshold_fill(image, x, y, low=low, high=high, connectivity=connectivity)
+    if neck_mm > 0 and mask.any():
+        seed = np.zeros(mask.shape, bool)
+        seed[y, x] = True
+        cut, status = cut_necks_2d(mask, seed, neck_mm=neck_mm, spacing_yx=spacing_yx, connectivity=connectivity)
+        if status in ("ok", "cut"):
+            mask = cut
+    return mask
 
 
 def seeded_components(inrange: np.ndarray, seeds: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
@@ -346,13 +362,7 @@ class Segmentation(EditMixin):
         if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
             raise IndexError(f"seed ({x}, {y}, {z}) outside the volume (x 0..{nx - 1}, y 0..{ny - 1}, z 0..{nz - 1})")
         lo, hi = fill_range(float(image[y, x]), tolerance=tolerance, low=low, high=high)
-        mask = threshold_fill(image, x, y, low=lo, high=hi, connectivity=connectivity)
-        if neck_mm > 0 and mask.any():
-            seed = np.zeros(mask.shape, bool)
-            seed[y, x] = True
-            cut, status = cut_necks_2d(mask, seed, neck_mm=neck_mm, spacing_yx=spacing_yx, connectivity=connectivity)
-            if status in ("ok", "cut"):
-                mask = cut
+        mask = neck_fill(image, x, y, low=lo, high=hi, connectivity=connectivity, neck_mm=neck_mm, spacing_yx=spacing_yx)
         area = int(mask.sum())
         if area == 0:
             return FillResult(False, 0, f"seed value {float(image[y, x]):g} is outside the range [{lo:g}, {hi:g}]", mask, (lo, hi))
