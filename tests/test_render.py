@@ -457,7 +457,7 @@ def test_brick_minmax_matches_filtered_reference():
     one voxel (what trilinear sampling and gradients can reach) == scipy filters."""
     from scipy import ndimage
 
-    from ctui.engine.render.gl import _brick_minmax
+    from ctui.engine.render.volume_gpu import brick_minmax as _brick_minmax
 
     rng = np.random.default_rng(1)
     for shape in [(37, 50, 64), (9, 8, 17)]:
