@@ -236,3 +236,10 @@ def test_fuzzed_seg_and_rtstruct_never_crash(phantom, tmp_path):
                 assert "\n" not in str(exc)
             else:
                 assert imp.labels.shape == v.shape
+
+
+def test_seg_too_big_for_memory_is_refused_before_reading(dcmqi, monkeypatch):
+    d, ct = dcmqi
+    monkeypatch.setenv("CTUI_MEMORY_LIMIT", str(1_000_000))
+    with pytest.raises(CtuiError, match="memory"):
+        read_label_file(d / "liver.dcm", grid=ct)

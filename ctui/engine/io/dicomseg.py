@@ -35,6 +35,7 @@ from ctui.engine.core.atomic import atomic_path
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
 
@@ -399,6 +400,9 @@ def read_seg(path: str | os.PathLike) -> SegContents:
         if not numbers:
             raise FormatError("the DICOM-SEG holds no segment", path=p)
         fractional = str(seg.SegmentationType) == "FRACTIONAL"
+        # one segment's volume (at most a slice per frame) and its crop, before highdicom allocates it
+        check_allocation(2 * int(seg.Rows) * int(seg.Columns) * max(int(seg.get("NumberOfFrames", 1) or 1), 1)
+                         * (4 if fractional else 1), what="a DICOM-SEG segment volume", path=p)
         out = SegContents([], Geometry((1, 1, 1)), str(seg.SegmentationType),
                           frame_of_reference=str(seg.get("FrameOfReferenceUID", "")),
                           number_of_frames=int(seg.get("NumberOfFrames", 0) or 0))
@@ -416,7 +420,7 @@ def read_seg(path: str | os.PathLike) -> SegContents:
             out.segments.append(SegSegment(number=n, label=str(d.get("SegmentLabel", "")), color=_rgb(d),
                                            algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
         refs = seg.get_source_image_uids()
-    except FormatError:
+    except CtuiError:
         raise
     except MemoryError:
         raise FormatError("not enough memory to read this DICOM-SEG", path=p) from None
