@@ -80,3 +80,27 @@ def test_cut_necks_3d_and_ball_shape():
     ball = morph_ball(one, 4.0, sp, erode=False)
     assert ball[2:5].any(axis=(1, 2)).all() and not ball[[0, 1, 5, 6]].any()
     assert ball[3].sum() > ball[2].sum() > 0
+
+
+def test_real_liver_fill_stops_at_necks():
+    """A real CT (dcmqi's 3-slice abdomen) and its liver segmentation: one seed and the liver's own
+    2-98% value range flood into the neighbours without the neck cut; with the default 5 mm neck
+    the fill is the liver (Dice 0.55 -> 0.85)."""
+    from conftest import shared
+
+    from ctui.engine.actions.segment import SegmentOptions, segment
+
+    root = shared("dcmqi_seg")
+    from ctui.engine.io.labels import load_labels
+    from ctui.engine.io.series import load
+
+    vol = load(str(root / "ct-3slice"))
+    liver = load_labels(str(root / "liver_seg.nrrd"))[0] > 0
+    lo, hi = (float(v) for v in np.percentile(vol.data[liver], [2, 98]))
+    seed = (154, 244, 1)  # the deepest point of the liver on the middle slice
+    assert liver[1, 244, 154]
+    dice = {}
+    for neck in (0.0, 5.0):
+        got = segment(vol, [seed], [(lo, hi)], options=SegmentOptions(neck_mm=neck)).segmentation.labels == 1
+        dice[neck] = 2 * (got & liver).sum() / (got.sum() + liver.sum())
+    assert dice[0.0] < 0.6 and dice[5.0] > 0.8, dice
