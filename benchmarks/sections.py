@@ -143,8 +143,10 @@ def main() -> int:
     area = np.array([r["area_mm2"] for r in rows])
     true = math.pi * args.radius**2
     inner = area[10:-10]
-    print(f"ctui : {len(rows)} sections, median of {args.repeat}: total {tc['total']:.3f} s "
-          f"(field {tc['field']:.3f}, sampling {tc['sampling']:.3f}, contours {tc['contours']:.3f}); "
+    n_ok = sum(1 for r in rows if r["status"] == "ok")
+    print(f"ctui : {len(rows)} sections ({n_ok} ok), median of {args.repeat}: total {tc['total']:.3f} s "
+          f"(field {tc['field']:.3f}, sampling {tc['sampling']:.3f}, contours {tc['contours']:.3f}, "
+          f"flags {tc.get('flags', 0.0):.3f}); "
           f"peak {mc / 2**20:.0f} MiB; area error mean {100 * (np.nanmean(inner) / true - 1):+.2f}% "
           f"max {100 * np.nanmax(np.abs(inner / true - 1)):.2f}%")
     half = 2.0 * args.radius + 2.0
