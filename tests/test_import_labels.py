@@ -197,15 +197,17 @@ def test_broken_or_foreign_label_files_are_one_line_errors(phantom, tmp_path):
 
 
 def test_overlapping_segments_written_back_overlapping(dcmqi, tmp_path):
-    """dcmqi's five overlapping segments through ctui and out as DICOM-SEG: every segment keeps its voxels."""
+    """dcmqi's five overlapping segments through ctui and out as DICOM-SEG and RTSTRUCT: every segment keeps
+    its voxels."""
     from ctui.engine.actions.export import export
 
     d, ct = dcmqi
     opened = open_input(d / "ct-3slice", labels=d / "partial_overlaps.dcm")
-    export(opened, format="dicom-seg", out=tmp_path / "again.dcm")
-    back = read_label_file(tmp_path / "again.dcm", grid=ct)
-    assert [o["name"] for o in back.objects] == ["GREEN", "ORANGE", "PURPLE", "LIGHT_BLUE", "DARK_BLUE"]
-    assert back.voxel_counts() == {1: 9602, 2: 11888, 3: 10743, 4: 6693, 5: 4713}
+    for fmt in ("dicom-seg", "rtstruct"):
+        export(opened, format=fmt, out=tmp_path / f"again-{fmt}.dcm")
+        back = read_label_file(tmp_path / f"again-{fmt}.dcm", grid=ct)
+        assert [o["name"] for o in back.objects] == ["GREEN", "ORANGE", "PURPLE", "LIGHT_BLUE", "DARK_BLUE"]
+        assert back.voxel_counts() == {1: 9602, 2: 11888, 3: 10743, 4: 6693, 5: 4713}, fmt
 
 
 def test_fuzzed_seg_and_rtstruct_never_crash(phantom, tmp_path):

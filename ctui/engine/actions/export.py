@@ -248,8 +248,9 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     elif fmt == "rtstruct":
         from ctui.engine.io.rtstruct import write_rtstruct
 
+        masks = {k: m for k, m in src.masks.items() if k in ids}  # overlapping segments keep their contours
         write_rtstruct(p, labels, src.geometry, _dicom_sources(src), objects=objs, keep_identifiers=keep_identifiers,
-                       progress=sub)
+                       masks=masks, progress=sub)
     elif fmt in ("nifti", "nrrd"):
         from ctui.engine.io.labels import save_labels
 

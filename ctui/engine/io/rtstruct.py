@@ -29,6 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ctui.engine.core.atomic import atomic_write
+from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -118,8 +119,9 @@ def _contour_data(values: np.ndarray) -> Any:
     return RawDataElement(Tag(0x30060050), "DS", len(raw), raw, 0, False, True)
 
 
-def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any]) -> list[Any]:
-    m = labels == oid
+def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any],
+                  mask: np.ndarray | None = None) -> list[Any]:
+    m = labels == oid if mask is None else np.asarray(mask, dtype=bool)
     items = []
     ys = np.flatnonzero(m.any(axis=(0, 2)))
     xs = np.flatnonzero(m.any(axis=(0, 1)))
@@ -138,11 +140,13 @@ def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Seq
 
 
 def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any], *, objects: Sequence[dict] | None = None,
-                   keep_identifiers: bool = False, label: str = "ctui", progress: Progress | None = None) -> Any:
+                   keep_identifiers: bool = False, label: str = "ctui", masks: dict[int, np.ndarray] | None = None,
+                   progress: Progress | None = None) -> Any:
     """The RTSTRUCT dataset (pydicom FileDataset-ready Dataset) for ``labels`` on ``sources``.
 
     ``labels`` (z, y, x) uint8 on ``geometry``, the series' grid (one source header per slice,
-    in slice order, from :func:`ctui.engine.io.dicomseg.source_datasets`).
+    in slice order, from :func:`ctui.engine.io.dicomseg.source_datasets`). ``masks``: full masks
+    of objects that overlap others (imported segments), contoured instead of their label.
     """
     import pydicom
     from pydicom.dataset import FileMetaDataset
@@ -151,7 +155,14 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     from ctui import __version__
 
     lab = np.asarray(labels)
+    masks = masks or {}
     objs = _objects_in(lab, objects)
+    known = {o["id"] for o in objs}
+    for oid in sorted(k for k in masks if k not in known and masks[k].any()):  # hidden under later segments
+        info = next((o for o in objects or [] if int(o.get("id", -1)) == oid), {})
+        objs.append({"id": oid, "name": str(info.get("name") or f"object {oid}"),
+                     "color": tuple(int(c) for c in info.get("color", object_color(oid)))[:3]})
+    objs.sort(key=lambda o: o["id"])
     if not objs:
         raise CtuiError("no object in the labels: nothing to write")
     if len(sources) != lab.shape[0]:
@@ -197,7 +208,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
         rois.append(_item(ROINumber=n, ReferencedFrameOfReferenceUID=for_uid, ROIName=o["name"][:64],
                           ROIGenerationAlgorithm="SEMIAUTOMATIC", ROIGenerationDescription="ctui threshold fill"))
         contours.append(_item(ROIDisplayColor=[int(c) for c in o["color"]], ReferencedROINumber=n,
-                              ContourSequence=_roi_contours(lab, o["id"], geometry, sources)))
+                              ContourSequence=_roi_contours(lab, o["id"], geometry, sources, masks.get(o["id"]))))
         observations.append(_item(ObservationNumber=n, ReferencedROINumber=n, RTROIInterpretedType="ORGAN",
                                   ROIInterpreter=""))
     ds.StructureSetROISequence = rois
@@ -208,11 +219,12 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
 
 def write_rtstruct(path: str | os.PathLike, labels: np.ndarray, geometry: Geometry, sources: Sequence[Any], *,
                    objects: Sequence[dict] | None = None, keep_identifiers: bool = False,
-                   progress: Progress | None = None) -> Path:
+                   masks: dict[int, np.ndarray] | None = None, progress: Progress | None = None) -> Path:
     """Write :func:`build_rtstruct`'s dataset to ``path`` atomically; returns the path."""
     import pydicom
 
-    ds = build_rtstruct(labels, geometry, sources, objects=objects, keep_identifiers=keep_identifiers, progress=progress)
+    ds = build_rtstruct(labels, geometry, sources, objects=objects, keep_identifiers=keep_identifiers, masks=masks,
+                        progress=progress)
     p = Path(path)
     with atomic_write(p, "wb") as fh:
         pydicom.dcmwrite(fh, ds, enforce_file_format=True)
