@@ -205,6 +205,7 @@ def test_sigkill_during_save_leaves_old_or_new(tmp_path):
         text=True,
         timeout=600,
         cwd=str(Path(__file__).resolve().parents[1]),
+        preexec_fn=lambda: os.umask(0o077),  # a private umask: every saved file must stay 0o600
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     stats = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -220,3 +221,5 @@ def test_sigkill_during_save_leaves_old_or_new(tmp_path):
     # leftovers of killed writers are cleaned on the next save of the same target
     assert stats["stray_after_final_save"] == []
     assert stats["max_stray_tmp"] <= 2 * len(stats["writers"])
+    modes = {f.name: oct(f.stat().st_mode & 0o777) for f in out.rglob("*") if f.is_file()}
+    assert modes and set(modes.values()) == {"0o600"}, modes  # atomic writes respect the umask
