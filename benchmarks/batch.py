@@ -56,7 +56,7 @@ def run(manifest: Path, workers: int, processes: bool) -> tuple[float, list[dict
     shutil.rmtree(manifest.parent / f"results-{workers}-outputs", ignore_errors=True)
     out.unlink(missing_ok=True)
     t0 = time.perf_counter()
-    res = run_batch(manifest, out=out, workers=workers, processes=processes)
+    run_batch(manifest, out=out, workers=workers, processes=processes)
     dt = time.perf_counter() - t0
     return dt, list(csv.DictReader(out.open()))
 

@@ -92,7 +92,7 @@ def test_batch_cli(manifest, capsys):
 
     from ctui.cli import main
 
-    root, truths = manifest
+    root, _ = manifest
     lines = (root / "jobs.csv").read_text().splitlines()
     (root / "cli.csv").write_text("\n".join([lines[0], lines[1], lines[-1]]) + "\n")
     rc = main(["batch", str(root / "cli.csv"), "--out", str(root / "cli-results.csv"), "--threads", "--workers", "1",

@@ -7,15 +7,15 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest import shared
+
 from ctui.engine.actions.measure import measure_object
 from ctui.engine.actions.opened import open_input
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.geometry import Geometry
 from ctui.engine.io.imports import label_kind, place_on_grid, read_label_file
 from ctui.engine.io.phantom import make_phantom, write_series
 from ctui.engine.io.series import load
-from ctui.engine.core.geometry import Geometry
 
 
 @pytest.fixture(scope="module")
@@ -188,7 +188,7 @@ def test_broken_or_foreign_label_files_are_one_line_errors(phantom, tmp_path):
         (tmp_path / "cut.dcm").write_bytes(raw[: len(raw) // 2])
         with pytest.raises(FormatError):
             read_label_file(tmp_path / "cut.dcm", grid=v)
-    ct_slice = sorted((root / "series").iterdir())[0]
+    ct_slice = min((root / "series").iterdir())
     with pytest.raises(FormatError, match="not a segmentation"):
         read_label_file(ct_slice, grid=v)
     (tmp_path / "notes.txt").write_text("hello")

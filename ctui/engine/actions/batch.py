@@ -33,9 +33,10 @@ import io
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -303,7 +304,7 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
         else:
             todo.append(j)
     res = BatchResult(out_s, [], skipped=len(rows))
-    order = lambda: [rows[j.row] for j in jobs if j.row in rows]  # noqa: E731
+    order = lambda: [rows[j.row] for j in jobs if j.row in rows]
     write_results(out_s, order())
     report(progress, len(rows), len(jobs), f"{len(rows)} done before")
     if todo:

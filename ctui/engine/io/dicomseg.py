@@ -25,9 +25,10 @@ convention; :mod:`ctui.engine.io.imports` places them on a series' grid.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -172,11 +173,15 @@ def blank_identifiers(ds: Any, *, keep: bool = False) -> Any:
 
 
 # =========================================================================== write
-def _objects_in(labels: np.ndarray, objects: Sequence[dict] | None) -> list[dict]:
-    present = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=256)) if i != 0]
+def _objects_in(labels: np.ndarray, objects: Sequence[dict] | None,
+                masks: dict[int, np.ndarray] | None = None) -> list[dict]:
+    """{id, name, color} of the objects present in ``labels`` or in ``masks`` (objects whose own
+    mask overlaps others, possibly hidden in the label map), ascending ids."""
+    present = {int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=256)) if i != 0}
+    present |= {int(k) for k, m in (masks or {}).items() if m.any()}
     info = {int(o["id"]): o for o in (objects or []) if "id" in o}
     out = []
-    for oid in present:
+    for oid in sorted(present):
         o = info.get(oid, {})
         color = tuple(int(c) for c in o.get("color", object_color(oid)))[:3]
         out.append({"id": oid, "name": str(o.get("name") or f"object {oid}"), "color": color})
@@ -224,14 +229,8 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     from ctui import __version__
 
     lab = np.asarray(labels)
-    objs = _objects_in(lab, objects)
     masks = masks or {}
-    known = {o["id"] for o in objs}
-    for oid in sorted(k for k in masks if k not in known and masks[k].any()):  # hidden under later segments
-        info = next((o for o in objects or [] if int(o.get("id", -1)) == oid), {})
-        objs.append({"id": oid, "name": str(info.get("name") or f"object {oid}"),
-                     "color": tuple(int(c) for c in info.get("color", object_color(oid)))[:3]})
-    objs.sort(key=lambda o: o["id"])
+    objs = _objects_in(lab, objects, masks)
     if not objs:
         raise CtuiError("no object in the labels: nothing to write", path=path)
     report(progress, 0.05, 1.0, "DICOM-SEG: segments")

@@ -26,9 +26,10 @@ own full mask, so measuring an object (:meth:`ImportedLabels.mask`) uses all its
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -22,18 +22,23 @@ from __future__ import annotations
 
 import datetime
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from ctui.engine.core.atomic import atomic_write
-from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, TYPE2_IDENTIFIERS, _objects_in, blank_identifiers
+from ctui.engine.io.dicomseg import (
+    RTSTRUCT_SOP_CLASS,
+    TYPE2_IDENTIFIERS,
+    _objects_in,
+    blank_identifiers,
+)
 
 STUDY_COMPONENT_MANAGEMENT = "1.2.840.10008.3.1.2.3.1"
 _COPIED = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyInstanceUID", "StudyDate",
@@ -156,13 +161,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
 
     lab = np.asarray(labels)
     masks = masks or {}
-    objs = _objects_in(lab, objects)
-    known = {o["id"] for o in objs}
-    for oid in sorted(k for k in masks if k not in known and masks[k].any()):  # hidden under later segments
-        info = next((o for o in objects or [] if int(o.get("id", -1)) == oid), {})
-        objs.append({"id": oid, "name": str(info.get("name") or f"object {oid}"),
-                     "color": tuple(int(c) for c in info.get("color", object_color(oid)))[:3]})
-    objs.sort(key=lambda o: o["id"])
+    objs = _objects_in(lab, objects, masks)
     if not objs:
         raise CtuiError("no object in the labels: nothing to write")
     if len(sources) != lab.shape[0]:
@@ -321,7 +320,7 @@ def roi_mask(roi: RoiInfo, geometry: Geometry, *, tol: float = 0.1) -> tuple[np.
     for pts in roi.contours:
         idx = geometry.mm_to_index(pts)  # (n, 3) z, y, x
         z = float(np.median(idx[:, 0]))
-        k = int(round(z))
+        k = round(z)
         if abs(z - k) > tol or np.abs(idx[:, 0] - z).max() > tol or not 0 <= k < nz:
             off += 1
             continue
@@ -332,5 +331,14 @@ def roi_mask(roi: RoiInfo, geometry: Geometry, *, tol: float = 0.1) -> tuple[np.
     return mask, off
 
 
-__all__ = ["slice_contours", "fill_contours", "build_rtstruct", "write_rtstruct", "read_rtstruct", "roi_mask",
-           "RoiInfo", "RtStructContents", "TYPE2_IDENTIFIERS"]
+__all__ = [
+    "TYPE2_IDENTIFIERS",
+    "RoiInfo",
+    "RtStructContents",
+    "build_rtstruct",
+    "fill_contours",
+    "read_rtstruct",
+    "roi_mask",
+    "slice_contours",
+    "write_rtstruct",
+]
