@@ -211,7 +211,7 @@ def main() -> int:
     got = seg.labels == 1
     print(f"ctui propagate (slice mode, both directions, {prop.slices[1] - prop.slices[0] + 1} slices): "
           f"median {med:.3f} s over {args.repeat} runs (goal <= 1 s)")
-    for key in ("filter", "fill", "bookkeeping"):
+    for key in ("filter", "fill", "necks", "bookkeeping"):
         print(f"  {key:<12} {statistics.median(ph.get(key, 0.0) for ph in phases):.3f} s")
     print(f"  {'accept':<12} {statistics.median(accept_t):.3f} s (write into labels, one undo step)")
     inter = np.count_nonzero(got & truth)
@@ -225,7 +225,7 @@ def main() -> int:
         prop3 = propagate(vol, p, start, z0, PropagationSettings(low=low, high=high, mode="3d"))
         t3.append(time.perf_counter() - t)
     print(f"ctui propagate (3d mode): median {statistics.median(t3):.3f} s (filter {prop3.timings['filter']:.3f} s, "
-          f"3D fill {prop3.timings['fill']:.3f} s), voxels {prop3.voxels}")
+          f"3D fill {prop3.timings['fill']:.3f} s, necks {prop3.timings.get('necks', 0.0):.3f} s), voxels {prop3.voxels}")
 
     peer_t, peer_ph = [], []
     for _ in range(max(1, args.repeat // 2)):

@@ -70,27 +70,42 @@ def _morph2d(m: np.ndarray, kernel: np.ndarray, erode: bool) -> np.ndarray:
 def morph_ball(mask: np.ndarray, radius_mm: float, spacing: tuple[float, float, float], *, erode: bool) -> np.ndarray:
     """Erosion or dilation of a bool 3D mask by a ball of ``radius_mm`` (outside the array: replicate for erosion).
 
-    Slice by slice (one output slice and one 2D result alive at a time), so the only
-    full-size allocation is the result.
+    Slice by slice: each input slice is eroded (dilated) once per distinct section of the
+    ball (the sections at offsets +k and -k are the same disc) and kept while an output
+    slice within reach needs it, so the only full-size allocation is the result.
     """
     m = mask.view(np.uint8) if mask.dtype == bool and mask.flags.c_contiguous else np.ascontiguousarray(mask, dtype=np.uint8)
     nz = m.shape[0]
     sections = ball_sections(radius_mm, spacing)
+    kz = len(sections) // 2
+    kernels = [kern for k, kern in sections if k >= 0]  # kernels[|k|]
     out = np.empty(m.shape, np.uint8)
+    cache: dict[tuple[int, int], np.ndarray] = {}
+
+    def get(zz: int, j: int) -> np.ndarray:
+        key = (zz, j)
+        r = cache.get(key)
+        if r is None:
+            r = _morph2d(m[zz], kernels[j], erode)
+            cache[key] = r
+        return r
+
     for z in range(nz):
         acc = None
-        for k, kern in sections:
+        for k in range(-kz, kz + 1):
             zz = min(max(z + k, 0), nz - 1) if erode else z + k
             if not 0 <= zz < nz:
                 continue
-            r = _morph2d(m[zz], kern, erode)
+            r = get(zz, abs(k))
             if acc is None:
-                acc = r.copy() if r is m[zz] else r
+                acc = r.copy()
             elif erode:
                 np.minimum(acc, r, out=acc)
             else:
                 np.maximum(acc, r, out=acc)
         out[z] = acc if acc is not None else 0
+        for key in [key for key in cache if key[0] < z + 1 - kz]:
+            del cache[key]  # no later output slice reaches back that far
     return out.view(bool)
 
 
@@ -139,8 +154,7 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
         kept = seeded_components(core, near & (core > 0), connectivity=connectivity)
         if not kept.any():
             return np.zeros(cand.shape, bool), "lost"
-    back = cv2.dilate(kept.astype(np.uint8), kern) & cand
-    out = seeded_components(back, kept, connectivity=connectivity)
+    out = (cv2.dilate(kept.view(np.uint8), kern) & cand).view(bool)  # every piece lies within r of ``kept``
     return out, ("cut" if np.count_nonzero(out) < np.count_nonzero(cand) else "ok")
 
 
