@@ -122,7 +122,7 @@ def _save_nifti(p: Path, labels: np.ndarray, volume: Volume) -> None:
 
 def nrrd_geometry(volume: Volume) -> dict:
     """NRRD header fields (LPS) for ``volume``'s geometry, data in (x, y, z) order."""
-    dirs = volume.direction * volume.spacing_xyz[None, :]  # columns = index axes
+    dirs = volume.geometry.affine[:3, :3]  # columns = index axes (x, y, z), mm per voxel
     return {
         "space": "left-posterior-superior",
         "space directions": dirs.T.copy(),  # rows = index axes
