@@ -27,6 +27,7 @@ from typing import Sequence
 import numpy as np
 
 from ctui.engine.core.limits import check_allocation
+from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.progress import Progress, report
 
@@ -37,12 +38,7 @@ def affine_from(spacing: Sequence[float], origin: Sequence[float] = (0.0, 0.0, 0
 
     spacing is (dz, dy, dx) mm (ctui's convention); origin (x, y, z) mm.
     """
-    sp = np.asarray(spacing, dtype=np.float64).reshape(3)[::-1]
-    d = np.eye(3) if direction is None else np.asarray(direction, dtype=np.float64).reshape(3, 3)
-    a = np.eye(4)
-    a[:3, :3] = d * sp[None, :]
-    a[:3, 3] = np.asarray(origin, dtype=np.float64).reshape(3)
-    return a
+    return Geometry((1, 1, 1), spacing, origin, direction).affine  # the one voxel<->mm type
 
 
 def _fix_handedness(faces: np.ndarray, affine: np.ndarray) -> np.ndarray:
