@@ -10,7 +10,10 @@ bits stored, intercept -1024, shuffled file names), then in ONE run times
 * SimpleITK: ``ImageSeriesReader.GetGDCMSeriesFileNames(folder)`` (GDCM's header scan
   and sort) + ``Execute()`` + ``GetArrayViewFromImage``;
 
-alternating runs, printing medians, the ratio and peak memory. Peak memory of each
+alternating runs, printing medians, the ratio and peak memory; then ``ctui info`` on the
+series (the whole command in a fresh process, and ``ctui.engine.io.series.inspect`` in
+process: headers and three sample slices, no pixel decode of the series; goal <= 1 s)
+against SimpleITK's header-only scan (GDCM file-name sort + ReadImageInformation). Peak memory of each
 loader is measured in a fresh subprocess as the growth of the process's maximum
 resident set size (VmHWM) during the load, compared with the final array size;
 for ctui also tracemalloc's peak of Python/numpy allocations. ``--large`` also loads a
@@ -119,6 +122,40 @@ def measure_child(which: str, path: Path, trace: bool = False) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def info_sitk(path: Path) -> None:
+    """SimpleITK's header-only description: GDCM's series scan and sort, then the first
+    file's image information (what `ctui info` reports without decoding)."""
+    import SimpleITK as sitk
+
+    names = sitk.ImageSeriesReader.GetGDCMSeriesFileNames(str(path))
+    r = sitk.ImageFileReader()
+    r.SetFileName(names[0])
+    r.ReadImageInformation()
+
+
+def info_figures(path: Path, repeat: int) -> None:
+    from ctui.engine.io.series import inspect
+
+    inspect(path)  # warm
+    t_in, t_cmd, t_sitk = [], [], []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        inspect(path)
+        t_in.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        info_sitk(path)
+        t_sitk.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "ctui", "info", str(path), "--json"], cwd=ROOT, check=True,
+                       capture_output=True)
+        t_cmd.append(time.perf_counter() - t0)
+    mi, mc, ms = statistics.median(t_in), statistics.median(t_cmd), statistics.median(t_sitk)
+    print(f"ctui info (whole command, fresh process) median {mc:.3f} s  (runs: {', '.join(f'{t:.3f}' for t in t_cmd)})"
+          f"  goal <= 1 s: {'met' if mc <= 1.0 else 'NOT met'}")
+    print(f"inspect() in process median {mi:.3f} s; SimpleITK header scan median {ms:.3f} s; "
+          f"ratio ctui/SimpleITK = {mi / ms:.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--slices", type=int, default=300)
@@ -161,6 +198,7 @@ def main() -> None:
           f"({pc['tracemalloc_peak'] / pc['nbytes']:.3f}x)")
     print(f"peak memory SimpleITK: RSS growth {ps['rss_growth'] * mb:.1f} MB for a {ps['nbytes'] * mb:.1f} MB array "
           f"({ps['rss_growth'] / ps['nbytes']:.3f}x)")
+    info_figures(path, args.repeat)
     if args.large:
         big = make_series(1000)
         pl, pt = measure_child("ctui", big), measure_child("ctui", big, trace=True)

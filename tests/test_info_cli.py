@@ -119,3 +119,34 @@ def test_info_reads_headers_and_three_slices_only(tmp_path, monkeypatch):
     assert d["value_range"] == [0.0, 110.0] and d["meta"]["headers_only"] is True
     assert any("grown" in w for w in d["warnings"]) and any("regular" in w for w in d["warnings"])
     json.dumps(d, allow_nan=False, default=str)
+
+
+def test_header_fast_path_table_matches_pydicom_and_files():
+    """The fast header path's element table is pydicom's dictionary, and it reads the
+    sample series' headers exactly as the pydicom path does."""
+    import dataclasses
+
+    import numpy as np
+    from pydicom.datadict import dictionary_VR, tag_for_keyword
+
+    from ctui.engine.io.series import dicom_headers
+    from ctui.engine.io.series.dicom_quick import ELEMENTS, quick_parse
+
+    for kw, (tag, vr) in ELEMENTS.items():
+        assert tag_for_keyword(kw) == tag and dictionary_VR(tag) == vr, kw
+    files = sorted(SAMPLE_DIR.glob("*.dcm"))[:10]
+    assert files
+    for f in files:
+        assert quick_parse(f.read_bytes()[:32768]) is not None
+        fast, ids_fast = dicom_headers.read_header(f)
+        orig = dicom_headers.quick_parse
+        try:
+            dicom_headers.quick_parse = lambda buf: None
+            slow, ids_slow = dicom_headers.read_header(f)
+        finally:
+            dicom_headers.quick_parse = orig
+        assert [str(i) for i in ids_fast] == [str(i) for i in ids_slow]
+        for a, b in zip(fast, slow):
+            for fld in dataclasses.fields(a):
+                u, v = getattr(a, fld.name), getattr(b, fld.name)
+                assert (np.array_equal(u, v) if isinstance(u, np.ndarray) else u == v), fld.name

@@ -309,7 +309,6 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     """
     import warnings
 
-    _quiet_pydicom()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
@@ -351,9 +350,11 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
 
 
 def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
-    """Frames and identifiers of one file from ``fh`` (positioned at its start)."""
+    """Frames and identifiers of one file from ``fh`` (positioned at its start), through pydicom."""
     import pydicom
     from pydicom.errors import InvalidDicomError
+
+    _quiet_pydicom()
 
     forced = False
     try:

@@ -23,25 +23,24 @@ TEXT_VRS = {"PN", "LO", "SH", "ST", "LT", "UT", "UC"}
 CODECS = {"": "latin-1", "ISO_IR 6": "latin-1", "ISO_IR 100": "latin-1", "ISO_IR 192": "utf-8"}
 IMPLICIT_LE, EXPLICIT_LE = "1.2.840.10008.1.2", "1.2.840.10008.1.2.1"
 
-KEYWORDS = (
-    "SpecificCharacterSet", "SOPClassUID", "Modality", "SeriesDescription", "SeriesInstanceUID", "SeriesNumber",
-    "InstanceNumber", "ImagePositionPatient", "ImageOrientationPatient", "SliceThickness", "SpacingBetweenSlices",
-    "SamplesPerPixel", "PhotometricInterpretation", "NumberOfFrames", "Rows", "Columns", "PixelSpacing",
-    "ImagerPixelSpacing", "BitsAllocated", "BitsStored", "PixelRepresentation", "PlanarConfiguration",
-    "WindowCenter", "WindowWidth", "RescaleIntercept", "RescaleSlope",
-    "PatientName", "PatientID", "PatientBirthDate", "AccessionNumber", "InstitutionName", "OtherPatientIDs",
-    "ReferringPhysicianName",
-)
-_TAGS: dict[int, tuple[str, str]] | None = None  # tag -> (keyword, dictionary VR)
-
-
-def _tags() -> dict[int, tuple[str, str]]:
-    global _TAGS
-    if _TAGS is None:
-        from pydicom.datadict import dictionary_VR, tag_for_keyword
-
-        _TAGS = {int(tag_for_keyword(k)): (k, dictionary_VR(tag_for_keyword(k)).split(" ")[0]) for k in KEYWORDS}
-    return _TAGS
+#: the elements ctui reads: keyword -> (tag, VR), so the fast path needs no pydicom import
+#: (importing pydicom is half of a cold ``ctui info``); tests check it against pydicom's dictionary
+ELEMENTS: dict[str, tuple[int, str]] = {
+    "SpecificCharacterSet": (0x00080005, "CS"), "SOPClassUID": (0x00080016, "UI"),
+    "AccessionNumber": (0x00080050, "SH"), "Modality": (0x00080060, "CS"), "InstitutionName": (0x00080080, "LO"),
+    "ReferringPhysicianName": (0x00080090, "PN"), "SeriesDescription": (0x0008103E, "LO"),
+    "PatientName": (0x00100010, "PN"), "PatientID": (0x00100020, "LO"), "PatientBirthDate": (0x00100030, "DA"),
+    "OtherPatientIDs": (0x00101000, "LO"), "SliceThickness": (0x00180050, "DS"),
+    "SpacingBetweenSlices": (0x00180088, "DS"), "ImagerPixelSpacing": (0x00181164, "DS"),
+    "SeriesInstanceUID": (0x0020000E, "UI"), "SeriesNumber": (0x00200011, "IS"), "InstanceNumber": (0x00200013, "IS"),
+    "ImagePositionPatient": (0x00200032, "DS"), "ImageOrientationPatient": (0x00200037, "DS"),
+    "SamplesPerPixel": (0x00280002, "US"), "PhotometricInterpretation": (0x00280004, "CS"),
+    "PlanarConfiguration": (0x00280006, "US"), "NumberOfFrames": (0x00280008, "IS"), "Rows": (0x00280010, "US"),
+    "Columns": (0x00280011, "US"), "PixelSpacing": (0x00280030, "DS"), "BitsAllocated": (0x00280100, "US"),
+    "BitsStored": (0x00280101, "US"), "PixelRepresentation": (0x00280103, "US"), "WindowCenter": (0x00281050, "DS"),
+    "WindowWidth": (0x00281051, "DS"), "RescaleIntercept": (0x00281052, "DS"), "RescaleSlope": (0x00281053, "DS"),
+}
+_TAGS = {tag: (kw, vr) for kw, (tag, vr) in ELEMENTS.items()}
 
 
 def decode_raw(vr: str, raw: bytes, little: bool, codec: str) -> Any:
@@ -129,7 +128,7 @@ def _walk(buf: bytes) -> QuickHeader | None:
     if syntax not in (IMPLICIT_LE, EXPLICIT_LE):
         return None
     implicit = syntax == IMPLICIT_LE
-    tags = _tags()
+    tags = _TAGS
     raw: dict[str, tuple[str, bytes]] = {}
     while True:
         el = _element(buf, pos, implicit)
