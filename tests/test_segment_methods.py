@@ -110,3 +110,29 @@ def test_help_says_slices_number_from_0(capsys):
         main(["segment", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "numbered from 0" in out and "--background" in out and "--slices" in out and "--neck" in out
+
+
+def test_cli_interpolates_a_project_object(capsys, tmp_path):
+    """ctui segment PROJECT --interpolate --project NEW: key slices 0, 5 and 10 of a cone are filled between."""
+    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.core.volume import Volume
+
+    n = 40
+    yy, xx = np.mgrid[:n, :n]
+    labels = np.zeros((11, n, n), np.uint8)
+    for z in (0, 5, 10):
+        labels[z][(yy - 20) ** 2 + (xx - 20) ** 2 <= (4 + z) ** 2] = 1
+    labels[3, 1:3, 1:3] = 1  # a 4-voxel island
+    vol = Volume(np.zeros(labels.shape, np.int16), spacing=(2.0, 1.0, 1.0), modality="CT")
+    src = tmp_path / "a.ctui"
+    save_project(src, new_project(vol, labels=labels, objects=[{"id": 1, "name": "cone"}]))
+    out = tmp_path / "b.ctui"
+    assert main(["segment", str(src), "--interpolate", "--min-island", "5", "--project", str(out), "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)["objects"][0]
+    assert row["id"] == 1 and row["added"] > 0 and row["removed"] == 4
+    from ctui.engine.io.project import load_project
+
+    got = load_project(out).labels == 1
+    assert got.any(axis=(1, 2)).all() and not got[3, 1:3, 1:3].any()
+    assert main(["segment", str(src), "--interpolate"]) == 2
+    assert "--project" in capsys.readouterr().err

@@ -79,11 +79,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "Slices are numbered from 0 (as in the TUI).",
         epilog="Example: ctui segment scan/ --seed 94,81,40 --range 115:445 --background 140,90,40 --method grow --json",
     )
-    p.add_argument("path", help="series folder/file (anything `ctui open` loads)")
+    p.add_argument("path", help="series folder/file (anything `ctui open` loads), or a .ctui project to edit "
+                                "its objects (--interpolate, --keep-largest, --min-island) without --seed")
     add_segmentation_args(p)
     p.add_argument("--project", metavar="OUT.ctui", help="write a project (source, pipeline, labels, objects)")
     p.add_argument("--mask", metavar="OUT", help="write the label volume (.nii, .nii.gz, .nrrd, .seg.nrrd)")
     p.add_argument("--mric", metavar="OUT.mric", help="write the borders as an MRIC contour file")
+    p.add_argument("--objects", metavar="IDS", default=None,
+                   help="with a .ctui PATH and no --seed: the objects --interpolate/--keep-largest/--min-island "
+                        "edit, e.g. 1,3 (default: all); write the result with --project NEW.ctui")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     p.set_defaults(func=run)
 
@@ -272,6 +276,9 @@ def run(args: argparse.Namespace) -> int:
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
     from ctui.commands._progress import progress_bar
 
+    if args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
+        return _edit_project(args)
+
     volume = load_volume(args.path, series=args.series)
     with progress_bar(args, "segmenting") as progress:
         seg, pipeline, settings, results = segment_volume(volume, args, progress=progress)
@@ -286,6 +293,44 @@ def run(args: argparse.Namespace) -> int:
             print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl} (numbered from 0)")
             for w in o["warnings"]:
                 print(f"  warning: {w}")
+        for w in written:
+            print(f"wrote {w}")
+    return 0
+
+
+def _edit_project(args: argparse.Namespace) -> int:
+    """``ctui segment PROJECT.ctui --interpolate|--keep-largest|--min-island N [--objects IDS] --project OUT``."""
+    import json
+
+    from ctui.engine.actions.opened import open_input
+    from ctui.engine.actions.segment import edit_objects
+    from ctui.engine.segment.selection import Segmentation
+
+    if not (args.interpolate or args.keep_largest or args.min_island):
+        raise _err(f"{args.path}: a project with no --seed: give --interpolate, --keep-largest or --min-island N")
+    if not args.project or args.mask or args.mric:
+        raise _err("write the edited objects with --project NEW.ctui (then `ctui export` for other formats)")
+    try:
+        ids = [int(v) for v in args.objects.split(",") if v.strip()] if args.objects else None
+    except ValueError:
+        raise _err(f"--objects {args.objects!r}: expected ids like 1,3") from None
+    opened = open_input(args.path, kind="project", require_labels=True, with_series=False)
+    proj = opened.project
+    seg = Segmentation(opened.labels.shape, labels=opened.labels.astype("uint8", copy=True), objects=proj.objects or [])
+    spacing = tuple(opened.geometry.spacing) if opened.geometry is not None else (1.0, 1.0, 1.0)
+    rows = edit_objects(seg, ids, spacing=spacing, interpolate=args.interpolate, keep_largest=args.keep_largest,
+                        min_island=args.min_island, slices=parse_slices(args.slices))
+    from ctui.engine.actions.project import save_project
+
+    proj.labels = seg.labels
+    save_project(args.project, proj)
+    written = [args.project]
+    if args.json:
+        print(json.dumps({"path": args.path, "objects": rows, "written": written}, indent=1))
+    else:
+        for r in rows:
+            print(f"object {r['id']}: {r['voxels_before']} -> {r['voxels']} voxels (+{r['added']} interpolated, "
+                  f"-{r['removed']} in islands)")
         for w in written:
             print(f"wrote {w}")
     return 0

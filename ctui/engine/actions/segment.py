@@ -287,12 +287,12 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, m
 
 
 def _clean(seg: Segmentation, oid: int, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:
-    if opts.interpolate:
-        seg.fill_between_slices(oid, slices=opts.slices, spacing=spacing)
     if opts.keep_largest:
         seg.keep_largest_island(oid)
     if opts.min_island:
         seg.remove_islands(oid, opts.min_island)
+    if opts.interpolate:
+        seg.fill_between_slices(oid, slices=opts.slices, spacing=spacing)
 
 
 def inrange_volume(volume: Any, pipe: Pipeline, low: float, high: float, *, slices: tuple[int, int] | None = None,
@@ -400,3 +400,33 @@ def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, b
         full[(zs < s.slices[0]) | (zs > s.slices[1])] = init[(zs < s.slices[0]) | (zs > s.slices[1])]
     seg.apply_mask(full, oid, offset=tuple(int(v) for v in origin), mode="replace", axis=0,  # type: ignore[arg-type]
                    overwrite=s.overwrite, label=f"level set of object {oid}")
+
+
+def edit_objects(segmentation: Segmentation, object_ids: Sequence[int] | None = None, *,
+                 spacing: tuple[float, float, float] = (1.0, 1.0, 1.0), interpolate: bool = False,
+                 keep_largest: bool = False, min_island: int = 0,
+                 slices: tuple[int, int] | None = None) -> list[dict[str, Any]]:
+    """Clean up existing objects (``ctui segment PROJECT.ctui --interpolate ...``; the TUI's keys).
+
+    In order: keep the largest 3D island, remove islands under ``min_island`` voxels (so
+    specks do not become key slices), then fill between slices (signed-distance
+    interpolation across the empty slices between the object's slices, key slices
+    limited to ``slices``). Each step is one undo step.
+    Returns per object ``{id, voxels_before, voxels, added, removed}``.
+    """
+    counts = label_counts(segmentation.labels)
+    present = [int(i) for i in np.flatnonzero(counts[1:]) + 1]
+    ids = present if object_ids is None else [int(i) for i in object_ids]
+    missing = [i for i in ids if i not in present]
+    if missing:
+        raise CtuiError(f"no object {', '.join(map(str, missing))} in the label volume (objects: "
+                        f"{', '.join(map(str, present)) or 'none'})")
+    out = []
+    for oid in ids:
+        before = int(counts[oid])
+        removed = segmentation.keep_largest_island(oid) if keep_largest else 0
+        removed += segmentation.remove_islands(oid, min_island) if min_island else 0
+        added = segmentation.fill_between_slices(oid, slices=slices, spacing=spacing) if interpolate else 0
+        out.append({"id": oid, "voxels_before": before, "voxels": segmentation.voxels(oid), "added": added,
+                    "removed": removed})
+    return out
