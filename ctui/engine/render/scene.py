@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
 
@@ -227,10 +228,7 @@ class SceneVolume:
 
     def affine(self) -> np.ndarray:
         """4x4: homogeneous (x, y, z) voxel indices -> patient mm."""
-        a = np.eye(4)
-        a[:3, :3] = np.asarray(self.direction, float).reshape(3, 3) * np.asarray(self.spacing[::-1], float)[None, :]
-        a[:3, 3] = self.origin
-        return a
+        return Geometry(self.shape, self.spacing, self.origin, self.direction).affine
 
     def corners(self) -> np.ndarray:
         """(8, 3) patient mm of the voxel grid's outer corners (voxel edges)."""
