@@ -32,6 +32,7 @@ from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report, scaled
+from ctui.engine.core.volume import Volume
 
 #: format -> default file suffix
 FORMATS: dict[str, str] = {"dicom-seg": ".dcm", "rtstruct": ".dcm", "nifti": ".nii.gz", "nrrd": ".seg.nrrd",
@@ -260,7 +261,9 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
             raise CtuiError("a NIfTI file name ends in .nii or .nii.gz", path=p)
         if fmt == "nrrd" and not name.endswith(".nrrd"):
             raise CtuiError("an NRRD file name ends in .nrrd or .seg.nrrd", path=p)
-        save_labels(p, labels, src.geometry, names={o["id"]: o["name"] for o in objs})
+        g = src.geometry  # save_labels takes a Volume: the labels on their grid
+        grid = Volume(labels, spacing=g.spacing, origin=g.origin, direction=g.direction, modality="SEG", window=(5, 10))
+        save_labels(p, labels, grid, names={o["id"]: o["name"] for o in objs})
     elif fmt in ("stl", "ply", "obj"):
         if p.suffix.lower() != "." + fmt:
             raise CtuiError(f"a {fmt.upper()} file name ends in .{fmt}", path=p)

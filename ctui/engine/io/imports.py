@@ -252,7 +252,7 @@ def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
                         "(ctui open SERIES --labels FILE)", path=p)
     c = read_rtstruct(p)
     if not c.rois:
-        raise CtuiError("the RTSTRUCT holds no ROI", path=p)
+        raise FormatError("the RTSTRUCT holds no ROI (empty or cut short)", path=p)
     warnings: list[str] = []
     placed = {"any": False}
 
