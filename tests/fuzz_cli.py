@@ -279,7 +279,7 @@ def _vm_size() -> int:
     return 0
 
 
-def _child(argv: list[str], case_dir: Path, cap: int) -> None:  # pragma: no cover - runs in the fork
+def _child(argv: list[str], case_dir: Path, cap: int, target: Callable | None, cpu_s: int) -> None:  # pragma: no cover
     code = 1
     try:
         os.chdir(case_dir)
@@ -289,13 +289,14 @@ def _child(argv: list[str], case_dir: Path, cap: int) -> None:  # pragma: no cov
         os.dup2(err.fileno(), 2)
         sys.stdout, sys.stderr = out, err
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
-        resource.setrlimit(resource.RLIMIT_CPU, (TIMEOUT_S + 1, TIMEOUT_S + 2))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu_s + 1, cpu_s + 2))
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
         signal.signal(signal.SIGXCPU, signal.SIG_DFL)
         signal.alarm(WALL_S)
-        from ctui.cli import main
+        if target is None:
+            from ctui.cli import main as target
 
-        code = int(main(argv) or 0)
+        code = int(target(argv) or 0)
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else 1
     except BaseException:  # noqa: BLE001 - an uncaught exception is what we look for
@@ -310,7 +311,7 @@ def _child(argv: list[str], case_dir: Path, cap: int) -> None:  # pragma: no cov
         os._exit(code)
 
 
-def run_case(seed: Seed, data: bytes, case_dir: Path) -> Outcome:
+def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None = None, cpu_s: int = TIMEOUT_S) -> Outcome:
     """Lay out the case (mutated main file + the seed's other files) and run it in a fork."""
     if case_dir.exists():
         shutil.rmtree(case_dir)
@@ -324,7 +325,7 @@ def run_case(seed: Seed, data: bytes, case_dir: Path) -> Outcome:
     sys.stderr.flush()
     pid = os.fork()
     if pid == 0:  # pragma: no cover
-        _child(argv, case_dir, cap)
+        _child(argv, case_dir, cap, target, cpu_s)
     _, status, usage = os.wait4(pid, 0)
     dt = time.monotonic() - t0
     cpu = usage.ru_utime + usage.ru_stime
@@ -333,12 +334,12 @@ def run_case(seed: Seed, data: bytes, case_dir: Path) -> Outcome:
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig in (signal.SIGALRM, signal.SIGXCPU):
-            return Outcome("slow", -sig, cpu, f"no result within {TIMEOUT_S} s of CPU ({WALL_S} s of wall clock); "
+            return Outcome("slow", -sig, cpu, f"no result within {cpu_s} s of CPU ({WALL_S} s of wall clock); "
                            f"used {cpu:.1f} s CPU in {dt:.0f} s")
         return Outcome("alloc" if sig in (signal.SIGSEGV, signal.SIGABRT, signal.SIGKILL, signal.SIGBUS) else "traceback",
                        -sig, dt, f"killed by signal {signal.Signals(sig).name}: {stderr.strip()[-300:]}")
     rc = os.WEXITSTATUS(status)
-    if cpu > TIMEOUT_S:
+    if cpu > cpu_s:
         return Outcome("slow", rc, cpu, f"{cpu:.1f} s of CPU")
     dt = cpu  # the figure reported as a case's time: its CPU seconds (independent of the machine's load)
     if "Traceback (most recent call last)" in stderr or rc not in (0, 2):

@@ -50,3 +50,46 @@ def test_oracle_catches_wrong_results(tmp_path):
     assert "negative" in oracle(m, tmp_path, json.dumps({"volume_ml": -3.0}))
 
 
+
+
+# --------------------------------------------------------------------- the rules themselves
+def _tb(argv):
+    raise KeyError("a bug")
+
+
+def _greedy(argv):
+    import numpy as np
+
+    return int(np.ones(6 * 2**30, np.uint8)[-1])  # 6 GiB: over the address-space cap
+
+
+def _spin(argv):
+    while True:
+        pass
+
+
+def _two_lines(argv):
+    print("ctui info: x.nrrd: first\nsecond line", file=sys.stderr)
+    return 2
+
+
+def _unnamed(argv):
+    print("ctui info: something is wrong", file=sys.stderr)
+    return 2
+
+
+def _polite(argv):
+    print(f"ctui info: {argv[1]}: not a label map", file=sys.stderr)
+    return 2
+
+
+def test_rules_catch_every_kind_of_failure(tmp_path):
+    """run_case classifies a traceback, an allocation over the cap, a CPU hog, a multi-line
+    and an unnamed error as findings, and a one-line error naming the file as clean."""
+    from fuzz_cli import run_case
+
+    seed = Seed("nrrd", "nrrd", "x.nrrd", {"x.nrrd": b"x"}, ["info", "{dir}/x.nrrd", "--json"])
+    kinds = {f.__name__: run_case(seed, b"x", tmp_path / f.__name__, target=f, cpu_s=2).kind
+             for f in (_tb, _greedy, _spin, _two_lines, _unnamed, _polite)}
+    assert kinds == {"_tb": "traceback", "_greedy": "alloc", "_spin": "slow", "_two_lines": "message",
+                     "_unnamed": "message", "_polite": "error"}
