@@ -74,15 +74,17 @@ def _wanted_series(volume: Any, series: str | None, groups: dict[str, list[Any]]
         key = str(series).strip()
         if key in groups:
             return key
-        if key.isdigit() and volume is not None and volume.series and int(key) < len(volume.series):
-            return str(volume.series[int(key)].get("uid"))
+        listed = getattr(volume, "series", None) or []  # a Volume lists its series; a Geometry does not
+        if key.isdigit() and int(key) < len(listed):
+            return str(listed[int(key)].get("uid"))
         hits = [u for u in groups if u.startswith(key)]
         if len(hits) == 1:
             return hits[0]
         raise CtuiError(f"no series {key!r} among {len(groups)} found", path=path)
-    if volume is not None and volume.series:
-        idx = int((volume.meta or {}).get("series_index", 0) or 0)
-        uid = volume.series[min(idx, len(volume.series) - 1)].get("uid")
+    listed = getattr(volume, "series", None) or []
+    if listed:
+        idx = int((getattr(volume, "meta", None) or {}).get("series_index", 0) or 0)
+        uid = listed[min(idx, len(listed) - 1)].get("uid")
         if uid in groups:
             return str(uid)
     return max(groups, key=lambda u: len(groups[u]))
