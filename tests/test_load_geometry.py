@@ -174,6 +174,13 @@ def test_huge_rows_columns_refused_against_memory(tmp_path, monkeypatch):
         load(p)
     msg = str(exc.value)
     assert "\n" not in msg and str(p) in msg and "memory" in msg
+    # in a folder with good slices: that file skipped, named, with the reason
+    images, ipps = _even(4)
+    write_slices(tmp_path / "f", images, ipps)
+    (tmp_path / "f" / "huge.dcm").write_bytes(p.read_bytes())
+    vol = load(tmp_path / "f")
+    assert vol.shape == (4, 8, 8)
+    assert [s["file"] for s in vol.skipped] == ["huge.dcm"] and "memory" in vol.skipped[0]["reason"]
 
 
 def test_series_over_rlimit_as_refused_before_allocating(tmp_path):

@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ctui.engine.core.limits import available_memory, fmt_bytes
 from ctui.engine.io.series._common import rel
 from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
 
@@ -300,7 +301,7 @@ def _quiet_pydicom() -> None:
     _QUIET = True
 
 
-def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
+def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[list[Frame], list[str]]:
     """Read one file's header: its frames and the patient identifiers found (for scrubbing).
 
     Raises _Skip(reason) when the file is not a loadable DICOM image. pydicom's
@@ -312,7 +313,14 @@ def read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
-            return _read_header(path)
+            frames, ids = _read_header(path)
+    if memory is not None:
+        f0 = frames[0]
+        need = f0.frame_bytes * len(frames)
+        if need > memory:
+            raise _Skip(f"header claims {fmt_bytes(need)} of pixels ({len(frames)}x{f0.rows}x{f0.cols}), more than "
+                        f"the {fmt_bytes(memory)} of memory ctui may use")
+    return frames, ids
 
 
 def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
@@ -551,14 +559,18 @@ def _multiframe(ds: Any, base: Frame, nframes: int) -> list[Frame]:
 def read_headers(
     files: Sequence[Path], *, base: Path | None = None, progress: Callable[[int, int], Any] | None = None
 ) -> tuple[dict[str, Series], list[dict[str, str]], set[str]]:
-    """Headers of all ``files``: series by UID, skipped files, identifiers seen."""
+    """Headers of all ``files``: series by UID, skipped files, identifiers seen.
+
+    A file whose header claims more pixel bytes than the process may allocate (free
+    RAM, RLIMIT_AS, cgroup limit) is skipped with that reason, naming the file."""
+    memory = int(0.9 * available_memory())
     series: dict[str, Series] = {}
     skipped: list[dict[str, str]] = []
     ids: set[str] = set()
     total = len(files)
     for k, p in enumerate(files):
         try:
-            frames, fid = read_header(p)
+            frames, fid = read_header(p, memory=memory)
         except _Skip as s:
             skipped.append({"file": rel(p, base), "reason": str(s)})
         else:
