@@ -61,6 +61,7 @@ import numpy as np
 
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
+from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
 
 __all__ = ["connect_contours", "offset_pixel_boundary", "resample_loop", "tile_dp", "tile_greedy", "tile_many"]
 
@@ -198,22 +199,36 @@ def _overlap(a: _Loop, b: _Loop) -> bool:
     return bool((ma & mb).any())
 
 
-def _merge_loops(loops: list[_Loop]) -> tuple[np.ndarray, np.ndarray]:
-    """One loop (positions (k, 3), ids (k,)) from several, joined by closest-point bridges."""
+def _merge_loops(loops: list[_Loop], used: set[tuple[int, int]] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One loop (positions (k, 3), ids (k,)) from several, joined by closest-point bridges.
+
+    ``used``: bridges (id pairs) already made for the other side of the same slice; a
+    loop set merged for the tiling below *and* above gets a different bridge each time,
+    since one bridge edge used from both sides would carry four faces (non-manifold).
+    New bridges are added to it."""
     ids = loops[0].ids.copy()
     pos = loops[0].xyz.copy()
     rest = list(loops[1:])
+    used = set() if used is None else used
     while rest:
         # the remaining loop closest to the merged loop
         best = None
         for li, lp in enumerate(rest):
             q = lp.xyz
             d = ((pos[:, None, :2] - q[None, :, :2]) ** 2).sum(-1)
+            if used:
+                pa = np.isin(ids, [u for pair in used for u in pair])
+                if pa.any():
+                    for i in np.flatnonzero(pa):
+                        for j in np.flatnonzero(np.isin(lp.ids, [u for pair in used for u in pair])):
+                            if (min(ids[i], lp.ids[j]), max(ids[i], lp.ids[j])) in used:
+                                d[i, j] = np.inf
             a, b = np.unravel_index(int(np.argmin(d)), d.shape)
             if best is None or d[a, b] < best[0]:
                 best = (d[a, b], li, a, b)
         _, li, a, b = best
         lp = rest.pop(li)
+        used.add((int(min(ids[a], lp.ids[b])), int(max(ids[a], lp.ids[b]))))
         ids = np.concatenate([ids[: a + 1], lp.ids[b:], lp.ids[: b + 1], ids[a:]])
         pos = np.concatenate([pos[: a + 1], lp.xyz[b:], lp.xyz[: b + 1], pos[a:]])
     return pos, ids
@@ -355,9 +370,11 @@ def connect_contours(
 
     jobs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]] = []
 
+    bridges: set[tuple[int, int]] = set()
+
     def tile(lower: list[_Loop], upper: list[_Loop]) -> None:
-        pos_p, pid = _merge_loops(lower) if len(lower) > 1 else (lower[0].xyz, lower[0].ids)
-        pos_q, qid = _merge_loops(upper) if len(upper) > 1 else (upper[0].xyz, upper[0].ids)
+        pos_p, pid = _merge_loops(lower, bridges) if len(lower) > 1 else (lower[0].xyz, lower[0].ids)
+        pos_q, qid = _merge_loops(upper, bridges) if len(upper) > 1 else (upper[0].xyz, upper[0].ids)
         jobs.append((to_mm(pos_p), pid, to_mm(pos_q), qid, len(lower) > 1 or len(upper) > 1))
 
     def run_jobs() -> None:
@@ -452,12 +469,56 @@ def connect_contours(
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
     faces = np.concatenate(builder.faces).astype(np.int32) if builder.faces else np.zeros((0, 3), np.int32)
+    if len(faces) and np.count_nonzero(edge_counts(faces, len(v_idx))[1] > 2):
+        faces = _flip_double_rungs(faces, v_idx[:, 2])
     faces = _fix_handedness(faces, aff)
-    from ctui.engine.mesh.meshtools import vertex_normals
-
-    mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces, normals=vertex_normals(v_mm, faces),
-                meta={"method": f"contours-{method}"})
+    mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces, meta={"method": f"contours-{method}"})
+    if len(faces) and np.count_nonzero(edge_counts(faces, len(v_mm))[1] > 2):
+        # a tile that reaches both sides of a bridge (a branching's zero-width seam) from
+        # one vertex leaves fins (opposite twin faces: dropped, no volume) and edges
+        # where two sheets touch (cut apart, nothing moves)
+        mesh = split_non_manifold(drop_opposite_twins(mesh))
+    mesh.normals = vertex_normals(mesh.vertices, mesh.faces)
     return mesh
+
+
+def _flip_double_rungs(faces: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Where one vertex was tiled to both copies of a bridge vertex (an edge between two
+    slices carrying four faces: two fans), flip the edge inside the second fan: its two
+    faces (u, v, w1), (v, u, w2) become (u, w2, w1), (w2, v, w1), preferably with w1 and
+    w2 on different slices (a new rung), so each edge keeps two faces. ``z``: slice index of
+    each vertex. Returns the faces (int64 (m, 3))."""
+    f = np.asarray(faces, np.int64).copy()
+    nv = int(f.max()) + 1
+    edges, counts = edge_counts(f, nv)
+    bad = edges[counts == 4]
+    if not len(bad):
+        return f
+    existing = set((edges[:, 0] * nv + edges[:, 1]).tolist())
+    for u, v in bad:
+        if z[u] == z[v]:
+            continue
+        sel = np.flatnonzero(((f == u).any(axis=1)) & ((f == v).any(axis=1)))
+        if len(sel) != 4:
+            continue
+        fw, bw = [], []  # faces with u -> v, with v -> u; each with its third vertex
+        for t in sel:
+            tri = list(f[t])
+            i = tri.index(u)
+            w = int(sum(tri) - u - v)
+            (fw if tri[(i + 1) % 3] == v else bw).append((t, w))
+        if len(fw) != 2 or len(bw) != 2:
+            continue
+        pairs = [(a, b) for a in fw[::-1] for b in bw]
+        # a new rung between the slices first; else a flat triangle in one slice
+        for (t1, w1), (t2, w2) in sorted(pairs, key=lambda p: z[p[0][1]] == z[p[1][1]]):
+            key = min(w1, w2) * nv + max(w1, w2)
+            if w1 != w2 and key not in existing:
+                f[t1] = (u, w2, w1)
+                f[t2] = (w2, v, w1)
+                existing.add(key)
+                break
+    return f
 
 
 def mask_contours(mask: np.ndarray) -> list[list[Any]]:
