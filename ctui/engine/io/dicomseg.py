@@ -77,6 +77,8 @@ def _wanted_series(volume: Any, series: str | None, groups: dict[str, list[Any]]
         listed = getattr(volume, "series", None) or []  # a Volume lists its series; a Geometry does not
         if key.isdigit() and int(key) < len(listed):
             return str(listed[int(key)].get("uid"))
+        if key.isdigit() and len(groups) == 1 and int(key) == 0:
+            return next(iter(groups))
         hits = [u for u in groups if u.startswith(key)]
         if len(hits) == 1:
             return hits[0]
