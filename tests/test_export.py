@@ -95,3 +95,16 @@ def test_cli_export_and_errors(case, capsys):
         export(case["project"], format="csv", out=case["out"] / "y.csv", objects=[7])
     with pytest.raises(CtuiError, match=r"\.nii"):
         export(case["project"], format="nifti", out=case["out"] / "y.nrrd")
+
+
+def test_dicom_export_from_a_project_without_series_uid(case):
+    """A project that recorded no series UID (older ctui): the series is found in its folder."""
+    from ctui.engine.io.project import load_project
+    from ctui.engine.io.project import save_project as save_raw
+
+    proj = load_project(case["project"])
+    proj.series_uid = None
+    save_raw(case["root"] / "old.ctui", proj)
+    out = case["out"] / "old-seg.dcm"
+    export(case["root"] / "old.ctui", format="dicom-seg", out=out)
+    np.testing.assert_array_equal(read_label_file(out, grid=case["volume"]).labels, case["labels"])
