@@ -199,3 +199,29 @@ def test_load_rejects_corrupt_and_bombs(tmp_path, oblique):
     assert peak < 5_000_000
     with pytest.raises(FormatError, match="folder"):
         load_labels(tmp_path / "dir.nii.gz") if (tmp_path / "dir.nii.gz").mkdir() is None else None
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 0.0])
+@pytest.mark.parametrize("suffix", [".nrrd", ".nii"])
+def test_label_map_with_bad_voxel_size_refused_in_one_line(tmp_path, suffix, bad):
+    """A label map must match its series voxel for voxel: a NaN, infinite or zero voxel
+    size is refused with one line naming the file (never a NaN volume in a report)."""
+    labels = np.zeros((3, 4, 5), np.uint8)
+    labels[1, 1:3, 1:4] = 1
+    p = tmp_path / f"bad{suffix}"
+    if suffix == ".nrrd":
+        import nrrd
+
+        nrrd.write(str(p), labels.transpose(2, 1, 0).copy(), {"space": "left-posterior-superior",
+                                                              "space directions": np.diag([1.0, bad, 2.0])})
+    else:
+        import nibabel as nib
+
+        nib.save(nib.Nifti1Image(labels.transpose(2, 1, 0).copy(), np.diag([1.0, 1.0, 2.0, 1.0])), p)
+        raw = bytearray(p.read_bytes())  # nibabel will not write it: patch srow_y (byte 296), qform_code 0
+        raw[296:312] = np.array([0.0, bad, 0.0, 0.0], "<f4").tobytes()
+        raw[252:254] = b"\x00\x00"
+        p.write_bytes(bytes(raw))
+    with pytest.raises(FormatError) as exc:
+        load_labels(p)
+    assert "\n" not in str(exc.value) and str(p) in str(exc.value)
