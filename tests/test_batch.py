@@ -100,3 +100,16 @@ def test_batch_cli(manifest, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rc == 1 and rep["failed"] == 1 and rep["jobs"] == 2  # a failed job: exit status 1, the rest written
     assert [r["status"] for r in rep["rows"]] == ["ok", "failed"]
+
+
+def test_outputs_never_go_into_a_series_folder(manifest, tmp_path):
+    from ctui.engine.actions.batch import read_manifest, run_batch, run_job
+    from ctui.engine.core.errors import CtuiError
+
+    root, _ = manifest
+    lines = (root / "jobs.csv").read_text().splitlines()
+    (root / "inside.csv").write_text(lines[0] + "\n" + lines[1].replace(",out,", ",s0,") + "\n")
+    row = run_job(read_manifest(root / "inside.csv")[0])
+    assert row["status"] == "failed" and "input folder" in row["error"]
+    with pytest.raises(CtuiError, match="input folder"):
+        run_batch(root / "jobs.csv", out=root / "s1" / "results.csv", processes=False)

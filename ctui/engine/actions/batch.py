@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from ctui.engine.core.atomic import write_text
+from ctui.engine.core.atomic import check_output, check_outputs, write_text
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
 
@@ -203,8 +203,9 @@ def _run(job: Job) -> dict:
                           objects=[{"id": 1, "name": job.name, "color": [230, 60, 60], "seeds": [list(job.seed)]}])
     opened = Opened.of_volume(volume, labels, path=job.series, project=project)
     m = measure_object(opened, object=1, path="auto" if job.sections else None)
-    os.makedirs(job.outdir, exist_ok=True)
     proj_path, mesh_path = job.outputs()
+    check_outputs({"project": proj_path, "mesh": mesh_path}, inputs=[job.series])  # never into the series folder
+    os.makedirs(job.outdir, exist_ok=True)
     save_project(proj_path, project)
     mesh = m.stats.get("mesh") if m.stats else None
     if mesh is None:
@@ -295,6 +296,7 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
     jobs = read_manifest(manifest, default_outdir=default_outdir)
     if not jobs:
         raise CtuiError("the manifest holds no job", path=manifest)
+    check_output(out_s, inputs=[manifest, *(j.series for j in jobs if j.series)], label="--out")
     previous = read_results(out_s)
     rows: dict[int, dict] = {}
     todo = []
