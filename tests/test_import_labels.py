@@ -245,3 +245,24 @@ def test_seg_too_big_for_memory_is_refused_before_reading(dcmqi, monkeypatch):
     monkeypatch.setenv("CTUI_MEMORY_LIMIT", str(1_000_000))
     with pytest.raises(CtuiError, match="memory"):
         read_label_file(d / "liver.dcm", grid=ct)
+
+
+def test_tui_open_with_labels_session(phantom):
+    """`ctui open SERIES --labels FILE` builds the TUI session from the label file; more objects
+    than the TUI edits are refused with what to use instead."""
+    from ctui.commands.open import _labels_session
+
+    root, v, _ = phantom
+    labels = np.zeros(v.shape, np.uint8)
+    labels[10, 20:30, 20:30] = 2
+    sitk, img = _sitk_labels(v, labels)
+    sitk.WriteImage(img, str(root / "two.nrrd"))
+    s = _labels_session(str(root / "series"), str(root / "two.nrrd"), {})
+    assert sorted(s.seg.objects) == [2] and int((s.seg.labels == 2).sum()) == 100
+    many = np.zeros(v.shape, np.uint8)
+    for k in range(1, 13):
+        many[k, 5:8, 5:8] = k
+    sitk, img = _sitk_labels(v, many)
+    sitk.WriteImage(img, str(root / "many.nii.gz"))
+    with pytest.raises(CtuiError, match="measure/mesh/render"):
+        _labels_session(str(root / "series"), str(root / "many.nii.gz"), {})
