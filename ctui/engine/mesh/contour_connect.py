@@ -60,6 +60,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh import contour_tiling
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
 from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
 
@@ -465,6 +466,7 @@ def connect_contours(
                 else:
                     holes = [h for k, h in enumerate(loops) if h.hole and h.parent == i and not matched[k]]
                     end([lp] + holes, up)
+    compiled = contour_tiling.kernels_ready()
     run_jobs()
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
@@ -472,7 +474,10 @@ def connect_contours(
     if len(faces) and np.count_nonzero(edge_counts(faces, len(v_idx))[1] > 2):
         faces = _flip_double_rungs(faces, v_idx[:, 2])
     faces = _fix_handedness(faces, aff)
-    mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces, meta={"method": f"contours-{method}"})
+    mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces,
+                meta={"method": f"contours-{method if compiled else 'greedy'}"})
+    if not compiled and method == "dp":
+        mesh.meta["note"] = "greedy tiling: the minimum-area kernel is being compiled (first use)"
     if len(faces) and np.count_nonzero(edge_counts(faces, len(v_mm))[1] > 2):
         # a tile that reaches both sides of a bridge (a branching's zero-width seam) from
         # one vertex leaves fins (opposite twin faces: dropped, no volume) and edges

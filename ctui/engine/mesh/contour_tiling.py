@@ -11,7 +11,7 @@ import os
 import numpy as np
 from numba import njit
 
-from ctui.engine.mesh import jit  # noqa: F401  (numba cache folder, before the kernels are defined)
+from ctui.engine.mesh import jit  # (also sets the numba cache folder before the kernels are defined)
 
 # --------------------------------------------------------------------------- tiling kernels
 
@@ -220,6 +220,14 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
     """
     npair = poff.shape[0] - 1
     ok = np.ones(npair, np.int64)
+    if not kernels_ready():
+        # a fresh install: greedy tiling in plain Python now (no compilation; the DP
+        # kernel takes 5-60 s to compile), the kernels compiled in the background
+        jit.compile_in_background()
+        for k in range(npair):
+            a0, a1, b0, b1 = poff[k], poff[k + 1], qoff[k], qoff[k + 1]
+            out[toff[k]:toff[k + 1]] = tile_greedy_py(P[a0:a1], Q[b0:b1], pid[a0:a1], qid[b0:b1])
+        return ok
     n = max(1, min(int(threads or os.cpu_count() or 1), npair // 4))
     if n == 1:
         _tile_range(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, ok, 0, npair)
@@ -233,3 +241,40 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
         list(ex.map(lambda i: _tile_range(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, ok,
                                           int(bounds[i]), int(bounds[i + 1])), range(len(bounds) - 1)))
     return ok
+
+
+def kernels_ready() -> bool:
+    """Whether the compiled tiling kernel is ready (compiled or cached; ``CTUI_KERNELS``)."""
+    return jit.use_compiled([_tile_range])
+
+
+def tile_greedy_py(P: np.ndarray, Q: np.ndarray, pid: np.ndarray, qid: np.ndarray) -> np.ndarray:
+    """:func:`tile_greedy` in plain Python (the same triangles), for use before it is compiled."""
+    n, m = len(P), len(Q)
+    s = int(np.argmin(((Q - P[0]) ** 2).sum(axis=1)))
+    p = P.tolist()
+    q = Q.tolist()
+    pi_, qi_ = pid.tolist(), qid.tolist()
+    out = np.empty((n + m, 3), np.int64)
+    rows = []
+    i = j = 0
+    while i < n or j < m:
+        pi, pn = i % n, (i + 1) % n
+        qj, qn = (j + s) % m, (j + 1 + s) % m
+        if j >= m:
+            adv_p = True
+        elif i < n:
+            a, b, c, d = p[pn], q[qj], p[pi], q[qn]
+            d1 = (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2
+            d2 = (c[0] - d[0]) ** 2 + (c[1] - d[1]) ** 2 + (c[2] - d[2]) ** 2
+            adv_p = d1 <= d2
+        else:
+            adv_p = False
+        if adv_p:
+            rows.append((pi_[pi], pi_[pn], qi_[qj]))
+            i += 1
+        else:
+            rows.append((pi_[pi], qi_[qn], qi_[qj]))
+            j += 1
+    out[:] = rows
+    return out

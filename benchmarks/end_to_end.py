@@ -1,0 +1,176 @@
+"""Whole commands, start to exit, as a user meets them: ctui vs a SimpleITK + VTK script.
+
+Run: ``python3 benchmarks/end_to_end.py [--shape 300,512,512] [--repeat 3] [--level 300]``
+
+* A CT-like series (``benchmarks/isosurface.py``'s volume: body, spine, ribs, pelvis,
+  skull cap, noise; 0.7 x 0.7 x 1.0 mm) is written once as DICOM with ctui's own writer
+  (:func:`ctui.engine.io.phantom.write_series`) into ``benchmarks/_cache/`` (git-ignored).
+* Every figure is the wall time of a fresh process (``subprocess``, start to exit),
+  median of ``--repeat`` runs:
+
+  - ``ctui mesh SERIES --iso L --out x.stl`` with a warm numba cache and with a cold one
+    (an empty ``NUMBA_CACHE_DIR``: a fresh install; no background compilation);
+  - the peer: a Python script doing SimpleITK series read + VTK flying edges (normals
+    on) + binary STL write + vtkMassProperties (volume, area): what ``ctui mesh`` does;
+  - ``ctui info SERIES`` (the goal is <= 1 s on 300 slices);
+  - the bundled sample (``sample_data/phantom``): ``ctui mesh --iso 300`` and
+    ``--method contours``, cold and warm cache (the goal: <= 3 s cold).
+
+Ratios printed: ctui / peer (goal <= 1.2), cold / warm.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CACHE = ROOT / "benchmarks" / "_cache"
+SAMPLE = ROOT / "sample_data" / "phantom"
+
+PEER = r"""
+import sys, os
+os.environ.setdefault("VTK_SMP_BACKEND_IN_USE", "STDThread")
+import SimpleITK as sitk
+import vtk
+from vtk.util import numpy_support
+series, level, out = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+reader = sitk.ImageSeriesReader()
+reader.SetFileNames(reader.GetGDCMSeriesFileNames(series))
+img = reader.Execute()
+arr = sitk.GetArrayViewFromImage(img)
+vimg = vtk.vtkImageData()
+vimg.SetDimensions(arr.shape[2], arr.shape[1], arr.shape[0])
+vimg.SetSpacing(*img.GetSpacing())
+vimg.SetOrigin(*img.GetOrigin())
+vimg.GetPointData().SetScalars(numpy_support.numpy_to_vtk(arr.ravel(), deep=False))
+fe = vtk.vtkFlyingEdges3D()
+fe.SetInputData(vimg)
+fe.SetValue(0, level)
+fe.ComputeNormalsOn()
+fe.ComputeScalarsOff()
+fe.Update()
+w = vtk.vtkSTLWriter()
+w.SetFileTypeToBinary()
+w.SetFileName(out)
+w.SetInputConnection(fe.GetOutputPort())
+w.Write()
+mp = vtk.vtkMassProperties()
+mp.SetInputConnection(fe.GetOutputPort())
+mp.Update()
+print(f"{fe.GetOutput().GetNumberOfCells()} triangles, volume {mp.GetVolume() / 1000:.2f} ml, area {mp.GetSurfaceArea():.0f} mm2")
+"""
+
+
+def make_series(shape: tuple[int, int, int]) -> Path:
+    """The DICOM series (cached): benchmarks/_cache/ct_<z>x<y>x<x>/."""
+    out = CACHE / f"ct_{shape[0]}x{shape[1]}x{shape[2]}"
+    if (out / ".done").exists():
+        return out
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from isosurface import make_ct
+
+    from ctui.engine.core.volume import Volume
+    from ctui.engine.io.phantom import write_series
+
+    data = make_ct(shape)
+    vol = Volume(data=data, spacing=(1.0, 0.7, 0.7), origin=(-180.0, -180.0, -150.0), modality="CT")
+    if out.exists():
+        shutil.rmtree(out)
+    write_series(out, vol, description="ctui benchmark CT")
+    (out / ".done").write_text("ok\n")
+    return out
+
+
+TREE = ROOT  # where ``python -m ctui.cli`` imports ctui from (--tree: an older checkout, for before/after)
+
+
+def timed(cmd: list[str], env: dict | None = None, *, setup=None) -> tuple[float, str]:
+    if setup:
+        setup()
+    t = time.perf_counter()
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=TREE)
+    dt = time.perf_counter() - t
+    if res.returncode != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{res.stderr[-2000:]}")
+    return dt, res.stdout.strip().splitlines()[-1] if res.stdout.strip() else ""
+
+
+def median_run(cmd, env=None, *, repeat: int, setup=None) -> tuple[float, str]:
+    runs = [timed(cmd, env, setup=setup) for _ in range(repeat)]
+    return statistics.median(r[0] for r in runs), runs[-1][1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shape", default="300,512,512")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--level", type=float, default=300.0)
+    ap.add_argument("--skip-big", action="store_true", help="only the sample's cold/warm figures")
+    ap.add_argument("--tree", default=None, help="run the ctui of this source tree (e.g. an older release unpacked "
+                    "with git archive) for a before/after comparison")
+    args = ap.parse_args()
+    global TREE
+    if args.tree:
+        TREE = Path(args.tree).resolve()
+    shape = tuple(int(v) for v in args.shape.split(","))
+    tmp = Path(tempfile.mkdtemp(prefix="ctui-e2e-"))
+    cold_dir = tmp / "numba-cold"
+    base = dict(os.environ, CTUI_NO_PROGRESS="1", CTUI_NO_BACKGROUND_COMPILE="1")
+    base.pop("CTUI_KERNELS", None)
+    cold_env = dict(base, NUMBA_CACHE_DIR=str(cold_dir))
+
+    def fresh_cache() -> None:
+        shutil.rmtree(cold_dir, ignore_errors=True)
+        cold_dir.mkdir()
+
+    ctui = [sys.executable, "-m", "ctui.cli"]
+    # warm the default cache (compile everything once) so "warm" means warm
+    warm_mod = "ctui.engine.mesh.warm" if (TREE / "ctui/engine/mesh/warm.py").exists() else None
+    if warm_mod:
+        subprocess.run([sys.executable, "-m", warm_mod], env=base, check=True, cwd=TREE)
+    else:  # an older tree: one run of each command compiles its kernels
+        for method in ("marching-cubes", "contours"):
+            subprocess.run(ctui + ["mesh", str(SAMPLE), "--iso", "300", "--method", method, "--out",
+                                   str(tmp / "w.stl")], env=base, cwd=TREE, capture_output=True)
+    rows = []
+    for method in ("marching-cubes", "contours"):
+        cmd = ctui + ["mesh", str(SAMPLE), "--iso", "300", "--method", method, "--out", str(tmp / "s.stl")]
+        cold, _ = median_run(cmd, cold_env, repeat=args.repeat, setup=fresh_cache)
+        warm, line = median_run(cmd, base, repeat=args.repeat)
+        rows.append((f"sample mesh --method {method}", cold, warm, line))
+    print(f"{'command':40s} {'cold s':>8s} {'warm s':>8s} {'cold/warm':>9s}")
+    for name, cold, warm, _ in rows:
+        print(f"{name:40s} {cold:8.2f} {warm:8.2f} {cold / warm:9.2f}")
+    if args.skip_big:
+        return
+    t0 = time.perf_counter()
+    series = make_series(shape)
+    print(f"\nseries {series} ({shape[0]}x{shape[1]}x{shape[2]}; made or found in {time.perf_counter() - t0:.1f} s)")
+    peer_py = tmp / "peer.py"
+    peer_py.write_text(PEER)
+    out = tmp / "big.stl"
+    peer, peer_line = median_run([sys.executable, str(peer_py), str(series), str(args.level), str(tmp / "peer.stl")],
+                                 base, repeat=args.repeat)
+    warm, warm_line = median_run(ctui + ["mesh", str(series), "--iso", str(args.level), "--out", str(out)], base,
+                                 repeat=args.repeat)
+    cold, _ = median_run(ctui + ["mesh", str(series), "--iso", str(args.level), "--out", str(out)], cold_env,
+                         repeat=args.repeat, setup=fresh_cache)
+    info, _ = median_run(ctui + ["info", str(series)], base, repeat=args.repeat)
+    print(f"peer  (SimpleITK + VTK flying edges + STL + mass properties): {peer:7.2f} s   {peer_line}")
+    print(f"ctui mesh --iso, warm cache:                                 {warm:7.2f} s   {warm_line}")
+    print(f"ctui mesh --iso, cold cache (fresh install):                 {cold:7.2f} s")
+    print(f"ctui info:                                                   {info:7.2f} s")
+    print(f"ratio ctui/peer: warm {warm / peer:.2f}, cold {cold / peer:.2f}  (goal <= 1.2)")
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
