@@ -385,8 +385,14 @@ def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, b
     big = tuple(slice(max(b.start - m, 0), min(b.stop + m, n)) for b, m, n in zip(box, margin, (nz, ny, nx)))
     origin = np.array([b.start for b in big])
     window = pipe.window_for(volume)
-    image = np.stack([pipe.final_region(volume, z, big[1].start, big[1].stop, big[2].start, big[2].stop, window=window)
-                      for z in range(big[0].start, big[0].stop)]).astype(np.float32)
+    check_allocation(int(np.prod([b.stop - b.start for b in big])) * 20, what="the level set of the object's box")
+    if not pipe.active_steps() and pipe.domain == "hu":
+        image = volume.data[big]  # the series values themselves: a view, no copy
+    else:
+        image = np.empty(tuple(b.stop - b.start for b in big), np.float32)  # filled slice by slice: one copy
+        for k, z in enumerate(range(big[0].start, big[0].stop)):
+            image[k] = pipe.final_region(volume, z, big[1].start, big[1].stop, big[2].start, big[2].stop,
+                                         window=window)
     init = seg.labels[big] == oid
     if (init.sum(axis=(1, 2)) > 0).sum() < 3:
         return  # the level set needs a body at least 3 slices thick

@@ -119,8 +119,11 @@ class EditMixin:
         oz, oy, ox = offset
         box = (slice(oz + bb[0].start, oz + bb[0].stop), slice(oy + bb[1].start, oy + bb[1].stop),
                slice(ox + bb[2].start, ox + bb[2].stop))
-        if mode == "replace":  # widen the box to the whole planes the mask touches
-            box = tuple(box[a] if a == axis else slice(0, self.labels.shape[a]) for a in range(3))  # type: ignore[assignment]
+        if mode == "replace":  # widen the box to the object's extent on the planes the mask touches
+            ob = self.object_bbox(object_id)  # type: ignore[attr-defined]
+            if ob is not None:
+                box = tuple(box[a] if a == axis else slice(min(box[a].start, ob[a].start), max(box[a].stop, ob[a].stop))
+                            for a in range(3))  # type: ignore[assignment]
         full = np.zeros(tuple(b.stop - b.start for b in box), bool)
         rel = tuple(slice(o + b.start - bx.start, o + b.stop - bx.start) for o, b, bx in zip(offset, bb, box))
         full[rel] = m[bb]

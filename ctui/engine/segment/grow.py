@@ -233,11 +233,11 @@ def levelset(image: np.ndarray, initial: np.ndarray, *, low: float, high: float,
     if box is None:
         return (0, 0, 0), np.zeros((0, 0, 0), bool)
     off = np.array([b.start for b in box])
-    sub = np.ascontiguousarray(image[box], dtype=np.float32)
+    sub = image[box]  # as it is (int16 series values need no float copy)
     init = np.ascontiguousarray(initial[box], dtype=bool)
     region = inrange[box] if inrange is not None else (sub >= low) & (sub <= high)
     seeds = np.argwhere(init)
-    check_allocation(sub.size * 16, what="the level set (distance maps, speed)")
+    check_allocation(sub.size * 14, what="the level set (distance maps)")
     grown = evolve(sub, init, low=low, high=high, spacing=spacing, curvature=curvature, iterations=iterations)
     report(progress, 3, 4, "level set")
     inside = grown & (region | init)

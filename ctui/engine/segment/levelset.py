@@ -25,7 +25,7 @@ import numpy as np
 _KERNEL: list = []
 
 
-def _step_py(phi, speed, out, dz, dy, dx, c, dt, band):  # pragma: no cover - compiled by numba
+def _step_py(phi, image, low, high, out, dz, dy, dx, c, dt, band):  # pragma: no cover - compiled by numba
     nz, ny, nx = phi.shape
     for z in range(nz):
         z0 = z - 1 if z > 0 else 0
@@ -47,7 +47,12 @@ def _step_py(phi, speed, out, dz, dy, dx, c, dt, band):  # pragma: no cover - co
                 myp = (phi[z, y1, x] - p) / dy
                 mzm = (p - phi[z0, y, x]) / dz
                 mzp = (phi[z1, y, x] - p) / dz
-                f = speed[z, y, x]
+                v = image[z, y, x]
+                f = min(v - low, high - v) / (0.5 * (high - low))  # the threshold speed, +1 mid-range
+                if f > 1.0:
+                    f = 1.0
+                elif f < -1.0:
+                    f = -1.0
                 if f > 0:  # the front moves outwards: phi grows
                     g = (min(mxm, 0.0) ** 2 + max(mxp, 0.0) ** 2 + min(mym, 0.0) ** 2 + max(myp, 0.0) ** 2
                          + min(mzm, 0.0) ** 2 + max(mzp, 0.0) ** 2)
@@ -86,18 +91,21 @@ def _side_distance(mask: np.ndarray, spacing: tuple[float, float, float], cap: f
     import cv2
 
     dz, _, dx = spacing
-    m = mask.astype(np.uint8)
-    plane = np.empty(m.shape, np.float32)
+    m = mask.view(np.uint8) if mask.dtype == bool and mask.flags.c_contiguous else mask.astype(np.uint8)
+    sq = np.empty(m.shape, np.float32)
     for z in range(m.shape[0]):
-        plane[z] = cv2.distanceTransform(m[z], cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    plane *= np.float32(dx)
-    np.minimum(plane, np.float32(cap), out=plane)
-    sq = plane * plane
+        sq[z] = cv2.distanceTransform(m[z], cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    sq *= np.float32(dx)
+    np.minimum(sq, np.float32(cap), out=sq)
+    sq *= sq  # squared, in place
     out = sq.copy()
     for k in range(1, int(np.ceil(cap / dz)) + 1):
         step = np.float32((k * dz) ** 2)
-        np.minimum(out[k:], sq[:-k] + step, out=out[k:])
-        np.minimum(out[:-k], sq[k:] + step, out=out[:-k])
+        for z in range(m.shape[0]):  # slice by slice: no volume-sized temporaries
+            if z + k < m.shape[0]:
+                np.minimum(out[z + k], sq[z] + step, out=out[z + k])
+                np.minimum(out[z], sq[z + k] + step, out=out[z])
+    del sq
     return np.sqrt(out, out=out)
 
 
@@ -109,7 +117,10 @@ def _signed_distance(inside: np.ndarray, spacing: tuple[float, float, float], ca
     if abs(spacing[1] - spacing[2]) < 1e-6 * spacing[2] and cap < 1e8:
         # half the distance: the zero level lies half-way between the boundary voxels; the level-set
         # equation moves the zero level the same whatever positive factor phi carries
-        return 0.5 * (_side_distance(inside, spacing, cap) - _side_distance(~inside, spacing, cap))
+        phi = _side_distance(inside, spacing, cap)
+        phi -= _side_distance(~inside, spacing, cap)
+        phi *= np.float32(0.5)
+        return phi
     import SimpleITK as sitk  # heavy import, only here
 
     out = None
@@ -125,15 +136,18 @@ def _signed_distance(inside: np.ndarray, spacing: tuple[float, float, float], ca
 def threshold_speed(image: np.ndarray, low: float, high: float) -> np.ndarray:
     """The threshold speed P (float32, same shape): +1 at the range's middle, 0 at its ends, -1 far outside."""
     h = max((float(high) - float(low)) / 2.0, 1e-6)
-    mid = (float(low) + float(high)) / 2.0
-    img = image.astype(np.float32, copy=False)
-    sp = np.where(img < mid, (img - np.float32(low)) / np.float32(h), (np.float32(high) - img) / np.float32(h))
-    return np.clip(sp, -1.0, 1.0).astype(np.float32)
+    img = np.asarray(image, np.float32)
+    sp = img - np.float32(low)  # below the middle the distance to low is the smaller one
+    np.minimum(sp, np.float32(high) - img, out=sp)
+    sp *= np.float32(1.0 / h)
+    return np.clip(sp, -1.0, 1.0, out=sp)
 
 
 def evolve(image: np.ndarray, initial: np.ndarray, *, low: float, high: float, spacing: tuple[float, float, float],
            curvature: float = 1.0, iterations: int = 20, reinit: int = 10) -> np.ndarray:
-    """Evolve the surface of ``initial`` (bool (nz, ny, nx)) over ``image``; returns bool, the inside.
+    """Evolve the surface of ``initial`` (bool (nz, ny, nx)) over ``image`` (any numeric dtype, read as
+    is: no float copy); returns bool, the inside. Memory: two float32 arrays of the image's shape
+    (phi and the next phi), three while phi is re-initialised.
 
     ``curvature``: weight c of the curvature term; the time step keeps both terms stable
     (at most half the finest voxel side a step for the propagation term).
@@ -144,15 +158,18 @@ def evolve(image: np.ndarray, initial: np.ndarray, *, low: float, high: float, s
     if curvature > 0:
         dt = min(dt, 0.9 * min(dy, dx) ** 2 / (2.0 * 2.0 * curvature))
     band = 3.0 * max(dz, dy, dx)
-    speed = threshold_speed(image, low, high)
     cap = 2.0 * band + max(dz, dy, dx)  # distances beyond the band only need to be "far"
     phi = _signed_distance(initial, spacing, cap)
     out = np.empty_like(phi)
     step = _kernel()
     for i in range(int(iterations)):
-        step(phi, speed, out, dz, dy, dx, float(curvature), dt, band)
+        step(phi, image, float(low), float(high), out, dz, dy, dx, float(curvature), dt, band)
         phi, out = out, phi
         if reinit and (i + 1) % reinit == 0 and i + 1 < iterations:
-            phi = _signed_distance(phi > 0, spacing, cap)
+            del out
+            inside = phi > 0
+            del phi
+            phi = _signed_distance(inside, spacing, cap)
+            del inside
             out = np.empty_like(phi)
     return phi > 0
