@@ -79,3 +79,20 @@ def test_contours_fill_back_exactly():
     m = ndimage.binary_opening(rng.random((40, 50)) > 0.45)
     back = fill_contours(slice_contours(m), m.shape)
     np.testing.assert_array_equal(back, m)
+
+
+def test_rtstruct_on_an_oblique_real_series(tmp_path):
+    """Siemens oblique sagittal MR: contours in patient mm on the tilted planes come back voxel for voxel."""
+    from conftest import shared
+
+    from ctui.engine.core.geometry import Geometry
+    from ctui.engine.io.rtstruct import write_rtstruct
+
+    d = shared("mr_sagittal_oblique")
+    v = load(d)
+    labels = np.zeros(v.shape, np.uint8)
+    labels[v.data > np.percentile(v.data, 97)] = 1  # bright, ragged: many contours with holes
+    labels[15:25, 100:140, 100:150] = 2
+    write_rtstruct(tmp_path / "rt.dcm", labels, Geometry.of(v), source_datasets(d, v))
+    back = read_label_file(tmp_path / "rt.dcm", grid=v)
+    np.testing.assert_array_equal(back.labels, labels)
