@@ -91,8 +91,10 @@ def test_rtstruct_on_an_oblique_real_series(tmp_path):
     d = shared("mr_sagittal_oblique")
     v = load(d)
     labels = np.zeros(v.shape, np.uint8)
-    labels[v.data > np.percentile(v.data, 97)] = 1  # bright, ragged: many contours with holes
-    labels[15:25, 100:140, 100:150] = 2
+    z, y, x = np.ogrid[: v.shape[0], : v.shape[1], : v.shape[2]]
+    r2 = ((z - 20) / 12.0) ** 2 + ((y - 120) / 50.0) ** 2 + ((x - 130) / 40.0) ** 2
+    labels[(r2 < 1) & (r2 > 0.3)] = 1  # a shell: rings with holes on most slices
+    labels[15:25, 30:60, 30:70] = 2
     write_rtstruct(tmp_path / "rt.dcm", labels, Geometry.of(v), source_datasets(d, v))
     back = read_label_file(tmp_path / "rt.dcm", grid=v)
     np.testing.assert_array_equal(back.labels, labels)
