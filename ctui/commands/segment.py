@@ -61,6 +61,9 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--neighbourhood", type=int, default=2,
                    help="pixels the previous slice's object is grown by to seed the next slice (default 2; 0 = overlap only)")
     p.add_argument("--min-area", type=int, default=5, help="smallest accepted fill / object slice in pixels (default 5)")
+    p.add_argument("--curvature", type=float, default=0.5, metavar="MM",
+                   help="levelset: weight of the curvature term in mm (default 0.5): smooths corners sharper than "
+                        "MM; the front does not enter necks narrower than about 2 x MM")
     p.add_argument("--keep-largest", action="store_true", help="keep only each object's largest 3D island")
     p.add_argument("--min-island", type=int, default=0, metavar="N", help="remove each object's islands under N voxels")
     p.add_argument("--interpolate", action="store_true",
@@ -176,7 +179,7 @@ def _options(args: argparse.Namespace):
                           leak_factor=args.leak_factor, neck_mm=getattr(args, "neck", 5.0),
                           slices=parse_slices(getattr(args, "slices", None)),
                           keep_largest=getattr(args, "keep_largest", False), min_island=getattr(args, "min_island", 0),
-                          interpolate=getattr(args, "interpolate", False))
+                          interpolate=getattr(args, "interpolate", False), curvature=getattr(args, "curvature", 0.5))
 
 
 def _thresholds(args: argparse.Namespace) -> list:

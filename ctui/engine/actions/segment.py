@@ -72,7 +72,7 @@ class SegmentOptions:
     keep_largest: bool = False
     min_island: int = 0
     interpolate: bool = False
-    curvature: float = 1.0
+    curvature: float = 0.5  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
     overwrite: bool = False
 
     def __post_init__(self) -> None:
