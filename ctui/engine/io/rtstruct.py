@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,7 +59,7 @@ def slice_contours(mask2d: np.ndarray) -> list[np.ndarray]:
     m = np.pad(np.asarray(mask2d, dtype=np.float32), 1)
     out = []
     for c in find_contours(m, 0.5):
-        pts = c[:-1] if len(c) > 1 and np.allclose(c[0], c[-1]) else c
+        pts = c[:-1] if len(c) > 1 and (c[0] == c[-1]).all() else c  # closed: the first point repeated
         pts = _corners(pts)
         if len(pts) >= 3:
             out.append(np.column_stack([pts[:, 1] - 1.0, pts[:, 0] - 1.0]))  # (row, col) -> (x, y), unpad
@@ -119,40 +120,51 @@ def _image_ref(ds: Any) -> Any:
     return _item(ReferencedSOPClassUID=ds.SOPClassUID, ReferencedSOPInstanceUID=ds.SOPInstanceUID)
 
 
-def _contour_data(values: np.ndarray) -> Any:
-    """ContourData (3006,0050) as a raw DS element: pydicom's per-value validation takes ~75 us a
-    number (5 s for a 60-slice organ); joined text bytes are written as they are (4 ms).
+def _elem(tag: int, value: bytes, pad: bytes = b" ") -> bytes:
+    """One data element in Implicit VR Little Endian: tag, 32-bit length, value padded to even."""
+    if len(value) % 2:
+        value += pad
+    return struct.pack("<HHI", tag >> 16, tag & 0xFFFF, len(value)) + value
 
-    DS is at most 16 characters: 6 decimals of a mm is far below any voxel.
+
+def _seq_item(content: bytes) -> bytes:
+    return struct.pack("<HHI", 0xFFFE, 0xE000, len(content)) + content
+
+
+def _ds_text(values: np.ndarray) -> bytes:
+    """Numbers as DS text "a\\b\\c" (at most 16 characters each: 6 decimals of a mm)."""
+    return "\\".join(f"{v:.6f}".rstrip("0").rstrip(".") if v else "0"
+                      for v in np.round(values.ravel(), 6)).encode("ascii")
+
+
+def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any],
+                  mask: np.ndarray | None = None) -> Any:
+    """The ROI's ContourSequence (3006,0040), encoded directly as Implicit VR Little Endian bytes.
+
+    Building one pydicom Dataset per contour (and validating every DS number) cost ~8 ms a
+    contour (11 s for 1390 contours of 10 organs); the bytes cost ~0.1 ms. Implicit VR also
+    lifts explicit VR's 64 KB limit on one contour's ContourData.
     """
     from pydicom.dataelem import RawDataElement
     from pydicom.tag import Tag
 
-    text = "\\".join(f"{v:.6f}".rstrip("0").rstrip(".") if v else "0" for v in np.round(values.ravel(), 6))
-    raw = text.encode("ascii")
-    if len(raw) % 2:
-        raw += b" "
-    return RawDataElement(Tag(0x30060050), "DS", len(raw), raw, 0, False, True)
-
-
-def _roi_contours(labels: np.ndarray, oid: int, geometry: Geometry, sources: Sequence[Any],
-                  mask: np.ndarray | None = None) -> list[Any]:
     m = labels == oid if mask is None else np.asarray(mask, dtype=bool)
     items = []
     ys = np.flatnonzero(m.any(axis=(0, 2)))
     xs = np.flatnonzero(m.any(axis=(0, 1)))
-    if ys.size == 0:
-        return items
-    y0, y1, x0, x1 = ys[0], ys[-1] + 1, xs[0], xs[-1] + 1  # trace inside the object's box only
-    for z in np.flatnonzero(m.any(axis=(1, 2))):
-        for poly in slice_contours(m[z, y0:y1, x0:x1]):
-            zyx = np.column_stack([np.full(len(poly), float(z)), poly[:, 1] + y0, poly[:, 0] + x0])
-            mm = geometry.index_to_mm(zyx)
-            item = _item(ContourImageSequence=[_image_ref(sources[int(z)])], ContourGeometricType="CLOSED_PLANAR",
-                         NumberOfContourPoints=len(poly))
-            item[0x30060050] = _contour_data(mm)
-            items.append(item)
-    return items
+    if ys.size:
+        y0, y1, x0, x1 = ys[0], ys[-1] + 1, xs[0], xs[-1] + 1  # trace inside the object's box only
+        for z in np.flatnonzero(m.any(axis=(1, 2))):
+            ref = sources[int(z)]
+            image = _elem(0x00081150, str(ref.SOPClassUID).encode("ascii"), b"\0") + \
+                _elem(0x00081155, str(ref.SOPInstanceUID).encode("ascii"), b"\0")
+            head = _elem(0x30060016, _seq_item(image)) + _elem(0x30060042, b"CLOSED_PLANAR")
+            for poly in slice_contours(m[z, y0:y1, x0:x1]):
+                zyx = np.column_stack([np.full(len(poly), float(z)), poly[:, 1] + y0, poly[:, 0] + x0])
+                items.append(_seq_item(head + _elem(0x30060046, str(len(poly)).encode("ascii"))
+                                       + _elem(0x30060050, _ds_text(geometry.index_to_mm(zyx)))))
+    value = b"".join(items)
+    return RawDataElement(Tag(0x30060040), "SQ", len(value), value, 0, True, True)
 
 
 def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any], *, objects: Sequence[dict] | None = None,
@@ -166,7 +178,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     """
     import pydicom
     from pydicom.dataset import FileMetaDataset
-    from pydicom.uid import ExplicitVRLittleEndian, generate_uid
+    from pydicom.uid import ImplicitVRLittleEndian, generate_uid
 
     from ctui import __version__
 
@@ -183,7 +195,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     ds.file_meta = FileMetaDataset()
     ds.file_meta.MediaStorageSOPClassUID = RTSTRUCT_SOP_CLASS
     ds.file_meta.MediaStorageSOPInstanceUID = generate_uid()
-    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds.file_meta.TransferSyntaxUID = ImplicitVRLittleEndian  # 32-bit lengths: no 64 KB limit on ContourData
     for kw in _COPIED:
         if kw in src:
             setattr(ds, kw, src.data_element(kw).value)
@@ -217,8 +229,9 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
         report(progress, n - 1, len(objs), f"RTSTRUCT: contours of {o['name']}")
         rois.append(_item(ROINumber=n, ReferencedFrameOfReferenceUID=for_uid, ROIName=o["name"][:64],
                           ROIGenerationAlgorithm="SEMIAUTOMATIC", ROIGenerationDescription="ctui threshold fill"))
-        contours.append(_item(ROIDisplayColor=[int(c) for c in o["color"]], ReferencedROINumber=n,
-                              ContourSequence=_roi_contours(lab, o["id"], geometry, sources, masks.get(o["id"]))))
+        roi_contour = _item(ROIDisplayColor=[int(c) for c in o["color"]], ReferencedROINumber=n)
+        roi_contour[0x30060040] = _roi_contours(lab, o["id"], geometry, sources, masks.get(o["id"]))
+        contours.append(roi_contour)
         observations.append(_item(ObservationNumber=n, ReferencedROINumber=n, RTROIInterpretedType="ORGAN",
                                   ROIInterpreter=""))
     ds.StructureSetROISequence = rois
