@@ -225,3 +225,21 @@ def test_label_map_with_bad_voxel_size_refused_in_one_line(tmp_path, suffix, bad
     with pytest.raises(FormatError) as exc:
         load_labels(p)
     assert "\n" not in str(exc.value) and str(p) in str(exc.value)
+
+
+def test_label_map_over_the_memory_limit_refused(tmp_path, monkeypatch):
+    """A label map bigger than the process may allocate: one line naming the file, before
+    decompressing (CTUI_MEMORY_LIMIT stands in for RLIMIT_AS / cgroup memory.max)."""
+    from ctui.engine.core.errors import CtuiError
+
+    vol = Volume(data=np.zeros((40, 64, 64), np.int16), spacing=(1.0, 1.0, 1.0))
+    labels = np.zeros((40, 64, 64), np.uint8)
+    labels[10:20, 10:20, 10:20] = 1
+    p = save_labels(tmp_path / "m.nii.gz", labels, vol)
+    monkeypatch.setenv("CTUI_MEMORY_LIMIT", str(100_000))
+    with pytest.raises(CtuiError) as exc:
+        load_labels(p)
+    msg = str(exc.value)
+    assert "\n" not in msg and "m.nii.gz" in msg and "memory" in msg
+    monkeypatch.delenv("CTUI_MEMORY_LIMIT")
+    assert load_labels(p)[0].sum() == 1000

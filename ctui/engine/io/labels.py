@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ctui.engine.core.atomic import atomic_path
-from ctui.engine.core.errors import FormatError
+from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.volume import Volume
 
 #: Largest expansion deflate (gzip/zlib) can achieve; bounds decompressed sizes.
@@ -227,6 +228,9 @@ def _check_size(p: Path, shape, itemsize: int, file_size: int, *, compressed: bo
     if n > MAX_VOXELS:
         raise FormatError(f"{p}: {tuple(shape)} is too large for a label map")
     need = n * itemsize
+    # the decoded data, its uint8 copy and the (z, y, x) transpose: against the process's
+    # limits (RLIMIT_AS, cgroup), not only the machine's free RAM
+    check_allocation(need + 2 * n, what=f"the {'x'.join(str(int(v)) for v in shape)} label map", path=p)
     if compressed:
         if need > (file_size - offset) * DEFLATE_MAX_RATIO + 1024:
             raise FormatError(
@@ -258,7 +262,7 @@ def load_labels(path: str | os.PathLike) -> tuple[np.ndarray, Volume]:
         if kind in ("nii", "nii.gz"):
             return _load_nifti(p, st.st_size, compressed=(kind == "nii.gz"))
         return _load_nrrd(p, st.st_size)
-    except FormatError:
+    except CtuiError:  # FormatError, or a size the memory limits refuse
         raise
     except MemoryError:
         raise FormatError(f"{p}: not enough memory to load this label map") from None
