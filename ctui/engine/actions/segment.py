@@ -86,6 +86,8 @@ class SegmentOptions:
             raise CtuiError("the neck width must be >= 0 mm")
         if self.min_island < 0:
             raise CtuiError("the minimum island size must be >= 0")
+        if self.curvature < 0:
+            raise CtuiError("the curvature weight must be >= 0 mm")
 
 
 @dataclass
