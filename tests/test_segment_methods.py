@@ -136,3 +136,18 @@ def test_cli_interpolates_a_project_object(capsys, tmp_path):
     assert got.any(axis=(1, 2)).all() and not got[3, 1:3, 1:3].any()
     assert main(["segment", str(src), "--interpolate"]) == 2
     assert "--project" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_segment_progress_bar_on_a_terminal_only(tmp_path):
+    """ctui segment draws its bar ("segmenting") on a terminal's stderr; with --json nothing."""
+    pytest.importorskip("pty")
+    from test_progress_pty import _run_with_tty_stderr
+
+    from ctui.engine.io.phantom import SAMPLE_DIR
+
+    args = ["segment", str(SAMPLE_DIR), "--seed", "94,81,40", "--range", "115:445", "--mode", "3d"]
+    rc, out, tty = _run_with_tty_stderr(args, tmp_path)
+    assert rc == 0 and "object 1:" in out and "segmenting" in tty
+    rc, out, tty = _run_with_tty_stderr([*args, "--json"], tmp_path)
+    assert rc == 0 and json.loads(out)["objects"][0]["id"] == 1 and "segmenting" not in tty
