@@ -48,6 +48,7 @@ import numpy as np
 
 from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import CtuiError, FormatError
+from ctui.engine.core.limits import check_allocation
 
 SIGNATURE = b"VAJIRA-MRICUBE-V8"
 HEADER = struct.Struct("<5i")
@@ -383,6 +384,8 @@ def read_regular_file(path: Path, limit: int, *, what: str) -> bytes:
         raise FormatError(f"{path}: not a regular file")
     if st.st_size > limit:
         raise FormatError(f"{path}: {st.st_size} bytes is too large for {what}")
+    # the bytes and the arrays decoded from them, against the process's memory limits
+    check_allocation(2 * st.st_size, what=what, path=path)
     try:
         with open(path, "rb") as fh:
             buf = fh.read(min(limit, st.st_size) + 1)
