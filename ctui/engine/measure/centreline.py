@@ -6,9 +6,13 @@ fast marching on a distance map does), computed by Dijkstra on the 26-connected 
 graph with mm steps (scikit-image's ``MCP_Geometric``), smoothed by a spline, moved
 onto the centroids of its own normal sections (:func:`recentre_path`; sections that
 are not cross-sections of the tube - caps, branches - do not pull it), and ended at
-the object's end caps: the bent ends of the voxel route are replaced by the path's
-straight continuation up to where it leaves the object, and the path stops there,
-inside (both the voxel mask and the smoothed border).
+the object's end caps: the bent ends of the voxel route (and any thin sheet of mask
+stuck to an end) are replaced by the axis' straight continuation up to where it
+leaves the object, and the path stops there, inside (both the voxel mask and the
+smoothed border the sections measure). On a helical tube with side branches in
+3 mm x 0.8 mm voxels the path is within 1% of the helix's length and 0.2 mm (median)
+of its axis; on an aorta-like tube cut by the slice planes, within 1% of the length
+between the planes (tests/test_centreline.py).
 
 The path helpers (:func:`~ctui.engine.measure.paths.path_from_points`,
 :func:`~ctui.engine.measure.paths.parse_points`, arc lengths, resampling, voxel <->
@@ -132,7 +136,8 @@ def centreline(
         The two ends: patient mm (x, y, z), or voxel indices (z, y, x) when
         ``endpoints_voxel``. None: the two extremities, found as the voxel farthest
         (geodesic distance inside the object) from the deepest voxel, then the voxel
-        farthest from that one.
+        farthest from that one, both among the voxels deeper than the largest voxel
+        side when there are any (a sheet of mask one slice thick does not hold an end).
     power, eps
         Cost per mm of travel: ``1 / d**power + eps`` with ``d`` the distance (mm,
         ``distance_transform_edt`` with the voxel spacing) to the border.

@@ -68,7 +68,7 @@ def cap_clearance(rows: list[dict[str, Any]], field: ObjectField, idx: Sequence[
         if np.allclose(c[0], c[-1]):
             c = c[:-1]
         t = np.asarray(rows[i]["normal"], dtype=np.float64)
-        n = np.cross(np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0), t)
+        n = np.cross(np.concatenate((c[1:], c[:1])) - np.concatenate((c[-1:], c[:-1])), t)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         o = c.mean(axis=0)
         if np.sum(n * (c - o)) < 0:  # outward
