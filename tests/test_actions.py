@@ -35,7 +35,7 @@ def _volume_and_labels():
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
     from ctui.engine.actions.project import new_project, save_project
-    from ctui.screens.projects import session_from_project
+    from ctui.screens.app import session_from_project
 
     d = tmp_path_factory.mktemp("actions")
     vol, labels = _volume_and_labels()
@@ -60,7 +60,7 @@ def test_measure_cli_equals_tui(case, capsys):
     from ctui.engine.actions import defaults
     from ctui.engine.actions.measure import measure_object
     from ctui.engine.core.jsonio import to_jsonable
-    from ctui.screens.projects import opened_of
+    from ctui.screens.export import opened_of  # what the screens pass to the actions
 
     d, path, session = case
     cli = _cli_json(capsys, "measure", path, "--object", 1, "--path", "auto", "--json")
