@@ -318,3 +318,104 @@ async def test_edits_wait_while_propagation_runs(monkeypatch):
         assert ws.proposal.cancelled
         await pilot.press("x")
         assert not app.internal_errors
+
+
+def _burst(app, keys) -> None:
+    """Keys as a terminal delivers a burst: all queued at once, no waiting in between."""
+    from textual import events
+
+    for key in keys:
+        char = key if len(key) == 1 else ("\r" if key == "enter" else None)
+        ev = events.Key(key, char)
+        ev.set_sender(app)
+        app._driver.send_message(ev)
+
+
+async def test_burst_keys_reach_the_prompt_they_open():
+    """g40⏎ typed faster than the prompt opens: every key reaches the prompt (none is
+    dropped, none runs a workspace binding: Enter must not fill)."""
+    app = CtuiApp(autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        _burst(app, ["g", "1", "2", "enter"])
+        await wait_for(pilot, lambda: app.screen is app.workspace and s.z == 12, what="slice 12", timeout=20)
+        _burst(app, ["g", "3", "7", "enter", "pageup", "pageup"])
+        await wait_for(pilot, lambda: s.z == 39, what="slice 39", timeout=20)
+        _burst(app, ["g", "5", "backspace", "6", "enter"])
+        await wait_for(pilot, lambda: s.z == 6, what="slice 6", timeout=20)
+        _burst(app, ["g", "9", "escape", "pageup"])
+        await wait_for(pilot, lambda: s.z == 7 and app.screen is app.workspace, what="cancelled prompt", timeout=20)
+        assert s.seg.voxels(1) == 0  # no Enter leaked into a fill
+        assert not app.internal_errors
+
+
+async def test_save_after_the_working_directory_is_deleted(tmp_path, monkeypatch):
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    monkeypatch.chdir(gone)
+    app = CtuiApp(autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        gone.rmdir()
+        app.session.dirty = True
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "PromptScreen"  # a default path, not an internal error
+        proj = tmp_path / "saved.ctui"
+        await answer_prompt(pilot, str(proj))
+        await wait_for(pilot, lambda: proj.exists(), what="the project")
+        # a relative name goes to the home folder when the working folder is gone
+        assert not app.internal_errors, app.internal_errors[-1]
+        await pilot.press("e")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "ChoiceScreen"
+        await pilot.press("escape")
+        assert not app.internal_errors
+
+
+@pytest.mark.parametrize("how", ["save", "quit"])
+async def test_no_stale_recovery_prompt_after_a_clean_exit(tmp_path, how):
+    src = _copy_sample(tmp_path / "series")
+    app = CtuiApp(str(src), autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause(0.3)  # (the recovery check at start has run: nothing to offer)
+        app.session.seg.paint(np.ones((1, 4, 4), bool), 1, offset=(10, 10, 10))
+        app.workspace.labels_changed()
+        app.autosave_worker()
+        from ctui.engine.io import project
+
+        await wait_for(pilot, lambda: project.find_autosave(str(src)) is not None, what="the autosave")
+        await pilot.press("q")
+        await pilot.pause()
+        from ctui.screens.testing import choose
+
+        await choose(pilot, how)
+        if how == "save":
+            await answer_prompt(pilot, str(tmp_path / "p.ctui"))
+    assert project.find_autosave(str(src)) is None
+    app2 = CtuiApp(str(src), autosave_s=1e9)
+    async with app2.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app2)
+        await pilot.pause(0.5)
+        assert app2.screen is app2.workspace  # no recovery prompt
+
+
+async def test_screens_closed_while_their_workers_run():
+    """Open and close the measure and 3D screens faster than their workers answer:
+    late answers are dropped (no NoMatches '#ms-status' / '#v3-status')."""
+    o = load_truth()["objects"][1]
+    app = CtuiApp(autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s = app.session
+        lab = np.zeros(s.shape, bool)
+        z, y, x = o["seed_zyx"]
+        lab[z - 3:z + 3, y - 4:y + 4, x - 4:x + 4] = True
+        s.seg.paint(lab, 1)
+        for _ in range(6):
+            await pilot.press("M", "escape", "r", "escape", "0", "0")
+        await pilot.pause(2.0)
+        assert app.screen is app.workspace
+        assert not app.internal_errors, app.internal_errors[-1]

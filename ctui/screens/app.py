@@ -1,101 +1,35 @@
 """The ctui Textual app: loading, the workspace, project save/autosave, quit guard,
-help and the command palette."""
+help and the command palette. Loading and autosave run in thread workers that post
+messages (:mod:`ctui.screens.messages`) to the app."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from textual import work
-from textual.app import App, ComposeResult, SystemCommand
+from textual import events, on, work
+from textual.app import App, SystemCommand
 from textual.binding import Binding
-from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Label, ProgressBar, Static
 
 from ctui.engine.actions.opened import check_source, series_available
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io import project
 from ctui.engine.io.project import source_load_options
-from ctui.engine.segment import pipeline, selection
+from ctui.engine.mesh.warm import warm_up
+from ctui.screens.dialogs import PromptScreen
 from ctui.screens.graphics import colour_advice
-from ctui.screens.guard import GuardMixin
-from ctui.screens.session import Session, load_volume
+from ctui.screens.loading import LoadingScreen
+from ctui.screens.messages import JobProgress, LoadFailed, SessionReady
+from ctui.screens.projects import project_from_session, session_from_project
+from ctui.screens.session import Session, load_volume, safe_cwd, sample_source
+
+__all__ = ["AUTOSAVE_SECONDS", "CtuiApp", "LoadingScreen", "project_from_session", "session_from_project"]
 
 AUTOSAVE_SECONDS = 180.0
-
-
-class LoadingScreen(GuardMixin, Screen):
-    """Shown while a series loads (progress bar), or the reasons it could not load."""
-
-    DEFAULT_CSS = """
-    LoadingScreen { align: center middle; }
-    LoadingScreen > Vertical { width: 80%; height: auto; border: round $accent; padding: 1 2; }
-    LoadingScreen ProgressBar { margin: 1 0; }
-    """
-    BINDINGS = [
-        Binding("o", "app.open", "Open another"),
-        Binding("d", "reduced(2)", "Downsample x2", show=False),
-        Binding("D", "reduced(4)", "Downsample x4", show=False),
-        Binding("c", "crop", "Crop", show=False),
-        Binding("escape", "back", "Back"),
-        Binding("q", "app.quit", "Quit"),
-    ]
-
-    def __init__(self, what: str) -> None:
-        super().__init__()
-        self.what = what
-        self.too_big = False  # the series would not fit in memory: offer downsampling/cropping
-        self.path: str | None = None
-        self.options: dict = {}
-
-    def action_reduced(self, factor: int) -> None:
-        if not self.too_big:
-            return
-        opts = {**self.options, "downsample": int(factor)}
-        self.app.load_worker(self.path, opts)
-        self.query_one("#load-title", Label).update(f"Loading [b]{self.what}[/b] downsampled x{factor} ...")
-        self.query_one("#load-progress").display = True
-        self.query_one("#load-reasons", Static).update("")
-
-    def action_crop(self) -> None:
-        if not self.too_big:
-            return
-        from ctui.screens.dialogs import PromptScreen
-
-        def done(val: str | None) -> None:
-            if not val:
-                return
-            try:
-                crop = tuple(int(v) for v in val.replace(" ", "").split(","))
-                if len(crop) != 6:
-                    raise ValueError
-            except ValueError:
-                self.app.notify("Crop: six integers z0,z1,y0,y1,x0,x1", severity="error")
-                return
-            self.app.load_worker(self.path, {**self.options, "crop": crop})
-            self.query_one("#load-progress").display = True
-
-        self.app.push_screen(PromptScreen("Crop z0,z1,y0,y1,x0,x1 (voxel indices)", ""), done)
-
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Label(f"Loading [b]{self.what}[/b] ...", id="load-title")
-            yield ProgressBar(total=None, id="load-progress", show_eta=False)
-            yield Static("", id="load-reasons")
-        yield Footer()
-
-    def action_back(self) -> None:
-        if len(self.app.screen_stack) > 2:
-            self.app.pop_screen()
-
-    def show_error(self, title: str, reasons: list[str]) -> None:
-        self.query_one("#load-title", Label).update(f"[b red]{title}[/b red]")
-        self.query_one("#load-progress").display = False
-        body = "\n".join(f"• {r}" for r in reasons) + "\n\n[dim]o opens another path, q quits[/dim]"
-        self.query_one("#load-reasons", Static).update(body)
 
 
 class CtuiApp(App):
@@ -132,6 +66,7 @@ class CtuiApp(App):
         self._colour_warned = False
         self.errors: list[str] = []  # every error notified (tests read it)
         self.internal_errors: list[str] = []  # tracebacks of internal errors (reported, not fatal)
+        self._quitting = False
 
     # ------------------------------------------------------------------ start
     def on_mount(self) -> None:
@@ -145,6 +80,21 @@ class CtuiApp(App):
             self.load_worker(self.path)
         self.set_interval(30.0, self._autosave_tick)
         self.call_after_refresh(self._check_colours)
+        self.warm_worker()
+
+    def warm_worker(self) -> None:
+        """Compile (or load from numba's cache) the meshing kernels while the user looks at
+        slices, so the first 3D view does not wait for a compiler. A daemon thread, not a
+        Textual worker: a compile cannot be interrupted and quitting must not wait for it."""
+        threading.Thread(target=self._warm, name="ctui-warm-up", daemon=True).start()
+
+    def _warm(self) -> None:
+        try:
+            warm_up()
+        except Exception as exc:  # the vectorised path still works; say why it stays slow
+            if self.is_running:
+                self.notify(f"Meshing kernels not compiled ({exc}); 3D views use the slower numpy path",
+                            severity="warning", timeout=6)
 
     def _check_colours(self) -> None:
         if self._colour_warned:
@@ -165,42 +115,46 @@ class CtuiApp(App):
 
         def progress(*a: Any) -> None:
             if len(a) >= 2 and a[1]:
-                self.call_from_thread(self._load_progress, float(a[0]), float(a[1]))
+                self.post_message(JobProgress("Loading", float(a[0]), float(a[1])))
 
         try:
             vol = load_volume(path, progress=progress, **options)
         except CtuiError as exc:
-            self.call_from_thread(self._load_failed, path, [str(exc)], options)
+            self.post_message(LoadFailed(path, [str(exc)], options))
             return
         except Exception as exc:  # a loader bug must not become a traceback
-            self.call_from_thread(self._load_failed, path, [f"{type(exc).__name__}: {exc}"])
+            self.post_message(LoadFailed(path, [f"{type(exc).__name__}: {exc}"]))
             return
         src = path
         if src is None:
             try:
-                from ctui.screens.session import sample_source
-
                 src = sample_source()
             except CtuiError:
                 src = ""
-        sess = Session(vol, source_path=str(src or ""), source_options=options)
-        self.call_from_thread(self._start_workspace, sess)
+        self.post_message(SessionReady(Session(vol, source_path=str(src or ""), source_options=options)))
 
-    def _load_progress(self, done: float, total: float) -> None:
+    @on(JobProgress)
+    def _load_progress(self, msg: JobProgress) -> None:
         if isinstance(self.screen, LoadingScreen):
-            self.screen.query_one("#load-progress", ProgressBar).update(total=total, progress=done)
+            self.screen.on_job_progress(msg)
 
-    def _load_failed(self, path: str | None, reasons: list[str], options: dict | None = None) -> None:
+    @on(LoadFailed)
+    def _load_failed(self, msg: LoadFailed) -> None:
+        path, reasons = msg.path, list(msg.reasons)
         self.errors.extend(reasons)
         if isinstance(self.screen, LoadingScreen):
             scr = self.screen
-            scr.path, scr.options = path, dict(options or {})
+            scr.path, scr.options = path, dict(msg.options)
             scr.too_big = any("downsample" in r for r in reasons)
             if scr.too_big:
                 reasons = reasons + ["d opens it downsampled x2, D x4, c asks for a crop"]
             scr.show_error(f"Could not open {path or 'the sample series'}", reasons)
         else:
             self.notify(f"Could not open {path}: {'; '.join(reasons)}", severity="error", timeout=10)
+
+    @on(SessionReady)
+    def _session_ready(self, msg: SessionReady) -> None:
+        self._start_workspace(msg.session)
 
     @work(thread=True, exclusive=True, group="load")
     def load_project_worker(self, path: str) -> None:
@@ -213,20 +167,20 @@ class CtuiApp(App):
             check_source(proj, vol, path)  # a series whose voxels changed is refused
             sess = session_from_project(proj, vol, path)
         except CtuiError as exc:
-            self.call_from_thread(self._load_failed, path, [str(exc)])
+            self.post_message(LoadFailed(path, [str(exc)]))
             return
         except Exception as exc:
-            self.call_from_thread(self._load_failed, path, [f"{type(exc).__name__}: {exc}"])
+            self.post_message(LoadFailed(path, [f"{type(exc).__name__}: {exc}"]))
             return
-        self.call_from_thread(self._start_workspace, sess)
+        self.post_message(SessionReady(sess))
 
-    def _start_workspace(self, session: Session) -> None:
+    def _start_workspace(self, session: Session, *, recovery: bool = True) -> None:
         from ctui.screens.workspace import WorkspaceScreen
 
         self.session = session
-        for w in session.volume.warnings[:3]:
+        for w in session.volume.warnings[:3] if recovery else []:
             self.notify(w, title="Series", severity="warning", timeout=6)
-        skipped = session.volume.skipped
+        skipped = session.volume.skipped if recovery else []
         if len(skipped) == 1:
             sk = skipped[0]
             self.notify(f"Skipped {sk.get('file')}: {sk.get('reason')}", severity="information", timeout=4)
@@ -239,7 +193,8 @@ class CtuiApp(App):
         while len(self.screen_stack) > 1:
             self.pop_screen()
         self.push_screen(ws)
-        self.call_after_refresh(self._offer_recovery, session)
+        if recovery:
+            self.call_after_refresh(self._offer_recovery, session)
 
     def _offer_recovery(self, session: Session) -> None:
         """An autosave newer than the project (or of an unsaved source): offer it."""
@@ -274,18 +229,8 @@ class CtuiApp(App):
         new.project_path = session.project_path
         new.source_path = session.source_path
         new.dirty = True
-        self._start_workspace_no_recovery(new)
+        self._start_workspace(new, recovery=False)
         self.notify(f"Recovered {auto}", timeout=4)
-
-    def _start_workspace_no_recovery(self, session: Session) -> None:
-        from ctui.screens.workspace import WorkspaceScreen
-
-        self.session = session
-        ws = WorkspaceScreen(session)
-        self.workspace = ws
-        while len(self.screen_stack) > 1:
-            self.pop_screen()
-        self.push_screen(ws)
 
     def open_path(self, path: str, series: str | None = None) -> None:
         """Open another series or project (from the open screen)."""
@@ -337,7 +282,7 @@ class CtuiApp(App):
             return
         from ctui.screens.dialogs import PromptScreen
 
-        default = str(Path.cwd() / (Path(s.source_path or "project").name.replace(" ", "_") + ".ctui"))
+        default = str(safe_cwd() / (Path(s.source_path or "project").name.replace(" ", "_") + ".ctui"))
 
         def done(val: str | None) -> None:
             if val:
@@ -351,26 +296,43 @@ class CtuiApp(App):
     def _save_to(self, path: str, then_quit: bool = False) -> None:
         s = self.session
         try:
+            p = Path(path).expanduser()
+            if not p.is_absolute():  # relative to where ctui started (the folder may be gone: then home)
+                p = safe_cwd() / p
             proj = project_from_session(s)
-            project.save_project(path, proj)
+            project.save_project(str(p), proj)
         except (CtuiError, OSError, ValueError) as exc:
             self.notify(f"Project not saved: {exc}", severity="error", timeout=10)
             return
-        s.project_path = path
+        old_key = s.project_path or s.source_path
+        s.project_path = str(p)
         s.dirty = False
-        try:
-            project.remove_autosave(path)
-        except Exception:
-            pass
-        self.notify(f"Project saved: {path}", timeout=3)
+        self._remove_autosaves(old_key, s.project_path)
+        self.notify(f"Project saved: {p}", timeout=3)
         if self.workspace is not None:
             self.workspace.update_panel()
         if then_quit:
-            self.exit()
+            self._exit_clean()
+
+    def _remove_autosaves(self, *keys: str | None) -> None:
+        """Forget the autosaves of these projects/sources (the work is saved or discarded)."""
+        for key in {k for k in keys if k}:
+            try:
+                project.remove_autosave(key)
+            except Exception:  # a read-only folder: the prompt will offer it, nothing lost
+                pass
+
+    def _exit_clean(self) -> None:
+        """Exit with nothing unsaved: no autosave may survive to prompt next time."""
+        self._quitting = True
+        s = self.session
+        if s is not None:
+            self._remove_autosaves(s.project_path, s.source_path)
+        self.exit()
 
     def _autosave_tick(self) -> None:
         s = self.session
-        if s is None or not s.dirty or time.monotonic() - self._last_autosave < self.autosave_s:
+        if s is None or not s.dirty or self._quitting or time.monotonic() - self._last_autosave < self.autosave_s:
             return
         self._last_autosave = time.monotonic()
         self.autosave_worker()
@@ -378,13 +340,17 @@ class CtuiApp(App):
     @work(thread=True, exclusive=True, group="autosave")
     def autosave_worker(self) -> None:
         s = self.session
+        key = s.project_path or s.source_path
         try:
             proj = project_from_session(s)
-            target = project.autosave(proj, s.project_path or s.source_path)
+            target = project.autosave(proj, key)
         except Exception as exc:
-            self.call_from_thread(self.notify, f"Autosave failed: {exc}", severity="warning")
+            self.notify(f"Autosave failed: {exc}", severity="warning")  # notify posts a message: thread-safe
             return
-        self.call_from_thread(self.notify, f"Autosaved to {target}", timeout=2)
+        if self._quitting or not s.dirty:  # saved or quit meanwhile: this autosave is stale already
+            self._remove_autosaves(key)
+            return
+        self.notify(f"Autosaved to {target}", timeout=2)
 
     def action_request_quit(self) -> None:
         s = self.session
@@ -394,8 +360,8 @@ class CtuiApp(App):
             def done(choice: str | None) -> None:
                 if choice == "save":
                     self.action_save(then_quit=True)
-                elif choice == "quit":
-                    self.exit()
+                elif choice == "quit":  # the user discards the work: its autosave goes too
+                    self._exit_clean()
 
             self.push_screen(ChoiceScreen("Unsaved work. Quit anyway?", [
                 ("save", "Save the project, then quit"),
@@ -403,7 +369,23 @@ class CtuiApp(App):
                 ("cancel", "Keep working"),
             ]), done)
             return
-        self.exit()
+        self._exit_clean()
+
+    def _on_key(self, event: events.Key) -> None:  # type: ignore[override]
+        """A key sent to a screen that is no longer on top (a burst after the key that
+        opened a prompt, or closed one) goes to the screen on top, not to its bindings.
+        (Textual then runs App._on_key, the bindings, unless the default is prevented.)"""
+        src = getattr(event, "ctui_screen", None)
+        if src is None or src is self.screen or self._quitting:
+            return
+        event.prevent_default()
+        top = self.screen
+        if isinstance(top, PromptScreen):
+            top.feed_key(event.key, event.character)
+            return
+        key = events.Key(event.key, event.character)
+        key.ctui_screen = top  # type: ignore[attr-defined]
+        (top.focused or top)._forward_event(key)
 
     # ------------------------------------------------------------------ errors
     def _handle_exception(self, error: Exception) -> None:
@@ -418,7 +400,7 @@ class CtuiApp(App):
     async def _dispatch_action(self, namespace, action_name, params):  # type: ignore[override]
         try:
             return await super()._dispatch_action(namespace, action_name, params)
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             from ctui.screens.guard import report_internal_error
 
             report_internal_error(self, exc)
@@ -428,10 +410,10 @@ class CtuiApp(App):
         if callback is not None:
             inner = callback
 
-            def callback(result, _inner=inner):  # noqa: F811 - guarded wrapper
+            def callback(result, _inner=inner):
                 try:
                     return _inner(result)
-                except Exception as exc:  # noqa: BLE001
+                except Exception as exc:
                     from ctui.screens.guard import report_internal_error
 
                     report_internal_error(self, exc)
@@ -467,48 +449,3 @@ class CtuiApp(App):
             await node.run_action(action)
 
         return run
-
-
-# ---------------------------------------------------------------------- projects
-def project_from_session(s: Session):
-    """A ctui.engine.io.project.Project of the session's state."""
-    seg = s.seg
-    labels = getattr(seg, "labels", None)
-    objects = seg.object_list() if seg is not None else []
-    return project.Project(
-        source_path=str(s.source_path),
-        source_options=dict(s.source_options or {}),
-        pipeline=s.pipeline.to_dict() if s.pipeline is not None else {},
-        labels=labels,
-        objects=objects,
-        propagation={"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None,
-                     "connectivity": s.connectivity, "current": s.current, "mode": s.prop_mode},
-        drift=dict(s.drift_info or {}),
-        window=tuple(s.window),
-        meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view},
-    ).set_source(s.volume, data=getattr(s, "original_data", None))  # geometry + identity (of the voxels as loaded)
-
-
-def session_from_project(proj, volume, path: str) -> Session:
-    """Rebuild a Session from a loaded Project and its source volume."""
-    pipeline_mod = pipeline
-    labels = proj.labels
-    if labels is not None and tuple(labels.shape) != tuple(volume.shape):
-        raise CtuiError(f"labels {labels.shape} do not match the series {volume.shape}", path=path)
-    seg = selection.Segmentation(volume.shape, labels=labels, objects=proj.objects or [])
-    prop = proj.propagation or {}
-    meta = proj.meta or {}
-    s = Session(volume, source_path=proj.source_path, source_options=dict(proj.source_options or {}),
-                pipeline=pipeline_mod.Pipeline.from_dict(proj.pipeline or {}), seg=seg,
-                z=meta.get("z"), x=meta.get("x"), y=meta.get("y"))
-    if proj.window:
-        s.window = (float(proj.window[0]), float(proj.window[1]))
-    s.tolerance = float(prop.get("tolerance", s.tolerance))
-    s.range_ = tuple(prop["range"]) if prop.get("range") else None
-    s.connectivity = int(prop.get("connectivity", 8))
-    s.prop_mode = str(prop.get("mode", "slice")) if prop.get("mode") in ("slice", "3d") else "slice"
-    s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
-    s.view = str(meta.get("view", s.view))
-    s.drift_info = dict(proj.drift or {})
-    s.project_path = path
-    return s

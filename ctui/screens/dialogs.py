@@ -26,6 +26,8 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
         self.title_text = title
         self.value = value
         self.placeholder = placeholder
+        self._typed: str | None = None  # keys typed before the input had focus
+        self._done = False
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -34,13 +36,43 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
             yield Label("[dim]Enter to accept, Escape to cancel[/dim]")
 
     def on_mount(self) -> None:
-        self.query_one(Input).focus()
+        inp = self.query_one(Input)
+        inp.focus()
+        if self._typed is not None:  # keys that came before the input could take them
+            inp.value = self._typed
+            inp.cursor_position = len(self._typed)
+
+    def feed_key(self, key: str, character: str | None) -> None:
+        """A key typed in a burst before this prompt was on screen (handed on by the app):
+        text replaces the default value (as typing into the selected default does),
+        Backspace deletes, Enter accepts, Escape cancels."""
+        if key == "enter":
+            self._finish(self._typed if self._typed is not None else self.value)
+            return
+        if key == "escape":
+            self._finish(None)
+            return
+        if key == "backspace":
+            self._typed = (self._typed or "")[:-1]
+        elif character and character.isprintable():
+            self._typed = (self._typed or "") + character
+        else:
+            return
+        inp = self.query(Input).first() if self.is_mounted and self.query(Input) else None
+        if inp is not None:
+            inp.value = self._typed
+            inp.cursor_position = len(self._typed)
+
+    def _finish(self, value: str | None) -> None:
+        if not self._done:
+            self._done = True
+            self.dismiss(value)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
-        self.dismiss(event.value)
+        self._finish(event.value)
 
     def action_cancel(self) -> None:
-        self.dismiss(None)
+        self._finish(None)
 
 
 class ConfirmScreen(GuardMixin, ModalScreen[bool]):

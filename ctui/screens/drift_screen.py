@@ -14,6 +14,7 @@ from ctui.engine.core.colors import object_color
 from ctui.engine.segment import drift
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.messages import Call
 from ctui.screens.plot import line_plot
 
 
@@ -58,14 +59,14 @@ class DriftScreen(GuardMixin, Screen):
     def analyse(self) -> None:
         labels = self.s.labels()
         if labels is None or not labels.any():
-            self.app.call_from_thread(self._info, "No objects yet: segment one (Enter, p) to check drift.")
+            self.post_message(Call(self._info, "No objects yet: segment one (Enter, p) to check drift."))
             return
         try:
             rep = drift.analyze_drift(labels, self.s.volume)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Drift analysis failed: {exc}", severity="error")
+            self.app.notify(f"Drift analysis failed: {exc}", severity="error")
             return
-        self.app.call_from_thread(self._show, rep)
+        self.post_message(Call(self._show, rep))
 
     def _info(self, text: str) -> None:
         self.query_one("#dr-info", Static).update(text)
@@ -170,9 +171,9 @@ class DriftScreen(GuardMixin, Screen):
         try:
             drift.plot_drift(self.report, path)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Plot not saved: {exc}", severity="error")
+            self.app.notify(f"Plot not saved: {exc}", severity="error")
             return
-        self.app.call_from_thread(self.app.notify, f"Saved {path}")
+        self.app.notify(f"Saved {path}")
 
     def action_close(self) -> None:
         self.app.pop_screen()

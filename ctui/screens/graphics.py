@@ -47,7 +47,7 @@ def prepare_graphics(mode: str | None = None) -> str:
         _chosen = mode
         return mode
     try:
-        import textual_image.renderable as tir  # noqa: F401  (runs the terminal query)
+        import textual_image.renderable as tir
         import textual_image.widget  # noqa: F401
         from textual_image._terminal import get_cell_size
 

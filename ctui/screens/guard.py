@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import traceback
 
+from textual import events
+from textual.screen import Screen
+
 
 def report_internal_error(app, exc: BaseException) -> None:
     tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
@@ -29,10 +32,21 @@ def report_internal_error(app, exc: BaseException) -> None:
 
 
 class GuardMixin:
-    """Catch exceptions of this node's own event handlers and report them."""
+    """Catch exceptions of this node's own event handlers and report them.
+
+    On a screen it also tags each key with the screen it was sent to, so the app can
+    hand keys typed in a burst after a key that opened (or closed) a screen to the
+    screen now on top instead of dropping them (see ``CtuiApp._on_key``).
+    """
 
     async def _dispatch_message(self, message) -> None:  # type: ignore[override]
+        if isinstance(message, events.Key) and isinstance(self, Screen) and getattr(message, "ctui_screen", None) is None:
+            message.ctui_screen = self  # type: ignore[attr-defined]
         try:
             await super()._dispatch_message(message)  # type: ignore[misc]
-        except Exception as exc:  # noqa: BLE001 - the point is to catch everything
+        except Exception as exc:
             report_internal_error(self.app, exc)  # type: ignore[attr-defined]
+
+    def on_call(self, message) -> None:
+        """A :class:`ctui.screens.messages.Call` posted by a worker of this screen."""
+        message.fn(*message.args, **message.kwargs)

@@ -1,26 +1,31 @@
-"""Measure screen (``M``): volume (voxels and mesh, Gauss theorem) and area per object
-(``ctui.engine.measure.stats.object_stats``), and for a tubular object the section-area plot
-along its centreline (``ctui.engine.measure.centreline`` + ``ctui.engine.measure.sections``)."""
+"""Measure screen (``M``): volume (voxels, mesh by the Gauss theorem, partial volume) and
+area per object, and for a tubular object the section-area plot along its centreline,
+all from :func:`ctui.engine.actions.measure.measure_object`, the action ``ctui measure``
+calls, with the same defaults (section step :data:`ctui.engine.actions.defaults.SECTION_STEP_MM`),
+so the TUI and the CLI report the same numbers. Workers post messages to this screen;
+a late answer after the screen closed is dropped."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from textual import work
+from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Label, Static
 
+from ctui.engine.actions.measure import measure_object, save_sections
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.measure import centreline, sections
-from ctui.engine.measure import stats as measure
+from ctui.engine.measure import sections
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.plot import line_plot
+from ctui.screens.projects import opened_of
 
 
 def is_tubular(stats: dict) -> bool:
@@ -52,7 +57,7 @@ class MeasureScreen(GuardMixin, Screen):
         self.sections: list[dict] | None = None
         self.sections_obj: int | None = None
         self.grey = False  # sections on the partial-volume fraction from the grey levels
-        self.pv: dict[int, dict | None] = {}  # per object: partial_volume_fraction result
+        self.result = None  # MeasureResult of the sections shown
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -73,34 +78,51 @@ class MeasureScreen(GuardMixin, Screen):
     def _status(self, text: str) -> None:
         self.query_one("#ms-status", Static).update(text)
 
+    @on(Status)
+    def _status_msg(self, msg: Status) -> None:
+        self._status(msg.text)
+
+    @on(JobFailed)
+    def _failed(self, msg: JobFailed) -> None:
+        self.app.notify(f"{msg.what}: {msg.reason}", severity="error")
+
+    @on(JobDone)
+    def _done(self, msg: JobDone) -> None:
+        if msg.kind == "row":
+            self._add_row(msg.info["oid"], msg.result)
+        elif msg.kind == "sections":
+            self._show_sections(msg.info["oid"], msg.result)
+        elif msg.kind == "saved":
+            self.app.notify(str(msg.result))
+
     @work(thread=True, exclusive=True, group="measure")
     def measure(self) -> None:
         s = self.s
         labels = s.labels()
         if labels is None or not labels.any():
-            self.app.call_from_thread(self._status, "No objects yet: fill (Enter) and propagate (p) first")
+            self.post_message(Status("No objects yet: fill (Enter) and propagate (p) first"))
             return
-        meas = measure
-        ids = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=11)[1:]) + 1]
-        v = s.volume
+        opened = opened_of(s)
+        ids = opened.object_ids
+        measured: dict[int, dict] = {}
         for oid in ids:
-            self.app.call_from_thread(self._status, f"Measuring object {oid} ...")
+            self.post_message(Status(f"Measuring object {oid} ..."))
             try:
-                st = meas.object_stats(labels, oid, spacing=v.spacing, origin=v.origin, direction=v.direction)
+                try:  # partial-volume volume from the grey levels (needs contrast with the surroundings)
+                    res = measure_object(opened, object=oid, partial_volume=True)
+                except CtuiError:  # no contrast with the surroundings: no grey-level estimate
+                    res = measure_object(opened, object=oid)
             except Exception as exc:
-                self.app.call_from_thread(self.app.notify, f"Object {oid}: {exc}", severity="error")
+                self.post_message(JobFailed(f"Object {oid}", str(exc)))
                 continue
+            st = dict(res.stats or {})
             st.pop("mesh", None)
-            try:  # partial-volume volume from the grey levels (needs contrast with the surroundings)
-                pv = meas.partial_volume_fraction(v.data, labels == oid)
-                st["volume_pv_ml"] = pv["volume_voxels"] * float(np.prod(v.spacing)) / 1000.0
-            except CtuiError:  # no contrast with the surroundings: no grey-level estimate
-                pv = None
-                st["volume_pv_ml"] = None
-            self.pv[oid] = pv
-            self.app.call_from_thread(self._add_row, oid, st)
-        self.app.call_from_thread(self._status, "c: sections along the centreline of the selected object; s saves")
-        tub = [oid for oid in ids if oid in self.stats and is_tubular(self.stats[oid])]
+            st["volume_pv_ml"] = res.volume_ml.get("partial_volume")
+            st["warnings"] = list(res.warnings)
+            measured[oid] = st
+            self.post_message(JobDone("row", st, oid=oid))
+        self.post_message(Status("c: sections along the centreline of the selected object; s saves"))
+        tub = [oid for oid, st in measured.items() if is_tubular(st)]
         if tub:
             self._sections_of(tub[0])
 
@@ -146,26 +168,18 @@ class MeasureScreen(GuardMixin, Screen):
         self._sections_of(oid)
 
     def _sections_of(self, oid: int) -> None:
-        s = self.s
-        v = s.volume
-        self.app.call_from_thread(self._status, f"Centreline and sections of object {oid} ...")
+        """Centreline and sections of object ``oid`` (in the worker), as ``ctui measure --path auto``."""
+        self.post_message(Status(f"Centreline and sections of object {oid} ..."))
         try:
-            mask = s.labels() == oid
-            path = centreline.centreline(mask, spacing=v.spacing, origin=v.origin, direction=v.direction)
-            field = None
-            if self.grey:  # the fraction measured for the table (or now, if it is not there yet)
-                pv = self.pv.get(oid) or measure.partial_volume_fraction(v.data, mask)
-                field = measure.partial_volume_field(pv, spacing=v.spacing, origin=v.origin,
-                                                               direction=v.direction)
-            rows = sections.sections_along_path(mask, path, field=field, spacing=v.spacing,
-                                                          origin=v.origin, direction=v.direction, step_mm=1.0)
+            res = measure_object(opened_of(self.s), object=oid, path="auto", partial_volume=self.grey)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Sections of object {oid} failed: {exc}", severity="error")
+            self.post_message(JobFailed(f"Sections of object {oid}", str(exc)))
             return
-        self.app.call_from_thread(self._show_sections, oid, rows, path)
+        self.post_message(JobDone("sections", res, oid=oid))
 
-    def _show_sections(self, oid: int, rows: list[dict], path) -> None:
-        self.sections, self.sections_obj = rows, oid
+    def _show_sections(self, oid: int, res) -> None:
+        rows = res.rows
+        self.sections, self.sections_obj, self.result = rows, oid, res
         iv = self.query_one("#ms-plot", ImageView)
         sm = [r["s_mm"] for r in rows]
         area = [r["area_mm2"] for r in rows]
@@ -206,15 +220,13 @@ class MeasureScreen(GuardMixin, Screen):
 
     @work(thread=True, group="ms-save")
     def _save(self, path: str) -> None:
-        sec = sections
+        png = path.rsplit(".", 1)[0] + ".png"
         try:
-            sec.write_sections_csv(path, self.sections)
-            png = path.rsplit(".", 1)[0] + ".png"
-            sec.plot_sections(png, self.sections, title=f"object {self.sections_obj}")
+            save_sections(self.result, csv=path, plot=png)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Not saved: {exc}", severity="error")
+            self.post_message(JobFailed("Not saved", str(exc)))
             return
-        self.app.call_from_thread(self.app.notify, f"Saved {path} and {png}")
+        self.post_message(JobDone("saved", f"Saved {path} and {png}"))
 
     def action_close(self) -> None:
         self.app.pop_screen()

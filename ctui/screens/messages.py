@@ -71,3 +71,16 @@ class LoadFailed(Message):
         self.path = path
         self.reasons = list(reasons)
         self.options = dict(options or {})
+
+
+class Call(Message, bubble=False):
+    """Run ``fn(*args, **kwargs)`` on the UI thread in the screen it is posted to (screens
+    mix in :class:`ctui.screens.guard.GuardMixin`, which handles it). Unlike
+    ``App.call_from_thread`` it never blocks the worker, and it is dropped when the screen
+    has closed meanwhile instead of touching widgets that are gone."""
+
+    def __init__(self, fn: Any, *args: Any, **kwargs: Any) -> None:
+        super().__init__()
+        self.fn = fn
+        self.args = args
+        self.kwargs = kwargs

@@ -17,6 +17,7 @@ from textual.widgets.option_list import Option
 
 from ctui.engine.io import series as loaders
 from ctui.screens.guard import GuardMixin
+from ctui.screens.messages import Call
 
 
 def describe_series(s: dict) -> str:
@@ -102,13 +103,13 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
 
     @work(thread=True, exclusive=True, group="scan")
     def scan(self, path: Path) -> None:
-        self.app.call_from_thread(self._status, f"Scanning {path} ...")
+        self.post_message(Call(self._status, f"Scanning {path} ..."))
         try:
             found = loaders.scan(str(path))
             err = None
         except Exception as exc:  # unreadable folder, loader error: a reason, not a traceback
             found, err = [], str(exc)
-        self.app.call_from_thread(self._show, path, found, err)
+        self.post_message(Call(self._show, path, found, err))
 
     def _status(self, text: str) -> None:
         self.query_one("#op-status", Label).update(text)

@@ -16,6 +16,7 @@ from textual.widgets.option_list import Option
 
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.messages import Call
 
 MORPHOLOGY = ("closing", "opening", "erode", "dilate", "conservative")
 
@@ -336,9 +337,9 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         try:
             views = self.s.stage_views(z)
         except Exception as exc:
-            self.app.call_from_thread(self.app.notify, f"Preview failed: {exc}", severity="error")
+            self.app.notify(f"Preview failed: {exc}", severity="error")
             return
-        self.app.call_from_thread(self._show, z, views)
+        self.post_message(Call(self._show, z, views))
 
     def _show(self, z: int, views) -> None:
         sp = self.s.volume.spacing[1:]

@@ -69,13 +69,9 @@ class EditMixin:
         """One brush (or eraser) dab at ``zyx`` (the cursor) on the current plane; returns voxels changed."""
         s = self.s
         pv = plane_view(s.volume, s.plane)
-        zyx = s.zyx if zyx is None else zyx
-        mask, off = et.brush_mask(pv, zyx[pv.normal], (zyx[pv.cols], zyx[pv.rows]), s.brush, s.shape, s.volume.spacing)
-        mask = et.limit_mask(mask, off, s.volume.data, s.limits)
-        if tool == "eraser":
-            return s.seg.erase(mask, offset=off, object_id=s.current)
-        s.seg.add_object(object_id=s.current)
-        return et.apply_mask(s.seg, mask, off, s.current, s.edit_mode, label=f"paint object {s.current}")
+        mode = "subtract" if tool == "eraser" else s.edit_mode
+        return et.dab(s.seg, s.volume, s.zyx if zyx is None else zyx, axis=pv.normal, object_id=s.current,
+                      radius=s.brush, mode=mode, limits=s.limits)
 
     def action_dab(self) -> None:
         if not self._editable():
@@ -167,18 +163,19 @@ class EditMixin:
         self.update_panel()
 
     # ------------------------------------------------------------------ whole-object tools
-    def _object_tool(self, fn, done_msg: str, *args) -> None:
+    def _object_tool(self, fn, done_msg: str) -> None:
         if not self._editable():
             return
         try:
-            n = fn(self.s.seg, self.s.current, *args)
+            n = fn(self.s.seg, self.s.current)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
         self._edited(done_msg.format(n=n, obj=self.s.current))
 
     def action_keep_largest(self) -> None:
-        self._object_tool(et.keep_largest_island, "Kept the largest island of object {obj}: {n} voxels removed (u undoes)")
+        self._object_tool(lambda seg, oid: seg.keep_largest_island(oid),
+                          "Kept the largest island of object {obj}: {n} voxels removed (u undoes)")
 
     def action_remove_islands(self) -> None:
         from ctui.screens.dialogs import PromptScreen
@@ -193,7 +190,8 @@ class EditMixin:
             except ValueError:
                 self.app.notify("Give a number of voxels (e.g. 100)", severity="error")
                 return
-            self._object_tool(et.remove_small_islands, "Removed {n} voxels of islands of object {obj} (u undoes)", n)
+            self._object_tool(lambda seg, oid: seg.remove_islands(oid, n),
+                              "Removed {n} voxels of islands of object {obj} (u undoes)")
 
         self.app.push_screen(PromptScreen("Remove islands smaller than N voxels", "100"), done)
 
@@ -201,7 +199,7 @@ class EditMixin:
         if not self._editable():
             return
         try:
-            n = et.fill_between_slices(self.s.seg, self.s.current, limits=self.s.limits)
+            n = self.s.seg.fill_between_slices(self.s.current, slices=self.s.limits.slices, spacing=self.s.volume.spacing)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
