@@ -205,10 +205,11 @@ def _declared_shape(kind: str, path: Path) -> tuple | None:
             return None
         if kind == "mhd":
             txt = path.read_text("latin-1")
-            m = re.search(r"^\s*DimSize\s*=\s*(.*)$", txt, re.MULTILINE)
-            nd = re.search(r"^\s*NDims\s*=\s*(\S+)\s*$", txt, re.MULTILINE)
-            if m and nd and nd.group(1) == "3":
-                vals = [int(v) for v in m.group(1).split()]
+            # a key given twice: the last one counts, as in ITK's MetaIO (SimpleITK reads it so)
+            m = re.findall(r"^\s*DimSize\s*=\s*(.*)$", txt, re.MULTILINE)
+            nd = re.findall(r"^\s*NDims\s*=\s*(\S+)\s*$", txt, re.MULTILINE)
+            if m and nd and nd[-1] == "3":
+                vals = [int(v) for v in m[-1].split()]
                 if len(vals) == 3 and min(vals) >= 1:
                     return tuple(reversed(vals))
             return None
