@@ -93,3 +93,13 @@ def test_obj_in_latin1_or_utf8(tmp_path, encoding):
     m = load_mesh(p)
     assert m.vertices.shape == (4, 3) and m.faces.shape == (4, 3)
     assert np.allclose(np.sort(m.vertices.sum(axis=1)), [0, 1, 1, 1])
+
+
+def test_mesh_over_the_memory_limit_refused(tmp_path, mesh, monkeypatch):
+    """CTUI_MEMORY_LIMIT stands in for RLIMIT_AS / cgroup memory.max: one line naming the
+    file instead of a MemoryError traceback."""
+    p = save_mesh(tmp_path / "m.stl", mesh)
+    monkeypatch.setenv("CTUI_MEMORY_LIMIT", str(p.stat().st_size))
+    with pytest.raises(CtuiError) as exc:
+        load_mesh(p)
+    assert "\n" not in str(exc.value) and "m.stl" in str(exc.value) and "memory" in str(exc.value)
