@@ -21,12 +21,16 @@ squared edges: 1 equilateral, 0 degenerate; mean and 1st percentile), slivers
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import tracemalloc
 from pathlib import Path
 
 import numpy as np
+
+# measure the compiled kernels, never the first-use fallback (ctui.engine.mesh.jit)
+os.environ.setdefault("CTUI_KERNELS", "compiled")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

@@ -27,6 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+# measure the compiled kernels, never the first-use fallback (ctui.engine.mesh.jit)
+os.environ.setdefault("CTUI_KERNELS", "compiled")
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -7,7 +7,8 @@ The CT-like DICOM series of ``benchmarks/end_to_end.py`` (written once into
 the series size varies without new files. For each size, each command runs in a fresh
 process and its peak resident memory (``ru_maxrss`` from ``os.wait4``) is read:
 
-* ``load``: a process that only loads the series (the baseline: what loading costs);
+* ``load``: a process that imports the same libraries and only loads the series (the
+  baseline: what loading costs);
 * ``mesh``: ``ctui mesh SERIES --iso 300`` (bone);
 * ``segment``: ``ctui segment SERIES --seed ... --range 200:3000 --mode 3d`` (the spine);
 * ``propagate``: the same, propagated slice by slice (``--mode slice``).
@@ -31,10 +32,13 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from end_to_end import make_series  # noqa: E402
 
 
+TREE = ROOT  # the source tree ``python -m ctui.cli`` runs (--tree: an older one, for before/after)
+
+
 def peak_rss(cmd: list[str]) -> int:
     """Peak resident bytes of one process (start to exit)."""
-    env = dict(os.environ, CTUI_NO_PROGRESS="1", CTUI_NO_BACKGROUND_COMPILE="1")
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    env = dict(os.environ, CTUI_NO_PROGRESS="1", CTUI_NO_BACKGROUND_COMPILE="1", PYTHONPATH=str(TREE))
+    proc = subprocess.Popen(cmd, cwd=TREE, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     err = proc.stderr.read().decode() if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:
@@ -42,11 +46,30 @@ def peak_rss(cmd: list[str]) -> int:
     return int(usage.ru_maxrss) * 1024
 
 
+def _seed(series: str, z: int) -> str:
+    """x,y,z of the centre voxel of the largest bone-range (200..3000 HU) region on slice z."""
+    import numpy as np
+    from scipy import ndimage as ndi
+
+    from ctui.engine.io.series import load
+
+    sl = load(series, crop=(z, z + 1, None, None, None, None)).data[0]
+    lab, n = ndi.label((sl >= 200) & (sl <= 3000))
+    big = 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
+    ys, xs = np.nonzero(lab == big)
+    i = int(np.argmin((ys - ys.mean()) ** 2 + (xs - xs.mean()) ** 2))
+    return f"{xs[i]},{ys[i]},{z}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shape", default="300,512,512")
     ap.add_argument("--slices", default="75,150,300", help="series sizes: the first N slices")
+    ap.add_argument("--tree", default=None, help="run the ctui of this source tree (before/after comparisons)")
     args = ap.parse_args()
+    global TREE
+    if args.tree:
+        TREE = Path(args.tree).resolve()
     shape = tuple(int(v) for v in args.shape.split(","))
     series = str(make_series(shape))
     tmp = Path(tempfile.mkdtemp(prefix="ctui-mem-"))
@@ -57,9 +80,11 @@ def main() -> None:
         n = min(n, shape[0])
         crop = f"0,{n},,,,"
         series_bytes = n * shape[1] * shape[2] * 2
-        load = peak_rss([sys.executable, "-c", "import sys; from ctui.engine.io.series import load; "
+        # baseline: the same libraries imported (numba, scipy: ~150 MB whatever the series) and the series loaded
+        load = peak_rss([sys.executable, "-c", "import sys; import ctui.engine.mesh.surface, ctui.engine.mesh.meshtools, ctui.engine.segment.pipeline; "
+                         "from ctui.engine.io.series import load; "
                          f"load(sys.argv[1], crop=(0, {n}, None, None, None, None))", series])
-        seed = f"{shape[2] // 2},{int(shape[1] * 0.7)},{n // 2}"
+        seed = _seed(series, n // 2)
         peaks = {"mesh": peak_rss(ctui + ["mesh", series, "--crop", crop, "--iso", "300", "--out", str(tmp / "m.stl")])}
         if n == shape[0]:  # ctui segment loads whole series (no --crop)
             for name, mode in (("segment", "3d"), ("propagate", "slice")):

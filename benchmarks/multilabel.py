@@ -29,6 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+# measure the compiled kernels, never the first-use fallback (ctui.engine.mesh.jit)
+os.environ.setdefault("CTUI_KERNELS", "compiled")
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("VTK_SMP_BACKEND_IN_USE", "STDThread")
 

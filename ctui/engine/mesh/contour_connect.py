@@ -466,7 +466,8 @@ def connect_contours(
                 else:
                     holes = [h for k, h in enumerate(loops) if h.hole and h.parent == i and not matched[k]]
                     end([lp] + holes, up)
-    compiled = contour_tiling.kernels_ready()
+    n_points = sum(len(j[1]) + len(j[3]) for j in jobs)
+    compiled = n_points > contour_tiling.PY_TILING_MAX_POINTS or contour_tiling.kernels_ready()
     run_jobs()
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))

@@ -220,7 +220,7 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
     """
     npair = poff.shape[0] - 1
     ok = np.ones(npair, np.int64)
-    if not kernels_ready():
+    if int(poff[-1] + qoff[-1]) <= PY_TILING_MAX_POINTS and not kernels_ready():
         # a fresh install: greedy tiling in plain Python now (no compilation; the DP
         # kernel takes 5-60 s to compile), the kernels compiled in the background
         jit.compile_in_background()
@@ -241,6 +241,11 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
         list(ex.map(lambda i: _tile_range(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, ok,
                                           int(bounds[i]), int(bounds[i + 1])), range(len(bounds) - 1)))
     return ok
+
+
+#: contour points up to which a fresh install tiles in plain Python rather than waiting
+#: for the compiler (plain Python: ~20 us a point; compiling: 5-60 s)
+PY_TILING_MAX_POINTS = 100_000
 
 
 def kernels_ready() -> bool:
