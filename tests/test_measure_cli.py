@@ -86,6 +86,9 @@ def test_measure_auto_path_text_output(label_file, capsys):
     a = np.array([r["area_mm2"] for r in doc["sections"]], dtype=float)
     assert len(a) >= 12 and np.all(np.isfinite(a))
     assert np.abs(a / (math.pi * 4) - 1).max() < 0.06, a
+    flags = doc["section_flags"]  # what was left out, and where: end caps only (every 2 mm: one or both)
+    assert flags["counts"].get("cap", 0) >= 1 and set(flags["counts"]) == {"cap"}
+    assert all(r["from_s_mm"] < 2.1 or r["to_s_mm"] > doc["path_length_mm"] - 2.1 for r in flags["ranges"])
     assert labels1.any()
 
 

@@ -23,7 +23,9 @@ class MeasureResult:
 
     volume_ml : {"voxels", "mesh"[, "partial_volume"]} mL; area_mm2 : mesh surface area;
     path_length_mm, sections (list of {s_mm, area_mm2, eq_diameter_mm, min_diameter_mm,
-    max_diameter_mm}), between ({volume_ml, area1_mm2, area2_mm2}) when a path was given;
+    max_diameter_mm}: the cross-sections only), section_flags ({counts, ranges} of the
+    sections left out: end caps, branches, outside), between ({volume_ml, area1_mm2,
+    area2_mm2}) when a path was given;
     rows (full section dicts with contours) and path_mm (n, 3) for drawing, not in JSON.
     """
 
@@ -39,6 +41,7 @@ class MeasureResult:
     principal_axes_mm: list | None = None
     partial_volume: dict | None = None
     warnings: list = field(default_factory=list)
+    section_flags: dict | None = None
     step_mm: float = defaults.SECTION_STEP_MM
     rows: list = field(default_factory=list, repr=False)
     path_mm: np.ndarray | None = field(default=None, repr=False)
@@ -52,6 +55,8 @@ class MeasureResult:
             d["principal_axes_mm"] = self.principal_axes_mm
         if self.partial_volume is not None:
             d["partial_volume"] = self.partial_volume
+        if self.section_flags is not None:
+            d["section_flags"] = self.section_flags
         return d
 
 
@@ -115,7 +120,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
         centroid_mm=res["centroid_mm"], principal_axes_mm=res["principal_axes_mm"],
         partial_volume=None if pv is None else {"object_value": pv["fg"], "surroundings_value": pv["bg"]},
         warnings=list(opened.notes) + list(res["warnings"]), step_mm=step_mm, rows=res["rows"],
-        path_mm=res["path_mm"], stats=res["stats"])
+        path_mm=res["path_mm"], stats=res["stats"], section_flags=res.get("section_flags"))
 
 
 def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None,
