@@ -30,10 +30,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ctui.engine.measure.fields import object_field  # noqa: E402
-from ctui.engine.measure.paths import arc_length, path_points, resample_path, rotation_minimising_frames  # noqa: E402
-from ctui.engine.measure.planes import shoelace_area  # noqa: E402
-from ctui.engine.measure.sections import sections_along_path  # noqa: E402
+from ctui.engine.measure.fields import object_field
+from ctui.engine.measure.paths import (
+    arc_length,
+    path_points,
+    resample_path,
+    rotation_minimising_frames,
+)
+from ctui.engine.measure.planes import shoelace_area
+from ctui.engine.measure.sections import sections_along_path
 
 SHAPE = (300, 512, 512)
 SPACING = (1.0, 0.7, 0.7)  # z 300 mm, x/y 358 mm

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure.centreline import (
     arc_length,
     centreline,
@@ -15,7 +16,6 @@ from ctui.engine.measure.centreline import (
     path_length,
     resample_path,
 )
-from ctui.engine.core.errors import CtuiError
 
 
 def _tube(shape, sp, c, a, r, half):
@@ -265,7 +265,7 @@ def test_aorta_like_tube_ends_inside_with_true_end_sections(sheet):
     from scipy.spatial import cKDTree
 
     assert cKDTree(axis).query(path[[0, -1]])[0].max() < 2.0  # the ends are on the axis
-    rows, s, status = _sections(mask, path, SP3, origin)
+    rows, _, status = _sections(mask, path, SP3, origin)
     assert status[0] == "cap" and status[-1] == "cap"
     table = sections_table(rows)
     area = np.array([t["area_mm2"] for t in table])

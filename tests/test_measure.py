@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from ctui.engine.measure.summary import measure_object
+from ctui.engine.core.meshdata import Mesh
 from ctui.engine.measure.stats import (
     label_stats,
     mesh_components,
@@ -17,7 +17,7 @@ from ctui.engine.measure.stats import (
     principal_axes,
     stats_json,
 )
-from ctui.engine.core.meshdata import Mesh
+from ctui.engine.measure.summary import measure_object
 
 
 def _ellipsoid(sp, semi, centre_jitter=(0.17, -0.23, 0.31), rot=None):

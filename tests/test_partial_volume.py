@@ -16,8 +16,8 @@ from ctui.engine.measure.summary import measure_object
 
 @pytest.fixture(scope="module")
 def phantom():
-    from ctui.engine.io.series import load
     from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
+    from ctui.engine.io.series import load
 
     return load(SAMPLE_DIR), load_truth()
 

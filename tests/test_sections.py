@@ -22,7 +22,12 @@ from ctui.engine.measure.centreline import centreline
 from ctui.engine.measure.fields import object_field
 from ctui.engine.measure.paths import path_points, rotation_minimising_frames
 from ctui.engine.measure.planes import feret_diameters, shoelace_area
-from ctui.engine.measure.report import plot_sections, sections_plot_image, write_sections_csv, write_sections_json
+from ctui.engine.measure.report import (
+    plot_sections,
+    sections_plot_image,
+    write_sections_csv,
+    write_sections_json,
+)
 from ctui.engine.measure.sections import find_steps, sections_along_path
 
 SP = (0.5, 0.5, 0.5)
@@ -380,7 +385,7 @@ def test_cap_sections_flagged_and_writers_report_only_ok_rows(tmp_path):
     from ctui.engine.measure.report import flag_summary, sections_table
 
     r = 2.5
-    inside, c, a = _cylinder((10.1, 10.2, 15.0), (0, 0, 1), r, 10.0)  # z 5 .. 25 mm
+    inside, _, _ = _cylinder((10.1, 10.2, 15.0), (0, 0, 1), r, 10.0)  # z 5 .. 25 mm
     m = _soft(inside, (60, 40, 40), ss=(2, 8, 8))
     path = np.array([[10.1, 10.2, z] for z in np.arange(1.0, 20.01, 0.25)])  # enters at z = 5 (s = 4)
     rows = sections_along_path(m, path, spacing=SP, step_mm=0.5)

@@ -64,7 +64,7 @@ def _pv_volume(field: ObjectField, obj, region, psi1, psi2, n1, n2) -> float:
     from scipy import ndimage as ndi
 
     others = obj & ~region
-    tail = int(math.ceil(3.3 * field.sigma_vox)) + 1
+    tail = math.ceil(3.3 * field.sigma_vox) + 1
     foot = ndi.binary_dilation(region, structure=np.ones((3, 3, 3)), iterations=tail)
     if others.any():
         d_reg = ndi.distance_transform_edt(~region, sampling=field.spacing)

@@ -201,7 +201,7 @@ class _Inside:
 
     def __init__(self, sub, lo, field: ObjectField | None, *, spacing, origin, direction):
         self.sub, self.lo, self.field = sub, lo, field
-        self.geo = dict(spacing=spacing, origin=origin, direction=direction)
+        self.geo = {"spacing": spacing, "origin": origin, "direction": direction}
         self.lim = np.asarray(sub.shape) - 1
 
     def index(self, q: np.ndarray) -> np.ndarray:
@@ -259,7 +259,7 @@ def _tube_part(s: np.ndarray, r: np.ndarray) -> tuple[int, int]:
     n = len(s)
     med = float(np.median(r))
     step = float(s[-1]) / max(n - 1, 1)
-    rs = ndi.median_filter(r, size=max(3, int(round(med / max(step, 1e-9))) | 1), mode="nearest")
+    rs = ndi.median_filter(r, size=max(3, round(med / max(step, 1e-9)) | 1), mode="nearest")
     w = 2.0 * med
     good = np.zeros(n, bool)
     for i in range(n):

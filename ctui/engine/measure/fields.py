@@ -23,7 +23,8 @@ goes through :class:`~ctui.engine.core.geometry.Geometry`. Imports only ``core``
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field as dc_field
+from dataclasses import dataclass
+from dataclasses import field as dc_field
 from typing import Any
 
 import numpy as np
@@ -170,7 +171,7 @@ def object_field(
     if bb_lo is None:
         raise CtuiError("the object is empty")
     if margin_vox is None:
-        margin_vox = int(math.ceil(4 * sigma_vox)) + 3
+        margin_vox = math.ceil(4 * sigma_vox) + 3
     lo = np.maximum(bb_lo - margin_vox, 0)
     hi = np.minimum(bb_hi + margin_vox + 1, m.shape)
     sl = tuple(slice(a, b) for a, b in zip(lo, hi))

@@ -27,7 +27,8 @@ Imports only ``core`` (through the field) and :mod:`ctui.engine.measure.fields`.
 from __future__ import annotations
 
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -148,7 +149,7 @@ def _mark_branches(rows: list[dict[str, Any]], status: list[str]) -> None:
     dmin = np.array([rows[i]["min_diameter_mm"] for i in idx], dtype=np.float64)
     step = float(np.median(np.diff(s))) if len(s) > 1 else 1.0
     eqd = float(np.nanmedian([rows[i]["eq_diameter_mm"] for i in idx]))
-    w = max(int(round(3.0 * eqd / max(step, 1e-6))), 4)
+    w = max(round(3.0 * eqd / max(step, 1e-6)), 4)
     ra, rd = _above_both(area, w), _above_both(dmax, w)
     with np.errstate(all="ignore"):
         re = _above_both(dmax / dmin, w)

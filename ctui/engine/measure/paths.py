@@ -11,7 +11,7 @@ This module is the bottom of the measure package: it imports only ``core``.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

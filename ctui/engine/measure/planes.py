@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 
-
 # ------------------------------------------------------------------ 2D geometry
 _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)  # 4-connected regions (scipy's default)
 

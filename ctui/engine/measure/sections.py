@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,11 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
 from ctui.engine.measure.fields import ObjectField, object_field
 from ctui.engine.measure.flags import OK, classify_sections
-from ctui.engine.measure.paths import path_points, path_spline, rotation_minimising_frames
+from ctui.engine.measure.paths import (
+    path_points,
+    path_spline,
+    rotation_minimising_frames,
+)
 from ctui.engine.measure.planes import sample_planes, section_of_plane
 from ctui.engine.measure.report import (  # noqa: F401  (the section tool's writers, re-exported)
     SECTION_KEYS,
@@ -132,7 +137,7 @@ def _averaged(path_mm, field: ObjectField, *, step_mm: float, at_s, average_mm: 
     """Sections averaged over ``average_mm`` of path (thin slabs): see :func:`sections_along_path`."""
     _, total = path_spline(path_mm)
     targets = np.arange(0.0, total + 1e-9, step_mm) if at_s is None else np.asarray(at_s, dtype=np.float64)
-    k = max(3, int(math.ceil(average_mm / 0.25)) + 1)
+    k = max(3, math.ceil(average_mm / 0.25) + 1)
     k += (k + 1) % 2
     offs = np.linspace(-average_mm / 2, average_mm / 2, k)
     all_s = np.clip(targets[:, None] + offs[None, :], 0.0, total)
@@ -275,7 +280,7 @@ def find_steps(s_mm: np.ndarray, values: np.ndarray, *, min_rel_jump: float = 0.
     if len(s) < 5:
         return []
     step = float(np.median(np.diff(s)))
-    w = max(int(round(window_mm / step)), 2)
+    w = max(round(window_mm / step), 2)
     margin = 2.0 * window_mm if margin_mm is None else float(margin_mm)
     jumps = np.zeros(len(s))
     for i in range(w, len(s) - w):

@@ -49,11 +49,11 @@ def mesh_components(mesh: Mesh) -> tuple[int, np.ndarray]:
     rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
     cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
     g = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(nv, nv))
-    n, vlab = connected_components(g, directed=False)
+    _, vlab = connected_components(g, directed=False)
     flab = vlab[f[:, 0]]
     # renumber to the components that own faces
     uniq, flab = np.unique(flab, return_inverse=True)
-    return int(len(uniq)), flab.astype(np.int64)
+    return len(uniq), flab.astype(np.int64)
 
 
 def edge_counts(faces: np.ndarray) -> tuple[int, int]:
@@ -92,7 +92,7 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
         comps.append({
             "volume_mm3": vol,
             "area_mm2": float(areas[flab == k].sum()),
-            "faces": int(len(fk)),
+            "faces": len(fk),
             "closed": b == 0,
             "boundary_edges": b,
             "nonmanifold_edges": nm,

@@ -16,7 +16,11 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
 from ctui.engine.measure.between import volume_between
 from ctui.engine.measure.centreline import centreline
-from ctui.engine.measure.fields import object_field, partial_volume_field, partial_volume_fraction
+from ctui.engine.measure.fields import (
+    object_field,
+    partial_volume_field,
+    partial_volume_fraction,
+)
 from ctui.engine.measure.paths import parse_points, path_from_points, path_length
 from ctui.engine.measure.report import flag_summary, sections_table
 from ctui.engine.measure.sections import sections_along_path
