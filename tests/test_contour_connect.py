@@ -17,6 +17,13 @@ from ctui.engine.mesh.meshtools import mesh_report
 SPACING = (2.5, 0.7, 0.7)
 
 
+@pytest.fixture(autouse=True)
+def _compiled_kernels(monkeypatch):
+    """The compiled kernels (DP tiling), whatever the state of numba's cache: the
+    first-use fallbacks are tested in test_cold_start.py."""
+    monkeypatch.setenv("CTUI_KERNELS", "compiled")
+
+
 def borders(mask):
     from ctui.engine.core.borders import object_borders
 

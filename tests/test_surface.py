@@ -8,6 +8,13 @@ import pytest
 from ctui.engine.mesh.meshtools import mesh_report
 from ctui.engine.mesh.surface import isosurface, label_surfaces, mask_surface
 
+
+@pytest.fixture(autouse=True)
+def _compiled_kernels(monkeypatch):
+    """The compiled kernels (DP tiling), whatever the state of numba's cache: the
+    first-use fallbacks are tested in test_cold_start.py."""
+    monkeypatch.setenv("CTUI_KERNELS", "compiled")
+
 SPACING = (2.5, 0.7, 0.7)  # (dz, dy, dx) mm
 
 

@@ -295,6 +295,108 @@ def _cap(builder: _Builder, rings: list[tuple[np.ndarray, np.ndarray]], up: bool
     builder.faces.append(ids[tri])
 
 
+def _slice_loops(items: Sequence[Any], z: int, builder: _Builder, *, pixel_centres: bool, step: float) -> list[_Loop]:
+    """One slice's loops: at the pixel edges, resampled, rasterised, their vertices added
+    to ``builder``, holes linked to their outer loop (``parent``)."""
+    loops = _as_loops(items or [], z)
+    for lp in loops:
+        pts = offset_pixel_boundary(lp.pts, hole=lp.hole) if pixel_centres else lp.pts
+        if step > 0:
+            pts = resample_loop(pts, step)
+        if len(pts) < 3:
+            continue
+        lp.pts = pts
+        _rasterise(lp)
+        lp.xyz = np.column_stack([pts, np.full(len(pts), float(z))])
+        lp.ids = builder.add(lp.xyz)
+    loops = [lp for lp in loops if len(lp.ids)]
+    for lp in loops:
+        if lp.hole:
+            for j, op in enumerate(loops):
+                if not op.hole and _contains(op.pts, lp.pts[0]):
+                    lp.parent = j
+                    break
+    return loops
+
+
+def _slice_pair_groups(below: list[_Loop], above: list[_Loop]) -> tuple[list, list[bool], list[bool]]:
+    """Loops of two adjacent slices grouped by overlap (same loop type; connected
+    components of the overlap graph): ([(lower loops, upper loops)], matched below, matched above)."""
+    nb = len(below)
+    parent = list(range(nb + len(above)))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    matched_b = [False] * nb
+    matched_a = [False] * len(above)
+    for i, lb in enumerate(below):
+        for j, la in enumerate(above):
+            if lb.hole == la.hole and _overlap(lb, la):
+                matched_b[i] = matched_a[j] = True
+                ra, rb = find(i), find(nb + j)
+                if ra != rb:
+                    parent[ra] = rb
+    groups: dict[int, tuple[list[_Loop], list[_Loop]]] = {}
+    for i, lb in enumerate(below):
+        if matched_b[i]:
+            groups.setdefault(find(i), ([], []))[0].append(lb)
+    for j, la in enumerate(above):
+        if matched_a[j]:
+            groups.setdefault(find(nb + j), ([], []))[1].append(la)
+    return list(groups.values()), matched_b, matched_a
+
+
+def _run_tiling(jobs: list, builder: _Builder, *, band: int, method: str) -> None:
+    """Tile every (lower, upper) loop pair of ``jobs`` at once; faces go to ``builder``."""
+    if not jobs:
+        return
+    lens_p = np.array([len(j[1]) for j in jobs], np.int64)
+    lens_q = np.array([len(j[3]) for j in jobs], np.int64)
+    poff = np.concatenate([[0], np.cumsum(lens_p)])
+    qoff = np.concatenate([[0], np.cumsum(lens_q)])
+    toff = np.concatenate([[0], np.cumsum(lens_p + lens_q)])
+    mx = np.maximum(lens_p, lens_q)
+    if band > 0:
+        bands = np.full(len(jobs), int(band), np.int64)
+    else:
+        bands = np.where(mx <= 200, 0, np.maximum(8, (0.02 * mx).astype(np.int64)))
+        # branch pairs (bridged composite loops) are far from the arc-length
+        # diagonal: full table (they are few)
+        bands[np.array([j[4] for j in jobs], bool)] = 0
+    out = np.empty((int(toff[-1]), 3), np.int64)
+    ok = tile_many(np.ascontiguousarray(np.concatenate([j[0] for j in jobs])), poff,
+                   np.concatenate([j[1] for j in jobs]).astype(np.int64),
+                   np.ascontiguousarray(np.concatenate([j[2] for j in jobs])), qoff,
+                   np.concatenate([j[3] for j in jobs]).astype(np.int64),
+                   bands.astype(np.int64), method == "dp", toff, out)
+    if not ok.all():  # cannot happen for valid loops; keep the surface closed anyway
+        raise RuntimeError("contour tiling failed")
+    builder.faces.append(out)
+
+
+def _end_cap(builder: _Builder, loop_group: list[_Loop], up: bool, half_slice_ends: bool) -> None:
+    """Cap an ending outer loop with its holes (or a lone hole), after a half-slice extrusion."""
+    rings = []
+    for lp in loop_group:
+        ids = lp.ids
+        if half_slice_ends:
+            dz = 0.5 if up else -0.5
+            new = builder.add(np.column_stack([lp.pts, np.full(len(lp.pts), lp.z + dz)]))
+            lo, hi = (ids, new) if up else (new, ids)
+            k = len(ids)
+            i = np.arange(k)
+            j = (i + 1) % k
+            builder.faces.append(np.column_stack([lo[i], lo[j], hi[i]]))
+            builder.faces.append(np.column_stack([lo[j], hi[j], hi[i]]))
+            ids = new
+        rings.append((lp.pts, ids))
+    _cap(builder, rings, up, loop_group[0].hole)
+
+
 def connect_contours(
     slices_borders: Sequence[Sequence[Any]],
     *,
@@ -342,27 +444,8 @@ def connect_contours(
         raise ValueError(f"unknown tiling method {method!r} (use 'dp' or 'greedy')")
     aff = affine_from(spacing, origin, direction)
     builder = _Builder()
-    slices: list[list[_Loop]] = []
-    for z, items in enumerate(slices_borders):
-        loops = _as_loops(items or [], z)
-        for lp in loops:
-            pts = offset_pixel_boundary(lp.pts, hole=lp.hole) if pixel_centres else lp.pts
-            if step > 0:
-                pts = resample_loop(pts, step)
-            if len(pts) < 3:
-                continue
-            lp.pts = pts
-            _rasterise(lp)
-            lp.xyz = np.column_stack([pts, np.full(len(pts), float(z))])
-            lp.ids = builder.add(lp.xyz)
-        loops = [lp for lp in loops if len(lp.ids)]
-        for i, lp in enumerate(loops):
-            if lp.hole:
-                for j, op in enumerate(loops):
-                    if not op.hole and _contains(op.pts, lp.pts[0]):
-                        lp.parent = j
-                        break
-        slices.append(loops)
+    slices = [_slice_loops(items, z, builder, pixel_centres=pixel_centres, step=step)
+              for z, items in enumerate(slices_borders)]
 
     lin = aff[:3, :3]
 
@@ -378,81 +461,16 @@ def connect_contours(
         pos_q, qid = _merge_loops(upper, bridges) if len(upper) > 1 else (upper[0].xyz, upper[0].ids)
         jobs.append((to_mm(pos_p), pid, to_mm(pos_q), qid, len(lower) > 1 or len(upper) > 1))
 
-    def run_jobs() -> None:
-        if not jobs:
-            return
-        lens_p = np.array([len(j[1]) for j in jobs], np.int64)
-        lens_q = np.array([len(j[3]) for j in jobs], np.int64)
-        poff = np.concatenate([[0], np.cumsum(lens_p)])
-        qoff = np.concatenate([[0], np.cumsum(lens_q)])
-        toff = np.concatenate([[0], np.cumsum(lens_p + lens_q)])
-        mx = np.maximum(lens_p, lens_q)
-        if band > 0:
-            bands = np.full(len(jobs), int(band), np.int64)
-        else:
-            bands = np.where(mx <= 200, 0, np.maximum(8, (0.02 * mx).astype(np.int64)))
-            # branch pairs (bridged composite loops) are far from the arc-length
-            # diagonal: full table (they are few)
-            bands[np.array([j[4] for j in jobs], bool)] = 0
-        out = np.empty((int(toff[-1]), 3), np.int64)
-        ok = tile_many(np.ascontiguousarray(np.concatenate([j[0] for j in jobs])), poff,
-                       np.concatenate([j[1] for j in jobs]).astype(np.int64),
-                       np.ascontiguousarray(np.concatenate([j[2] for j in jobs])), qoff,
-                       np.concatenate([j[3] for j in jobs]).astype(np.int64),
-                       bands.astype(np.int64), method == "dp", toff, out)
-        if not ok.all():  # cannot happen for valid loops; keep the surface closed anyway
-            raise RuntimeError("contour tiling failed")
-        builder.faces.append(out)
-
     def end(loop_group: list[_Loop], up: bool) -> None:
-        """Cap an ending outer loop with its holes (or a lone hole), after a half-slice extrusion."""
-        rings = []
-        for lp in loop_group:
-            ids = lp.ids
-            if half_slice_ends:
-                dz = 0.5 if up else -0.5
-                new = builder.add(np.column_stack([lp.pts, np.full(len(lp.pts), lp.z + dz)]))
-                lo, hi = (ids, new) if up else (new, ids)
-                k = len(ids)
-                i = np.arange(k)
-                j = (i + 1) % k
-                builder.faces.append(np.column_stack([lo[i], lo[j], hi[i]]))
-                builder.faces.append(np.column_stack([lo[j], hi[j], hi[i]]))
-                ids = new
-            rings.append((lp.pts, ids))
-        _cap(builder, rings, up, loop_group[0].hole)
+        _end_cap(builder, loop_group, up, half_slice_ends)
 
     nz = len(slices)
     for z in range(nz + 1):
         below = slices[z - 1] if z > 0 else []
         above = slices[z] if z < nz else []
         # overlap graph between slice z-1 (below) and z (above), same loop type
-        nb = len(below)
-        parent = list(range(nb + len(above)))
-
-        def find(a: int) -> int:
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
-
-        matched_b = [False] * nb
-        matched_a = [False] * len(above)
-        for i, lb in enumerate(below):
-            for j, la in enumerate(above):
-                if lb.hole == la.hole and _overlap(lb, la):
-                    matched_b[i] = matched_a[j] = True
-                    ra, rb = find(i), find(nb + j)
-                    if ra != rb:
-                        parent[ra] = rb
-        groups: dict[int, tuple[list[_Loop], list[_Loop]]] = {}
-        for i, lb in enumerate(below):
-            if matched_b[i]:
-                groups.setdefault(find(i), ([], []))[0].append(lb)
-        for j, la in enumerate(above):
-            if matched_a[j]:
-                groups.setdefault(find(nb + j), ([], []))[1].append(la)
-        for lo, hi in groups.values():
+        groups, matched_b, matched_a = _slice_pair_groups(below, above)
+        for lo, hi in groups:
             tile(lo, hi)
         # ends: loops of `below` with no partner above -> top caps; `above` with none below -> bottom caps
         for loops, matched, up in ((below, matched_b, True), (above, matched_a, False)):
@@ -468,7 +486,7 @@ def connect_contours(
                     end([lp] + holes, up)
     n_points = sum(len(j[1]) + len(j[3]) for j in jobs)
     compiled = n_points > contour_tiling.PY_TILING_MAX_POINTS or contour_tiling.kernels_ready()
-    run_jobs()
+    _run_tiling(jobs, builder, band=band, method=method)
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
     faces = np.concatenate(builder.faces).astype(np.int32) if builder.faces else np.zeros((0, 3), np.int32)
