@@ -17,6 +17,10 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError
 
 
+#: largest coordinate or voxel size accepted (mm): 1000 km, far beyond any scanner
+MAX_MM = 1e9
+
+
 def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, float, float]:
     try:
         vals = tuple(float(v) for v in value)
@@ -28,6 +32,8 @@ def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, floa
         raise CtuiError(f"{name}: not a finite number in {list(vals)}")
     if positive and min(vals) <= 0:
         raise CtuiError(f"{name}: every value must be > 0, got {list(vals)}")
+    if max(abs(v) for v in vals) > MAX_MM:  # 1e308 mm is finite but overflows every product (fuzz finding)
+        raise CtuiError(f"{name}: values beyond {MAX_MM:g} mm in {list(vals)}")
     return vals  # type: ignore[return-value]
 
 
