@@ -490,20 +490,34 @@ def connect_contours(
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
     faces = np.concatenate(builder.faces).astype(np.int32) if builder.faces else np.zeros((0, 3), np.int32)
-    if len(faces) and np.count_nonzero(edge_counts(faces, len(v_idx))[1] > 2):
+    nonmanifold = _has_nonmanifold_edge(faces, len(v_idx))
+    if nonmanifold:
         faces = _flip_double_rungs(faces, v_idx[:, 2])
+        nonmanifold = _has_nonmanifold_edge(faces, len(v_idx))
     faces = _fix_handedness(faces, aff)
     mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces,
                 meta={"method": f"contours-{method if compiled else 'greedy'}"})
     if not compiled and method == "dp":
         mesh.meta["note"] = "greedy tiling: the minimum-area kernel is being compiled (first use)"
-    if len(faces) and np.count_nonzero(edge_counts(faces, len(v_mm))[1] > 2):
+    if nonmanifold:
         # a tile that reaches both sides of a bridge (a branching's zero-width seam) from
         # one vertex leaves fins (opposite twin faces: dropped, no volume) and edges
         # where two sheets touch (cut apart, nothing moves)
         mesh = split_non_manifold(drop_opposite_twins(mesh))
     mesh.normals = vertex_normals(mesh.vertices, mesh.faces)
     return mesh
+
+
+def _has_nonmanifold_edge(faces: np.ndarray, n_vertices: int) -> bool:
+    """Whether some edge carries more than two faces (one sort of the 3m edge keys)."""
+    if len(faces) == 0:
+        return False
+    f = np.asarray(faces, np.int64)
+    a = f.ravel()
+    b = f[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * np.int64(max(n_vertices, 1)) + np.maximum(a, b)
+    key.sort()
+    return bool(np.any(key[2:] == key[:-2]))
 
 
 def _flip_double_rungs(faces: np.ndarray, z: np.ndarray) -> np.ndarray:
