@@ -112,3 +112,45 @@ def test_tmux_without_colorterm_tells_how_to_fix(tmux_session, tmp_path):
     screen = _wait(tmux_session, "SendEnv")
     assert "TEXTUAL_COLOR_SYSTEM=truecolor" in screen.replace("\n", " ") or "TEXTUAL_COLOR_SYSTEM" in screen
     assert "Traceback" not in screen
+
+
+def test_paint_and_erase_in_tmux_voxel_counts(tmux_session, tmp_path):
+    """The real binary: brush a dab (space), a stroke (b, moves, b), erase (E), switch to
+    the sagittal view (orientation letters), save the project and count its voxels."""
+    import numpy as np
+
+    from ctui.engine.io.project import load_project
+
+    env = _env(CTUI_AUTOSAVE_DIR=str(tmp_path / "autosave"), COLORTERM="truecolor")
+    cmd = f"cd {tmp_path} && {sys.executable} -m ctui --graphics halfblock; echo CTUI-EXIT=$?; sleep 30"
+    subprocess.run(_tmux("new-session", "-d", "-s", tmux_session, "-x", "160", "-y", "50", cmd),
+                   check=True, env=env, timeout=10)
+    _wait(tmux_session, "Slice")
+    # the sample is 128x128: the cursor starts at its centre (x 64, y 64); brush radius 3 -> 29 px
+    _keys(tmux_session, "space")
+    _wait(tmux_session, "Painted 29 voxels")
+    _keys(tmux_session, "b")
+    for _ in range(4):
+        _keys(tmux_session, "l")
+    _keys(tmux_session, "b")
+    _wait(tmux_session, "Brush lifted")
+    _keys(tmux_session, ",", ",")  # radius 1: a 5-px eraser
+    _wait(tmux_session, "Brush radius 1")
+    _keys(tmux_session, "E")
+    _wait(tmux_session, "Eraser down")
+    _keys(tmux_session, "E")
+    _keys(tmux_session, "2")
+    screen = _wait(tmux_session, "sagittal")
+    assert all(f" {c} " in screen or f"{c}◀" in screen or f"▶{c}" in screen or f"{c}▲" in screen or f"▼{c}" in screen
+               for c in "APSI")
+    _keys(tmux_session, "C-s")
+    _wait(tmux_session, "Save project as")
+    proj = tmp_path / "painted.ctui"
+    _keys(tmux_session, "C-u", str(proj), "Enter")
+    _wait(tmux_session, "Project saved")
+    labels = load_project(str(proj)).labels
+    # dab 29 + a stroke of 4 one-pixel steps (7 new pixels each) - the eraser's 5 px
+    assert int(np.count_nonzero(labels == 1)) == 29 + 4 * 7 - 5
+    _keys(tmux_session, "q")
+    screen = _wait(tmux_session, "CTUI-EXIT=")
+    assert "CTUI-EXIT=0" in screen and "Traceback" not in screen

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
@@ -10,6 +11,21 @@ from textual.widgets import Button, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
 from ctui.screens.guard import GuardMixin
+
+
+class PromptInput(Input):
+    """An Input that runs its own key bindings (Backspace, Ctrl+U, Enter, arrows...) at
+    once, in key order. Textual runs bindings only when the key has bubbled up to the
+    app, after the characters typed behind it in a burst were already inserted: "5",
+    Backspace, "6" gave "6"-less text and Ctrl+U wiped the path pasted after it."""
+
+    async def _on_key(self, event: events.Key) -> None:
+        bindings = self._bindings.key_to_bindings.get(event.key)
+        if not bindings:
+            return  # Input._on_key (inserting the character) runs next
+        event.prevent_default()
+        event.stop()
+        await self.run_action(bindings[0].action)
 
 
 class PromptScreen(GuardMixin, ModalScreen[str | None]):
@@ -32,7 +48,7 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Label(self.title_text)
-            yield Input(value=self.value, placeholder=self.placeholder, id="prompt")
+            yield PromptInput(value=self.value, placeholder=self.placeholder, id="prompt")
             yield Label("[dim]Enter to accept, Escape to cancel[/dim]")
 
     def on_mount(self) -> None:

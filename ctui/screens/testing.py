@@ -20,7 +20,11 @@ async def wait_for(pilot, predicate, *, timeout: float = 90.0, what: str = "cond
 
 
 async def wait_workspace(pilot, app, timeout: float = 120.0) -> None:
-    await wait_for(pilot, lambda: app.workspace is not None and app.screen is app.workspace, timeout=timeout, what="the workspace")
+    def ready() -> bool:
+        ws = app.workspace
+        return ws is not None and app.screen is ws and ws.is_mounted and bool(ws.query("#main"))
+
+    await wait_for(pilot, ready, timeout=timeout, what="the workspace")
 
 
 async def goto_voxel(pilot, app, z: int, y: int, x: int) -> None:
