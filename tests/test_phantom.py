@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -103,10 +102,8 @@ def test_noise_and_storage(phantom):
     assert truth["shape_zyx"] == list(vol.shape) and vol.spacing == (2.5, 2.0, 2.0)
 
 
-def test_deterministic_and_fast(tmp_path):
-    t = time.perf_counter()
+def test_deterministic(tmp_path):
     out = write_demo(tmp_path / "demo")
-    assert time.perf_counter() - t < 5.0
     files = sorted(p.name for p in out.iterdir())
     assert files == sorted(p.name for p in SAMPLE_DIR.iterdir()), "bundled sample out of date: run ctui demo sample_data/phantom"
     for name in files:  # byte-identical to the bundled copy

@@ -184,12 +184,11 @@ def test_zip_bomb_not_decompressed(tmp_path):
                 fh.write(zero)
     (tmp_path / "bomb.ctui").write_bytes(buf.getvalue())
     tracemalloc.start()
-    t = time.perf_counter()
     with pytest.raises(FormatError, match="does not match"):
         load_project(tmp_path / "bomb.ctui")
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    assert peak < 20_000_000 and time.perf_counter() - t < 2
+    assert peak < 20_000_000  # refused from the header: the 300 MB member is never inflated
 
 
 def test_write_failure_keeps_previous(tmp_path):
