@@ -92,19 +92,31 @@ def make_series(shape: tuple[int, int, int]) -> Path:
 TREE = ROOT  # where ``python -m ctui.cli`` imports ctui from (--tree: an older checkout, for before/after)
 
 
-def timed(cmd: list[str], env: dict | None = None, *, setup=None) -> tuple[float, str]:
+CPU_TIMES: dict[str, float] = {}  # command line -> median CPU seconds (user + system) of its last median_run
+
+
+def timed(cmd: list[str], env: dict | None = None, *, setup=None) -> tuple[float, str, float]:
+    """(wall seconds, last stdout line, CPU seconds: user + system of the process and its children)."""
     if setup:
         setup()
     t = time.perf_counter()
-    res = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=TREE)
-    dt = time.perf_counter() - t
-    if res.returncode != 0:
-        raise SystemExit(f"failed: {' '.join(cmd)}\n{res.stderr[-2000:]}")
-    return dt, res.stdout.strip().splitlines()[-1] if res.stdout.strip() else ""
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=err, cwd=TREE)
+        _, status, usage = os.wait4(proc.pid, 0)
+        dt = time.perf_counter() - t
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read().decode(), err.read().decode()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{stderr[-2000:]}")
+    return dt, stdout.strip().splitlines()[-1] if stdout.strip() else "", usage.ru_utime + usage.ru_stime
 
 
 def median_run(cmd, env=None, *, repeat: int, setup=None) -> tuple[float, str]:
+    """Median wall time and the last output line; the median CPU time goes to CPU_TIMES (a
+    loaded machine inflates wall times, CPU times much less)."""
     runs = [timed(cmd, env, setup=setup) for _ in range(repeat)]
+    CPU_TIMES[" ".join(cmd)] = statistics.median(r[2] for r in runs)
     return statistics.median(r[0] for r in runs), runs[-1][1]
 
 
@@ -144,11 +156,12 @@ def main() -> None:
     for method in ("marching-cubes", "contours"):
         cmd = ctui + ["mesh", str(SAMPLE), "--iso", "300", "--method", method, "--out", str(tmp / "s.stl")]
         cold, _ = median_run(cmd, cold_env, repeat=args.repeat, setup=fresh_cache)
+        cold_cpu = CPU_TIMES[" ".join(cmd)]
         warm, line = median_run(cmd, base, repeat=args.repeat)
-        rows.append((f"sample mesh --method {method}", cold, warm, line))
-    print(f"{'command':40s} {'cold s':>8s} {'warm s':>8s} {'cold/warm':>9s}")
-    for name, cold, warm, _ in rows:
-        print(f"{name:40s} {cold:8.2f} {warm:8.2f} {cold / warm:9.2f}")
+        rows.append((f"sample mesh --method {method}", cold, warm, cold_cpu, CPU_TIMES[" ".join(cmd)]))
+    print(f"{'command':40s} {'cold s':>8s} {'warm s':>8s} {'cold/warm':>9s}   {'cold cpu s':>10s} {'warm cpu s':>10s}")
+    for name, cold, warm, ccpu, wcpu in rows:
+        print(f"{name:40s} {cold:8.2f} {warm:8.2f} {cold / warm:9.2f}   {ccpu:10.2f} {wcpu:10.2f}")
     if args.skip_big:
         return
     t0 = time.perf_counter()
@@ -157,18 +170,22 @@ def main() -> None:
     peer_py = tmp / "peer.py"
     peer_py.write_text(PEER)
     out = tmp / "big.stl"
-    peer, peer_line = median_run([sys.executable, str(peer_py), str(series), str(args.level), str(tmp / "peer.stl")],
-                                 base, repeat=args.repeat)
-    warm, warm_line = median_run(ctui + ["mesh", str(series), "--iso", str(args.level), "--out", str(out)], base,
-                                 repeat=args.repeat)
-    cold, _ = median_run(ctui + ["mesh", str(series), "--iso", str(args.level), "--out", str(out)], cold_env,
-                         repeat=args.repeat, setup=fresh_cache)
-    info, _ = median_run(ctui + ["info", str(series)], base, repeat=args.repeat)
-    print(f"peer  (SimpleITK + VTK flying edges + STL + mass properties): {peer:7.2f} s   {peer_line}")
-    print(f"ctui mesh --iso, warm cache:                                 {warm:7.2f} s   {warm_line}")
-    print(f"ctui mesh --iso, cold cache (fresh install):                 {cold:7.2f} s")
-    print(f"ctui info:                                                   {info:7.2f} s")
-    print(f"ratio ctui/peer: warm {warm / peer:.2f}, cold {cold / peer:.2f}  (goal <= 1.2)")
+    mesh_cmd = ctui + ["mesh", str(series), "--iso", str(args.level), "--out", str(out)]
+    figures = {}
+    figures["peer"] = median_run([sys.executable, str(peer_py), str(series), str(args.level), str(tmp / "peer.stl")],
+                                 base, repeat=args.repeat) + (CPU_TIMES.popitem()[1],)
+    figures["warm"] = median_run(mesh_cmd, base, repeat=args.repeat) + (CPU_TIMES.popitem()[1],)
+    figures["cold"] = median_run(mesh_cmd, cold_env, repeat=args.repeat, setup=fresh_cache) + (CPU_TIMES.popitem()[1],)
+    figures["info"] = median_run(ctui + ["info", str(series)], base, repeat=args.repeat) + (CPU_TIMES.popitem()[1],)
+    names = {"peer": "peer (SimpleITK + VTK flying edges + STL + mass properties)",
+             "warm": "ctui mesh --iso, warm cache", "cold": "ctui mesh --iso, cold cache (fresh install)",
+             "info": "ctui info"}
+    print(f"{'':62s} {'wall s':>7s} {'cpu s':>7s}")
+    for k, (wall, line, cpu) in figures.items():
+        print(f"{names[k]:62s} {wall:7.2f} {cpu:7.2f}   {line[:90] if k in ('peer', 'warm') else ''}")
+    pw, pc = figures["peer"][0], figures["peer"][2]
+    print(f"ratio ctui/peer: warm {figures['warm'][0] / pw:.2f} (cpu {figures['warm'][2] / pc:.2f}), "
+          f"cold {figures['cold'][0] / pw:.2f} (cpu {figures['cold'][2] / pc:.2f})  (goal <= 1.2)")
     shutil.rmtree(tmp, ignore_errors=True)
 
 
