@@ -235,18 +235,27 @@ def levelset(image: np.ndarray, initial: np.ndarray, *, low: float, high: float,
     off = np.array([b.start for b in box])
     sub = image[box]  # as it is (int16 series values need no float copy)
     init = np.ascontiguousarray(initial[box], dtype=bool)
-    region = inrange[box] if inrange is not None else (sub >= low) & (sub <= high)
-    seeds = np.argwhere(init)
     check_allocation(sub.size * 14, what="the level set (distance maps)")
     grown = evolve(sub, init, low=low, high=high, spacing=spacing, curvature=curvature, iterations=iterations)
     report(progress, 3, 4, "level set")
+    region = inrange[box] if inrange is not None else (sub >= low) & (sub <= high)
     inside = grown & (region | init)
-    inside = fill3d_seeds(inside, seeds, connectivity=connectivity)
+    del grown
+    inside = fill3d_seeds(inside, run_starts(init & inside), connectivity=connectivity)
     if background is not None and len(background):
         bg = inside_seeds(np.asarray(background, np.int64).reshape(-1, 3) - off, region.shape)
-        inside &= compete(region | inside, seeds, bg, spacing=spacing, connectivity=connectivity)
+        inside &= compete(region | inside, np.argwhere(init), bg, spacing=spacing, connectivity=connectivity)
     report(progress, 4, 4, "")
     return tight(tuple(int(v) for v in off), inside)  # type: ignore[arg-type]
+
+
+def run_starts(mask: np.ndarray) -> np.ndarray:
+    """int (n, 3) z, y, x: the first voxel of every run of ``mask`` (bool (nz, ny, nx)) along x. As
+    seeds of a fill they reach what all of ``mask``'s voxels reach, from a few percent of the voxels
+    (np.argwhere of a 1.2-million-voxel object is 28 MB)."""
+    starts = mask.copy()
+    starts[..., 1:] &= ~mask[..., :-1]
+    return np.argwhere(starts)
 
 
 def describe() -> dict[str, Any]:
