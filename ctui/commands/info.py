@@ -9,7 +9,10 @@ def add_load_options(p: argparse.ArgumentParser) -> None:
     """Loader options shared by the commands that read a series."""
     g = p.add_argument_group("loading")
     g.add_argument("--series", help="DICOM series to load: index as listed by `ctui info` (0-based) or SeriesInstanceUID")
-    g.add_argument("--spacing", help="voxel size dz,dy,dx in mm (image stacks, raw; default 1 mm)")
+    g.add_argument("--spacing", help="voxel size dz,dy,dx in mm: image stacks and raw data (default 1 mm), "
+                   "MetaImage (replaces the header's); DICOM: only dz counts, the z step of the regular grid an "
+                   "unevenly spaced or tilted series is resampled onto (or the slice step when the headers give "
+                   "no positions); in-plane spacing comes from the header")
     g.add_argument("--shape", help="raw data: z,y,x for one file, or y,x for one file per slice")
     g.add_argument("--dtype", help="raw data: uint8, int16, '>u2' (big-endian uint16), float32...")
     g.add_argument("--offset", type=int, help="raw data: header bytes to skip")
@@ -68,7 +71,7 @@ def _lines(vol, d: dict) -> list[str]:
         f"orientation {d['orientation']}; origin {', '.join(f'{o:.2f}' for o in vol.origin)} mm (LPS)",
         f"            x axis {_vec(vol.direction[:, 0])}, y axis {_vec(vol.direction[:, 1])}, normal {_vec(vol.direction[:, 2])}",
         f"modality    {vol.modality}",
-        f"values      {d['value_range'][0]:g} .. {d['value_range'][1]:g}" + (" HU" if vol.modality == "CT" else ""),
+        _values_line(vol, d),
         f"window      centre {vol.window[0]:g}, width {vol.window[1]:g}",
     ]
     if vol.series:
@@ -80,15 +83,33 @@ def _lines(vol, d: dict) -> list[str]:
             desc = s.get("description") or ""
             lines.append(f"  {mark}[{i}] {s.get('modality', '')} {shp} {s.get('files', '')} files "
                          f"{('‘' + desc + '’') if desc else ''} {s.get('uid', '')}".rstrip())
-    if vol.skipped:
-        lines.append(f"skipped     {len(vol.skipped)} file(s)")
-        for sk in vol.skipped[:50]:
+    objects = [sk for sk in vol.skipped if sk.get("object")]
+    if objects:
+        lines.append(f"non-image   {len(objects)} DICOM object(s), not volumes")
+        lines += [f"  {sk['file']}: {sk['reason']}" for sk in objects[:50]]
+    skipped = [sk for sk in vol.skipped if not sk.get("object")]
+    if skipped:
+        lines.append(f"skipped     {len(skipped)} file(s)")
+        for sk in skipped[:50]:
             lines.append(f"  {sk['file']}: {sk['reason']}")
-        if len(vol.skipped) > 50:
-            lines.append(f"  ... and {len(vol.skipped) - 50} more (--json lists all)")
+    if len(objects) > 50 or len(skipped) > 50:
+        lines.append(f"  ... and {max(0, len(objects) - 50) + max(0, len(skipped) - 50)} more (--json lists all)")
     for w in vol.warnings:
         lines.append(f"warning     {w}")
     return lines
+
+
+def _values_line(vol, d: dict) -> str:
+    """The value range, saying when it comes from sampled slices only (DICOM: ``ctui info``
+    decodes three slices, not the series)."""
+    vr = d.get("value_range")
+    unit = " HU" if vol.modality == "CT" else ""
+    if d.get("value_range_sampled"):
+        n = d.get("sampled_slices", 0)
+        if not vr:
+            return "values      unknown (no sampled slice could be decoded)"
+        return f"values      {vr[0]:g} .. {vr[1]:g}{unit}   value range ({n} sampled slice{'s' * (n != 1)})"
+    return f"values      {vr[0]:g} .. {vr[1]:g}{unit}" if vr else "values      unknown"
 
 
 def _vec(v) -> str:

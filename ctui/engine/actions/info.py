@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any, Sequence
 
@@ -22,12 +23,22 @@ def describe_series(path: str | os.PathLike | Sequence[str], **load_options: Any
 
     From the headers and three sample slices only (:func:`ctui.engine.io.series.inspect`:
     300 slices of 512x512 in well under a second); the Volume's ``data`` is then a
-    placeholder and ``value_range`` that of the sampled slices (``meta["headers_only"]``).
+    placeholder and ``value_range`` that of the sampled slices (``meta["headers_only"]``;
+    ``value_range_sampled`` True, ``sampled_slices`` how many; ``value_range`` None when
+    none could be decoded). ``non_image_objects``: the skipped files that are DICOM
+    objects other than images (DICOM-SEG, RTSTRUCT, SR...), each with its ``object`` kind.
     """
     vol = inspect(path, **load_options)
-    d = vol.describe()
+    d = vol.describe()  # headers-only: value_range from meta, nothing computed on the placeholder
     d["orientation"] = orientation_name(vol.direction)
-    d["value_range"] = [float(v) for v in d["value_range"]]
+    sampled = bool(vol.meta.get("headers_only"))
+    vr = [float(v) for v in d["value_range"]]
+    d["value_range"] = vr if all(math.isfinite(v) for v in vr) else None
+    # DICOM: the range of the sampled slices only (a full load may reach further)
+    d["value_range_sampled"] = sampled
+    if sampled:
+        d["sampled_slices"] = len(vol.meta.get("sampled_slices") or [])
+    d["non_image_objects"] = [sk for sk in vol.skipped if sk.get("object")]
     if vol.slice_positions is not None:
         d["slice_positions_mm"] = [round(float(v), 4) for v in vol.slice_positions]
     d["meta"] = {k: v for k, v in vol.meta.items() if isinstance(v, (str, int, float, bool, list, dict))}

@@ -135,8 +135,8 @@ class Volume:
     def value_range(self) -> tuple[float, float]:
         """(min, max) of the voxel values (``meta["value_range"]`` for a headers-only
         Volume, whose ``data`` is a placeholder: see ``ctui.engine.io.series.inspect``)."""
-        if self.meta.get("headers_only") and self.meta.get("value_range"):
-            lo, hi = self.meta["value_range"]
+        if self.meta.get("headers_only"):  # never computed on the placeholder; NaN: no slice sampled
+            lo, hi = self.meta.get("value_range") or (float("nan"), float("nan"))
             return float(lo), float(hi)
         return float(self.data.min()), float(self.data.max())
 

@@ -290,7 +290,7 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
         raise LoadError(f"nothing loadable: {why}{hint}", path=path_label)
     ordered = dicom._ordered_series(found)
     summaries = [dicom.series_summary(s, ids=ids) for s in ordered]
-    chosen = dicom.pick_series(ordered, series, path_label)
+    chosen = dicom.pick_series(ordered, series, path_label, slices=[d["shape_zyx"][0] for d in summaries])
     loader = dicom.inspect_series if headers_only else dicom.load_series
     vol = loader(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
                  spacing=spacing, all_series=summaries, **common)

@@ -101,9 +101,15 @@ def series_summary(s: Series, frames: list[Frame] | None = None, *, ids: set[str
     }
 
 
-def pick_series(ordered: list[Series], series: Any, path: Any) -> Series:
+def pick_series(ordered: list[Series], series: Any, path: Any, *, slices: list[int] | None = None) -> Series:
+    """The series ``series`` names (index into ``ordered`` or a UID / unique UID prefix);
+    by default the one with most slices (``slices``: each series' slice count after
+    duplicates and outliers, as :func:`series_summary` gives it; else its frame count),
+    the first in ``ordered`` on a tie. Only image series reach here: DICOM-SEG, RTSTRUCT,
+    SR... are skipped by the header reader (:mod:`.dicom_sop`)."""
     if series is None:
-        return max(ordered, key=lambda s: len(s.frames))  # first of the largest
+        counts = slices if slices is not None and len(slices) == len(ordered) else [len(s.frames) for s in ordered]
+        return ordered[max(range(len(ordered)), key=lambda i: (counts[i], -i))]
     if isinstance(series, (int, np.integer)) or (isinstance(series, str) and series.strip().isdigit() and len(series.strip()) < 6):
         i = int(series)
         if not 0 <= i < len(ordered):
@@ -329,14 +335,17 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
     ok = [k for k, zi in enumerate(picks)
           if _decode_frame(prep.frames[zi], sample[k], plan.y, plan.x, full_plane, False, [], k) is None]
-    sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)
+    sampled = [picks[k] for k in ok]
+    sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)  # for the window only; no value range
     grid = prep.grid
     shape = grid.out_shape(len(zsel))
     placeholder = np.broadcast_to(np.zeros((), prep.dtype), shape)
     vol = _volume(placeholder, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series,
                   sample=sample)
     vol.meta["headers_only"] = True
-    vol.meta["value_range"] = [float(sample.min()), float(sample.max())]
+    # the range of the sampled slices only (None when none decoded): ctui info says so
+    vol.meta["value_range"] = [float(sample.min()), float(sample.max())] if ok else None
+    vol.meta["sampled_slices"] = [zsel.index(zi) for zi in sampled]
     return vol
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from ctui.engine.core.limits import available_memory, fmt_bytes
 from ctui.engine.io.series._common import rel
 from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
+from ctui.engine.io.series.dicom_sop import _check_image, _NotImage, _Skip
 
 _NATIVE_SYNTAXES = {
     "1.2.840.10008.1.2",  # implicit VR little endian
@@ -43,10 +44,6 @@ _DEFER = 1 << 20
 #: parsed from the file)
 _HEAD_BYTES = 32 << 10
 MAX_COMPRESSION = 1000  # decoded bytes per stored byte we accept before decoding
-
-
-class _Skip(Exception):
-    """A file that is skipped; str(self) is the reason."""
 
 
 @dataclass
@@ -345,14 +342,15 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
             try:
                 return _checked_frames(quick, path, size, quick.syntax, quick.implicit, True, quick.pixel_pos,
                                        io.BytesIO(head))
+            except _NotImage:
+                raise
             except _Skip:
                 pass  # judged again through pydicom: same reasons for the files that are really bad
-        if len(head) >= size:
-            return _parse(io.BytesIO(head), path, size)
         try:
             return _parse(io.BytesIO(head), path, size)
-        except _Skip:
-            pass
+        except _Skip as sk:
+            if isinstance(sk, _NotImage) or len(head) >= size:
+                raise
         fh.seek(0)
         return _parse(_Capped(fh, size), path, size)
 
@@ -378,6 +376,7 @@ def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
         raise _Skip(f"broken DICOM header ({type(exc).__name__})") from None
     try:
         pos = fh.tell()
+        _check_image(ds)
         if forced and not (ds.get("Rows") and ds.get("Columns")):
             raise _Skip("not a DICOM file or image")
         implicit, little = ds.original_encoding
@@ -440,6 +439,7 @@ def _checked_frames(ds: Any, path: str, size: int, syntax: str, implicit: bool, 
 
 
 def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
+    _check_image(ds)
     rows, cols = int(ds.get("Rows") or 0), int(ds.get("Columns") or 0)
     if rows <= 0 or cols <= 0:
         raise _Skip("no image (Rows/Columns missing)")
@@ -573,6 +573,8 @@ def read_headers(
             frames, fid = read_header(p, memory=memory)
         except _Skip as s:
             skipped.append({"file": rel(p, base), "reason": str(s)})
+            if isinstance(s, _NotImage):  # listed as a non-image object (ctui info shows them apart)
+                skipped[-1]["object"] = s.kind
         else:
             ids.update(fid)
             uid = frames[0].series_uid or f"(no SeriesInstanceUID) {Path(p).parent.name}"
