@@ -1,4 +1,5 @@
-"""Key-to-paint latency of a slice change in the TUI, ctui vs textual-image, in one run.
+"""Key-to-paint latency of a slice change in the TUI, ctui vs textual-image, in one run
+(and of a brush stroke step in ctui).
 
 ctui: the real app (WorkspaceScreen, half-block renderer forced, overlay view with one
 object, side panel updated) on a 512x512-pixel CT-like series at a 160x50 terminal; each PageUp/PageDown is timed from the key press
@@ -111,6 +112,37 @@ async def bench_ctui(vol, size, n: int) -> list[float]:
     return times
 
 
+async def bench_brush(vol, size, n: int) -> list[float]:
+    """Brush stroke: brush down (b), then each cursor step (l/h) paints a 3-px-radius dab;
+    timed from the key to the painted frame showing it (issue 14 goal: <= 30 ms)."""
+    from ctui.screens import graphics
+
+    graphics._chosen = "halfblock"
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.session import Session
+
+    sess = Session(vol, source_path="bench")
+    app = CtuiApp(session=sess, autosave_s=1e9)
+    times: list[float] = []
+    async with app.run_test(size=size) as pilot:
+        await pilot.pause(0.2)
+        stamps: list[float] = []
+        _hook_display(app, stamps)
+        ws = app.workspace
+        mv = ws.main_view
+        await pilot.press("b")
+        for i in range(n + 3):
+            key = "l" if (i // 20) % 2 == 0 else "h"
+            version = ws._labels_version
+            t0 = time.perf_counter()
+            await pilot.press(key)
+            dt = await _wait_frame(pilot, stamps, t0, lambda: ws._labels_version > version and mv.painted[1] > t0)
+            if i >= 3:
+                times.append(dt)
+            await pilot.pause(0.01)
+    return times
+
+
 async def bench_textual_image(vol, size, n: int) -> list[float]:
     from PIL import Image as PILImage
     from textual.app import App
@@ -177,10 +209,14 @@ def main() -> int:
     rss_ctui = proc.memory_info().rss
     ti = asyncio.run(bench_textual_image(vol, (w, h), max(args.n // 3, 10)))
     rss_peer = proc.memory_info().rss
+    br = asyncio.run(bench_brush(vol, (w, h), max(args.n // 2, 10)))
     mc, mt = statistics.median(ct) * 1000, statistics.median(ti) * 1000
     print(f"ctui half-block         median {mc:7.1f} ms  p90 {np.percentile(ct, 90) * 1000:7.1f} ms  (n={len(ct)})")
     print(f"textual-image Halfcell  median {mt:7.1f} ms  p90 {np.percentile(ti, 90) * 1000:7.1f} ms  (n={len(ti)})")
     print(f"ratio textual-image / ctui: {mt / mc:.1f}x   goal ctui <= 50 ms: {'met' if mc <= 50 else 'NOT met'}")
+    mb = statistics.median(br) * 1000
+    print(f"ctui brush stroke step  median {mb:7.1f} ms  p90 {np.percentile(br, 90) * 1000:7.1f} ms  (n={len(br)})"
+          f"   goal <= 30 ms: {'met' if mb <= 30 else 'NOT met'}")
     print(f"RSS: after volume {rss0 / 2**20:.0f} MiB, after ctui {rss_ctui / 2**20:.0f} MiB, after peer {rss_peer / 2**20:.0f} MiB")
     return 0
 

@@ -4,11 +4,13 @@ failure) to the screen: the 3D cell of the 2x2 layout, exports. Each is cancella
 
 from __future__ import annotations
 
+import time
 from functools import partial
 
 from textual.worker import Worker, get_current_worker
 
 from ctui.engine import render
+from ctui.engine.core.progress import Cancelled
 from ctui.screens.messages import JobDone, JobFailed, JobProgress
 
 
@@ -37,6 +39,24 @@ def _render_cell(ws, size: tuple[int, int]) -> None:
         return
     if not worker.is_cancelled:
         ws.post_message(JobDone("3d", img, caption=f"3d: {len(meshes)} object(s), r opens the 3D view"))
+
+
+def job_progress(ws, what: str):
+    """A ``progress(done, total, message="")`` callback for the engine that shows on the
+    workspace's progress row (as messages, at most 20 a second) and stops the job when
+    Escape cancelled its worker (raises :class:`ctui.engine.core.progress.Cancelled`)."""
+    worker = get_current_worker()
+    last = [0.0]
+
+    def progress(done, total, message: str = "") -> None:
+        if worker.is_cancelled:
+            raise Cancelled(f"{what} cancelled")
+        now = time.monotonic()
+        if now - last[0] >= 0.05:
+            last[0] = now
+            ws.post_message(JobProgress(f"{what}: {message}" if message else what, float(done), float(total or 0) or None))
+
+    return progress
 
 
 def run_job(ws, fn, *, what: str, name: str) -> Worker:
