@@ -18,8 +18,16 @@ background seed in the neighbour.
 * ``fill``: the default (neck-cut propagation) for reference.
 * brush: one dab (radius 10 px) into a 300 x 512 x 512 label volume, engine side.
 
+* ``--memory``: peak resident memory of ``ctui segment SERIES --method levelset`` (and
+  ``fill`` for reference) in a fresh process on the CT-like 300 x 512 x 512 DICOM series of
+  benchmarks/end_to_end.py (the spine, range 200:3000), above a process that imports the same
+  libraries and only loads the series, as a multiple of the series' size (goal <= 2x).
+
+Wall times are medians; CPU seconds (``time.process_time``, all threads of the process)
+are printed beside them: on a loaded machine they hold where wall times do not.
+
 Goals (issue 14): grow and levelset on the 200 x 200 x 100 region <= 2 s; a brush
-stroke <= 30 ms. Run: python3 benchmarks/segment_methods.py [--repeat N]
+stroke <= 30 ms. Run: python3 benchmarks/segment_methods.py [--repeat N] [--only levelset] [--memory]
 """
 
 from __future__ import annotations
@@ -63,18 +71,64 @@ def make_series(seed: int = 0):
 
 
 def med(f, n):
-    ts, out = [], None
+    t, _cpu, out = timed(f, n)
+    return t, out
+
+
+def timed(f, n):
+    """Median wall and CPU seconds (process_time: every thread of this process) of n runs, and the last result."""
+    ts, cs, out = [], [], None
     for _ in range(n):
+        c = time.process_time()
         t = time.perf_counter()
         out = f()
         ts.append(time.perf_counter() - t)
-    return statistics.median(ts), out
+        cs.append(time.process_time() - c)
+    return statistics.median(ts), statistics.median(cs), out
+
+
+def peak_rss(cmd: list[str]) -> int:
+    """Peak resident bytes of one fresh process (start to exit)."""
+    import os
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, CTUI_NO_PROGRESS="1", CTUI_NO_BACKGROUND_COMPILE="1", PYTHONPATH=str(root))
+    proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{proc.stderr.read().decode()[-2000:] if proc.stderr else ''}")
+    return int(usage.ru_maxrss) * 1024
+
+
+def memory() -> None:
+    """Peak memory of ctui segment --method levelset / fill above loading, x the series (goal <= 2x)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from end_to_end import make_series as make_dicom
+
+    shape = (300, 512, 512)
+    series = str(make_dicom(shape))
+    seed = "255,268,150"  # the spine's middle on slice 150 (range 200:3000 HU)
+    nbytes = shape[0] * shape[1] * shape[2] * 2
+    code = ("import sys; import ctui.engine.mesh.surface, ctui.engine.mesh.meshtools, ctui.engine.segment.pipeline; "
+            "from ctui.engine.io.series import load; load(sys.argv[1])")
+    load = peak_rss([sys.executable, "-c", code, series])
+    for method in ("levelset", "fill"):
+        peak = peak_rss([sys.executable, "-m", "ctui.cli", "segment", series, "--seed", seed, "--range", "200:3000",
+                         "--method", method, "--json"])
+        print(f"memory, ctui segment --method {method} on the {shape[0]}x{shape[1]}x{shape[2]} series "
+              f"({nbytes / 2**20:.0f} MB): peak {peak / 2**20:.0f} MB, {(peak - load) / nbytes:.2f}x the series above "
+              f"loading it ({load / 2**20:.0f} MB){' (goal <= 2x)' if method == 'levelset' else ''}")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--only", choices=("all", "levelset"), default="all", help="levelset: skip grow, fill and brush")
+    ap.add_argument("--memory", action="store_true", help="also the peak memory of ctui segment (fresh processes)")
     args = ap.parse_args()
+    if args.memory:
+        memory()
     t = time.perf_counter()
     vol, truth, seed, bg = make_series()
     print(f"series {vol.data.shape} generated in {time.perf_counter() - t:.1f} s; kidney {int(truth.sum())} voxels")
@@ -85,12 +139,22 @@ def main() -> int:
         got = labels == 1
         return f"volume {got.sum() / n:.3f} x truth, Dice {2 * (got & truth).sum() / (got.sum() + n):.4f}"
 
-    # --- grow on the region: ctui (SimpleITK) vs scikit-image
     sub = vol.data[REGION]
+    if args.only == "all":
+        grow_section(vol, sub, seed, bg, lo, hi, score, args.repeat)
+    levelset_section(vol, sub, truth, seed, bg, lo, hi, score, args.repeat)
+    if args.only == "all":
+        brush_section(vol)
+    return 0
+
+
+def grow_section(vol, sub, seed, bg, lo, hi, score, repeat):
+    """grow on the region: ctui (SimpleITK) vs scikit-image, and the whole action."""
     inr = (sub >= lo) & (sub <= hi)
     org = np.array([r.start for r in REGION])
     fg = np.array([[seed[2], seed[1], seed[0]]]) - org
     bgz = np.array([[bg[2], bg[1], bg[0]]]) - org
+    args = argparse.Namespace(repeat=repeat)
     G.compete(inr[:4], fg * 0, bgz * 0, spacing=SPACING)  # warm-up (imports, numba)
     t_ctui, share = med(lambda: G.compete(inr, fg, bgz, spacing=SPACING), args.repeat)
     t_ws, ws = med(lambda: G.compete_watershed(inr, fg, bgz, spacing=SPACING), 1)
@@ -116,7 +180,10 @@ def main() -> int:
     print(f"grow, whole action on the 300x512x512 series (threshold every slice + competition): {t_act:.3f} s; "
           f"{score(res.segmentation.labels)}")
 
-    # --- fill (default) and levelset
+
+def levelset_section(vol, sub, truth, seed, bg, lo, hi, score, repeat):
+    """fill (the default, for reference) and levelset: ctui vs SimpleITK on the region, and the whole action."""
+    args = argparse.Namespace(repeat=repeat)
     t_fill, res = med(lambda: segment(vol, [seed], [(lo, hi)], options=SegmentOptions()), args.repeat)
     print(f"fill (default, neck-cut slice propagation), whole action: {t_fill:.3f} s; {score(res.segmentation.labels)}")
     import cv2
@@ -126,8 +193,8 @@ def main() -> int:
     start = res.segmentation.labels[REGION] == 1
     k = np.ones((5, 5), np.uint8)
     start = np.stack([cv2.erode(s.astype(np.uint8), k) for s in start]).astype(bool)
-    evolve(sub[:3], start[:3], low=lo, high=hi, spacing=SPACING, iterations=1)  # compile
-    t_ls, got = med(lambda: evolve(sub, start, low=lo, high=hi, spacing=SPACING, iterations=20), args.repeat)
+    evolve(sub[40:52], start[40:52], low=lo, high=hi, spacing=SPACING, iterations=11)  # compile (or load the cache)
+    t_ls, c_ls, got = timed(lambda: evolve(sub, start, low=lo, high=hi, spacing=SPACING, iterations=20), args.repeat)
     tr = truth[REGION]
 
     def sitk_levelset(iterations=20):
@@ -148,15 +215,23 @@ def main() -> int:
         f.ReverseExpansionDirectionOn()
         return sitk.GetArrayFromImage(f.Execute(d, img)) > 0
 
-    t_peer, peer = med(sitk_levelset, 1)
+    t_peer, c_peer, peer = timed(sitk_levelset, 1)
+
+    def dice(a):
+        return 2 * (a & tr).sum() / (a.sum() + tr.sum())
+
     print(f"levelset, 100x200x200 region, 20 iterations from the fill eroded by 2 px ({start.sum() / tr.sum():.3f} x truth): "
-          f"ctui {t_ls:.3f} s ({got.sum() / tr.sum():.3f} x truth) (goal <= 2 s); SimpleITK {t_peer:.3f} s "
-          f"({peer.sum() / tr.sum():.3f} x truth); ratio SimpleITK/ctui {t_peer / t_ls:.1f}x")
-    t_act, res = med(lambda: segment(vol, [seed], [(lo, hi)], background=[bg], options=SegmentOptions(method="levelset")), 1)
-    print(f"levelset, whole action (fill + level set + background competition): {t_act:.3f} s; "
+          f"ctui {t_ls:.3f} s wall, {c_ls:.3f} s CPU ({got.sum() / tr.sum():.4f} x truth, Dice {dice(got):.4f}) "
+          f"(goal <= 2 s); SimpleITK {t_peer:.3f} s wall, {c_peer:.3f} s CPU ({peer.sum() / tr.sum():.4f} x truth, "
+          f"Dice {dice(peer):.4f}); ratio SimpleITK/ctui {t_peer / t_ls:.1f}x wall, {c_peer / c_ls:.1f}x CPU")
+    t_act, c_act, res = timed(lambda: segment(vol, [seed], [(lo, hi)], background=[bg],
+                                              options=SegmentOptions(method="levelset")), args.repeat)
+    print(f"levelset, whole action (fill + level set + background competition): {t_act:.3f} s wall, {c_act:.3f} s CPU; "
           f"{score(res.segmentation.labels)}")
 
-    # --- brush
+
+def brush_section(vol):
+    """One brush dab into a 300 x 512 x 512 label volume, engine side."""
     seg = Segmentation(vol.data.shape)
     seg.paint_brush(256, 256, 150, 1, radius=10)
     ts = []
@@ -166,7 +241,6 @@ def main() -> int:
         ts.append(time.perf_counter() - t)
     print(f"brush dab radius 10 px into 300x512x512 labels: median {statistics.median(ts) * 1000:.2f} ms "
           f"(max {max(ts) * 1000:.2f} ms; goal <= 30 ms, engine side)")
-    return 0
 
 
 if __name__ == "__main__":

@@ -139,29 +139,36 @@ def _band_py(phi, band):  # pragma: no cover - compiled by numba
     return runs
 
 
-def _envelope_py(sq, inside, phi, dz, cap):  # pragma: no cover - compiled by numba
-    """phi = +-0.5 x the distance (mm, capped) to the other side: ``sq`` holds the squared in-plane
-    distance (mm^2, capped) of every voxel to the nearest voxel of the other side in its slice; the
-    lower envelope over the slices within ``cap`` adds the through-plane part."""
-    nz, ny, nx = sq.shape
+def _envelope_py(pix, inside, phi, dz, dx, cap):  # pragma: no cover - compiled by numba
+    """phi = +-0.5 x the distance (mm, capped) to the other side: ``pix`` holds the in-plane distance
+    (pixels; overwritten with squared mm) of every voxel to the nearest voxel of the other side in
+    its slice; the lower envelope over the slices within ``cap`` adds the through-plane part. Whole
+    rows at a time (SIMD): 8 ms against 29 ms voxel by voxel with an early stop, 2.3 M voxels."""
+    nz, ny, nx = pix.shape
     kmax = int(np.ceil(cap / dz))
-    cap2 = cap * cap
     for z in range(nz):
         for y in range(ny):
             for x in range(nx):
-                s = inside[z, y, x]
-                best = sq[z, y, x]
-                for k in range(1, kmax + 1):
-                    step = (k * dz) * (k * dz)
-                    if step >= best:
-                        break
-                    for zz in (z - k, z + k):
-                        if 0 <= zz < nz:
-                            o = step if inside[zz, y, x] != s else step + sq[zz, y, x]
-                            best = min(best, o)
-                best = min(best, cap2)
-                d = 0.5 * np.sqrt(best)
-                phi[z, y, x] = d if s else -d
+                v = min(pix[z, y, x] * dx, cap)
+                pix[z, y, x] = v * v
+    best = np.empty((ny, nx), np.float32)
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                best[y, x] = pix[z, y, x]
+        for k in range(1, kmax + 1):
+            step = np.float32((k * dz) * (k * dz))
+            for zz in (z - k, z + k):
+                if zz < 0 or zz >= nz:
+                    continue
+                for y in range(ny):
+                    for x in range(nx):
+                        o = step + (pix[zz, y, x] if inside[zz, y, x] == inside[z, y, x] else np.float32(0))
+                        best[y, x] = min(best[y, x], o)
+        for y in range(ny):
+            for x in range(nx):
+                d = np.float32(0.5) * np.sqrt(best[y, x])
+                phi[z, y, x] = d if inside[z, y, x] else -d
 
 
 def _kernel(name: str):
@@ -182,25 +189,27 @@ def _signed_distance(inside: np.ndarray, spacing: tuple[float, float, float], ca
     """Signed distance (float32, positive inside) with the zero level half-way between the boundary
     voxels inside and outside, in half millimetres (the level-set equation moves the zero level the
     same whatever positive factor phi carries). Square pixels with a ``cap``: OpenCV per slice (both
-    sides in one array) + a numba pass along z (``out`` reused when given); otherwise SimpleITK's Maurer
-    maps of the mask and of its complement, averaged."""
+    sides in one array; the 5 x 5 chamfer mask: 1 and 1.4 pixels exact, within 0.4 pixel of the exact
+    distance up to 20 pixels, 2.5 times faster) + a numba pass along z (``out`` reused when given);
+    otherwise SimpleITK's Maurer maps of the mask and of its complement, averaged."""
     if abs(spacing[1] - spacing[2]) < 1e-6 * spacing[2] and cap < 1e8:
         import cv2
 
         dz, _, dx = (float(s) for s in spacing)
         m = inside.view(np.uint8) if inside.dtype == bool and inside.flags.c_contiguous else \
             np.ascontiguousarray(inside, dtype=np.uint8)
-        sq = np.empty(m.shape, np.float32)
+        sq = np.empty(m.shape, np.float32)  # in-plane distances in pixels, squared mm in the kernel
         inv = np.empty(m.shape[1:], np.uint8)
+        far = np.float32(cap / dx + 1.0)
         for z in range(m.shape[0]):
+            if not m[z].any():  # no inside voxel in the slice: every voxel is far in-plane
+                sq[z] = far
+                continue
             np.subtract(1, m[z], out=inv)
-            cv2.distanceTransform(m[z], cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=sq[z])
-            sq[z] += cv2.distanceTransform(inv, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)  # one side is 0 a pixel
-        sq *= np.float32(dx)
-        np.minimum(sq, np.float32(cap), out=sq)
-        sq *= sq
+            cv2.distanceTransform(m[z], cv2.DIST_L2, cv2.DIST_MASK_5, dst=sq[z])
+            sq[z] += cv2.distanceTransform(inv, cv2.DIST_L2, cv2.DIST_MASK_5)  # one side is 0 a pixel
         phi = out if out is not None else np.empty(m.shape, np.float32)
-        _kernel("envelope")(sq, m, phi, dz, float(cap))
+        _kernel("envelope")(sq, m, phi, dz, dx, float(cap))
         return phi
     import SimpleITK as sitk  # heavy import, only here
 
@@ -258,7 +267,12 @@ def evolve(image: np.ndarray, initial: np.ndarray, *, low: float, high: float, s
     dt = 0.5 * h
     if curvature > 0:
         dt = min(dt, 0.9 * min(dy, dx) ** 2 / (2.0 * 2.0 * curvature))
-    band = 1.5 * max(dz, dy, dx)  # phi units: the front moves < 1.5 mm between re-initialisations
+    # the band (phi units: half millimetres) holds every voxel the front can reach before the next
+    # re-initialisation: at most dt a step for the propagation term, dt * c / min(dy, dx) more for the
+    # curvature term (curvatures up to one over a pixel), plus one voxel step; never more than the
+    # 1.5 voxel steps of the former fixed band
+    travel = (reinit or max(int(iterations), 1)) * dt * (1.0 + float(curvature) / min(dy, dx))
+    band = min(1.5 * max(dz, dy, dx), 0.5 * (travel + max(dz, dy, dx)))
     cap = 2.0 * band + max(dz, dy, dx)  # distances beyond the band only need to be "far"
     iterations = int(iterations)
     periods = max(1, -(-iterations // reinit)) if reinit else 1
