@@ -285,6 +285,11 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
     if not found:
         reasons = {d["reason"] for d in skipped}
         why = next(iter(reasons)) if len(reasons) == 1 else "no DICOM image, image stack or MetaImage found"
+        objects = sorted({d["object"] for d in skipped if d.get("object")})
+        if objects and len(reasons) > 1:
+            why = (f"no image series, only non-image DICOM objects ({', '.join(objects)})"
+                   + ("; open a DICOM-SEG or RTSTRUCT as labels over its image series with --labels"
+                      if {"DICOM-SEG", "RTSTRUCT"} & set(objects) else ""))
         hint = ("; for headerless raw data give shape and dtype (--shape, --dtype)"
                 if any("not a DICOM" in r for r in reasons) else "")
         raise LoadError(f"nothing loadable: {why}{hint}", path=path_label)

@@ -376,7 +376,7 @@ def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *,
     warnings = prep.warnings + grid.warnings
     meta: dict[str, Any] = {"format": "dicom", "transfer_syntax": f0.syntax, "rescale": [f0.slope, f0.intercept],
                             "photometric": f0.photometric, **grid.meta}
-    dz = grid.dz if grid.positions is not None else prep.geo["dz"] * zs
+    dz = grid.dz if grid.positions is not None or prep.dz_user else prep.geo["dz"] * zs
     window = f0.window
     if window is None:
         from ctui.engine.core.windows import auto_window

@@ -329,17 +329,25 @@ def plan_grid(geo: dict[str, Any], zsel: list[int], *, dy: float, dx: float, ny:
     if positions is not None and len(positions) > 1:
         gaps = np.diff(positions)
         dz = float(np.median(gaps))
-        if _uneven(gaps):
-            grid, dz, w = _z_grid(positions, gaps, dz_user=dz_user, resample=resample)
+        if _uneven(gaps) or (dz_user and shifts is not None and resample):
+            # uneven: always onto a regular grid; tilted: onto the user's dz when one is given
+            grid, dz, w = _z_grid(positions, gaps, dz_user=dz_user, resample=resample,
+                                  why="" if _uneven(gaps) else "tilted series")
             warnings += w
             meta["resampled"] = grid is not None
+        elif dz_user:
+            warnings.append(f"spacing dz {dz_user:g} mm not used: the series is evenly spaced at {dz:.4g} mm "
+                            f"(from its slice positions)")
+    elif dz_user:  # no positions (or one slice): the user's dz is the slice step
+        dz = float(dz_user)
+        warnings.append(f"slice step {dz:g} mm from the spacing asked for")
     return GridPlan(shifts_yx=shifts, pad_yx=pad, shape_yx=shape, positions=positions, grid=grid, dz=dz,
                     warnings=warnings, meta=meta)
 
 
 def _z_grid(positions: np.ndarray, gaps: np.ndarray, *, dz_user: float | None,
-            resample: bool) -> tuple[np.ndarray | None, float, list[str]]:
-    msg = f"uneven slice spacing (gaps {gaps.min():.3g} to {gaps.max():.3g} mm)"
+            resample: bool, why: str = "") -> tuple[np.ndarray | None, float, list[str]]:
+    msg = why or f"uneven slice spacing (gaps {gaps.min():.3g} to {gaps.max():.3g} mm)"
     if not resample:
         return None, float(np.median(gaps)), [msg + ": kept as is (resample=False); slice_positions gives each "
                                                     "slice's position"]
