@@ -4,7 +4,9 @@
 
 * **DICOM**: a folder (searched recursively), one file, or a list of files; with or
   without the preamble / file meta; single- and multi-frame; grouped by
-  SeriesInstanceUID (largest series unless ``series=``), sorted along the slice
+  SeriesInstanceUID (the image series with most slices unless ``series=``; DICOM-SEG,
+  RTSTRUCT, SR and other non-image objects are skipped, each with an ``object`` kind
+  and a reason: SEG and RTSTRUCT open as labels with --labels), sorted along the slice
   normal, rescaled to HU for CT; tilt and uneven spacing corrected onto a regular
   grid (see :mod:`ctui.engine.io.series.dicom`);
 * **image stacks**: a folder of PNG/BMP/TIFF/JPEG slices (natural order: 2 before 10)
@@ -147,10 +149,12 @@ def load(
     path : folder, file, glob pattern or list of files.
     series : int or str, optional
         DICOM series to load: index into :func:`scan`'s list (0-based) or a
-        SeriesInstanceUID (or unique prefix). Default: the series with most slices.
+        SeriesInstanceUID (or unique prefix). Default: the image series with most slices.
     spacing : float or (dz, dy, dx) mm, optional
         For image stacks and raw data (default 1 mm with a warning); overrides a
-        MetaImage header's spacing.
+        MetaImage header's spacing. DICOM: only dz counts, the step of the regular grid
+        an unevenly spaced or tilted series is resampled onto, or the slice step when
+        the headers give no positions (a warning when an evenly spaced series ignores it).
     shape : (z, y, x) or (y, x), optional
         Raw data: the volume (one file) or slice (one file per slice) shape. Giving a
         shape makes ``path`` be read as raw.

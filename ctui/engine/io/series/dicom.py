@@ -11,7 +11,10 @@ Pipeline
    offset and length, so the pixel pass reads exactly those bytes; sizes a header
    claims are checked against the file size. Multi-frame files (Enhanced CT/MR) give
    one entry per frame from the functional groups.
-2. **Grouping** by SeriesInstanceUID; the largest series is loaded unless ``series=``
+2. **Grouping** by SeriesInstanceUID of the image objects only: DICOM-SEG, RTSTRUCT,
+   RT doses/plans, presentation states, SR, KO... are skipped as non-image objects
+   (``skipped`` entries with an ``object`` kind; :mod:`.dicom_sop`). The series with most
+   slices is loaded unless ``series=``
    picks one (index into :func:`scan`'s list, or a UID / UID prefix). Within the
    series, slices whose size or orientation differs from the majority are skipped with
    a reason.
