@@ -17,16 +17,21 @@ How the work is kept small (the update rule is unchanged):
 
 * the box: only the initial object's bounding box plus the farthest the front can
   travel (one band width per re-initialisation period) is worked on;
-* the band: the voxels within ``band`` of the front are listed once per
-  re-initialisation (flat indices) and each iteration visits only them, writing the new
-  values into a list and then into phi (no second volume);
-* the signed distance: exact in-plane distances (OpenCV, inside and outside in one
-  array) and a lower envelope along z over the slices within the cap, in one numba pass;
-* a convergence stop: when no voxel changes side for ``patience`` iterations in a row.
+* the band: the voxels the front can reach before the next re-initialisation (reinit x dt
+  x (1 + c / pixel) + one voxel step) are listed once per re-initialisation as runs along
+  x, and each iteration visits only them, writing the new values into a list and then
+  into phi (no second volume);
+* the signed distance: in-plane distances (OpenCV's 5 x 5 chamfer, inside and outside
+  in one array, slices without inside voxels skipped) and a lower envelope along z over
+  the slices within the cap, in one numba pass a row at a time;
+* a convergence stop: when no voxel changes side for as long as a front at half speed
+  needs to cross a voxel.
 
 benchmarks/segment_methods.py compares it with SimpleITK's filter (same start, same
-iterations) on a 100 x 200 x 200 region: 2.8 s wall (0.94 s CPU) before these changes,
-see the module's git log for the figures after.
+iterations) on a 100 x 200 x 200 region (``--only levelset``, on the loaded 2-core machine):
+0.69 s wall, 0.34 s CPU, against SimpleITK's 9.3 s wall, 2.3 s CPU, with the same result as the
+full-volume sweep this replaced (2.8 s wall, 0.94 s CPU): 0.994 x truth, Dice 0.997
+(SimpleITK 0.984 x, Dice 0.992).
 """
 
 from __future__ import annotations
