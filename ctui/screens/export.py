@@ -1,7 +1,6 @@
-"""Export (``e``): meshes (STL/PLY/OBJ), label maps (NIfTI, NRRD, DICOM-SEG, RTSTRUCT), the
-objects table (CSV), MRIC contours (all by :func:`ctui.engine.actions.export.export`, what
-``ctui export`` runs), or the current image (PNG). The TUI asks what and where, runs it in
-a worker (progress row, Esc cancels) and reports the file written."""
+"""Export (``e``): mesh (STL/PLY/OBJ), label map (NIfTI/NRRD), MRIC contours, or the
+current image (PNG). Each writer is the engine's (atomic); the TUI asks what and where,
+runs it in a worker and reports the file written."""
 
 from __future__ import annotations
 
@@ -17,7 +16,7 @@ from ctui.engine.io import meshes as meshio
 from ctui.engine.io import mric
 from ctui.engine.io.project import Project
 from ctui.screens.session import safe_cwd
-from ctui.screens.ws_jobs import job_progress, run_job
+from ctui.screens.ws_jobs import run_job
 
 KINDS = [
     ("mesh-stl", "Mesh of the current object: STL", ".stl"),
@@ -28,12 +27,19 @@ KINDS = [
     ("meshall-obj", "Meshes of all objects in one file: OBJ", ".obj"),
     ("labels-nii", "Label map: NIfTI (.nii.gz)", ".nii.gz"),
     ("labels-nrrd", "Label map: NRRD (.seg.nrrd, 3D Slicer segmentation)", ".seg.nrrd"),
-    ("labels-dicom-seg", "DICOM-SEG over the source DICOM series", ".dcm"),
-    ("labels-rtstruct", "DICOM RTSTRUCT over the source DICOM series", ".dcm"),
-    ("table-csv", "Objects table: CSV (volumes, areas, centroids)", ".csv"),
     ("mric", "Contours: MRIC", ".mric"),
+    ("dicom-seg", "All objects: DICOM-SEG over the series (PACS, 3D Slicer)", ".dcm"),
+    ("rtstruct", "All objects: DICOM RTSTRUCT contours (radiotherapy planning)", ".dcm"),
+    ("csv", "Measurements of all objects: CSV", ".csv"),
     ("image", "Current slice view: PNG", ".png"),
 ]
+
+
+def opened_of(s) -> Opened:
+    """The session as the actions see it: its series, labels and objects (names, colours)."""
+    objects = s.seg.object_list() if s.seg is not None else []
+    return Opened.of_volume(s.volume, s.labels(), path=str(s.project_path or s.source_path or "ctui"),
+                            project=Project(source_path=str(s.source_path or ""), labels=s.labels(), objects=objects))
 
 
 def default_name(session, suffix: str, kind: str) -> str:
@@ -45,6 +51,50 @@ def default_name(session, suffix: str, kind: str) -> str:
     elif kind == "image":
         stem += f"-slice{session.z}"
     return str(safe_cwd() / f"{stem}{suffix}")
+
+
+def export_mesh(session, path: str, object_id: int):
+    """Smoothed surface of one object written with ``meshio.save_mesh``; returns the Mesh."""
+    labels = session.labels()
+    if labels is None or not (labels == object_id).any():
+        raise ValueError(f"object {object_id} is empty: nothing to export")
+    mesh = mesh_objects(opened_of(session), objects=int(object_id)).mesh  # the action `ctui mesh` calls
+    mesh.object_id = int(object_id)
+    meshio.save_mesh(path, mesh)
+    return mesh
+
+
+def export_all_meshes(session, path: str):
+    """Smoothed surfaces of every object (each closed on its own) written as one mesh
+    file; returns (Mesh, number of objects)."""
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    res = mesh_objects(opened_of(session))  # the action `ctui mesh` calls: the same surfaces
+    meshio.save_mesh(path, res.mesh)
+    return res.mesh, len(res.meshes)
+
+
+def export_labels(session, path: str):
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    names = {i: o.name for i, o in session.seg.objects.items()} if session.seg is not None else None
+    return labelio.save_labels(path, labels, session.volume, names=names)
+
+
+def export_mric(session, path: str):
+    labels = session.labels()
+    if labels is None or not labels.any():
+        raise ValueError("no objects to export")
+    slices = borders.borders_for_mric(labels)
+    ny, nx = labels.shape[1:]
+    from ctui.engine.core.windows import apply_window
+
+    image = apply_window(session.volume.data[session.z], session.window)
+    v = session.volume  # the sidecar <name>.mric.json keeps the true voxel size
+    return mric.write_mric(path, slices, width=nx, height=ny, image=image, spacing=v.spacing, origin=v.origin,
+                           direction=v.direction)
 
 
 def export_image(rgb: np.ndarray, path: str):
@@ -59,23 +109,34 @@ def export_image(rgb: np.ndarray, path: str):
     return Path(path)
 
 
-def run_export(ws, kind: str, path: str, *, progress=None) -> str:
-    """Do one export (called in a worker thread) with :func:`ctui.engine.actions.export.export`,
-    the action ``ctui export`` calls; returns a message."""
+def run_export(ws, kind: str, path: str) -> str:
+    """Do one export (called in a worker thread); returns a message."""
     s = ws.s
+    if kind.startswith("meshall"):
+        mesh, n = export_all_meshes(s, path)
+        return f"Wrote {path}: {n} objects, {len(mesh.faces)} triangles, {mesh.volume_mm3() / 1000:.2f} ml"
+    if kind.startswith("mesh"):
+        mesh = export_mesh(s, path, s.current)
+        return f"Wrote {path}: {len(mesh.faces)} triangles, {mesh.volume_mm3() / 1000:.2f} ml"
+    if kind.startswith("labels"):
+        export_labels(s, path)
+        return f"Wrote label map {path}"
+    if kind == "mric":
+        export_mric(s, path)
+        return f"Wrote MRIC contours {path}"
+    if kind in ("dicom-seg", "rtstruct", "csv"):  # the action `ctui export` calls
+        from ctui.engine.actions.export import export
+
+        res = export(opened_of(s), format=kind, out=path)
+        return f"Wrote {path}: {len(res.objects)} objects" + "".join(f"; {w}" for w in res.warnings[:1])
     if kind == "image":
-        rgb = ws.main_view.rgb
+        iv = ws.main_view
+        rgb = iv.rgb
         if rgb is None:
             raise ValueError("no image shown")
         export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
         return f"Wrote {path}"
-    fmt = {"labels-nii": "nifti", "table-csv": "csv"}.get(kind, kind.split("-", 1)[-1])
-    objects = s.current if kind.startswith("mesh-") else None
-    series = s.source_path if fmt in ("dicom-seg", "rtstruct") else None
-    res = export(opened_of(s), format=fmt, out=path, objects=objects, series=series, progress=progress)
-    names = ", ".join(str(o["id"]) for o in res.objects)
-    extra = f" ({'; '.join(res.warnings)})" if res.warnings else ""
-    return f"Wrote {path}: {fmt}, object(s) {names}{extra}"
+    raise ValueError(f"unknown export {kind}")
 
 
 def export_dialog(ws) -> None:
@@ -94,7 +155,7 @@ def export_dialog(ws) -> None:
             path = str(Path(path.strip()).expanduser())
 
             def work() -> str:
-                msg = run_export(ws, kind, path, progress=job_progress(ws, f"Export {kind}"))
+                msg = run_export(ws, kind, path)
                 ws.last_export = path
                 return msg
 
