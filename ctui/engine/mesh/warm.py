@@ -37,18 +37,23 @@ def _multilabel() -> None:
 
 
 def _normals() -> None:
-    from ctui.engine.mesh.meshtools import vertex_normals
+    from ctui.engine.mesh.meshtools import _vertex_normals
 
-    vertex_normals(np.eye(3, dtype=np.float32), np.array([[0, 1, 2]], np.int32))
+    _vertex_normals(np.eye(3), np.array([[0, 1, 2]], np.int64))
 
 
 def _contours() -> None:
-    from ctui.engine.mesh.contour_connect import connect_contours
+    # the kernels themselves: connect_contours would tile a small stack in plain Python
+    from ctui.engine.mesh.contour_tiling import _tile_range
 
-    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    ring = np.stack([10 + 5 * np.cos(t), 10 + 5 * np.sin(t)], axis=1)
-    for method in ("dp", "greedy"):
-        connect_contours([[ring], [ring]], method=method)
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    ring = np.ascontiguousarray(np.stack([np.cos(t), np.sin(t), np.zeros(12)], axis=1))
+    ids = np.arange(12, dtype=np.int64)
+    off = np.array([0, 12], np.int64)
+    for use_dp in (True, False):
+        out = np.empty((24, 3), np.int64)
+        _tile_range(ring, off, ids, ring + [0.0, 0.0, 1.0], off, ids + 12, np.zeros(1, np.int64), use_dp,
+                    np.array([0, 24], np.int64), out, np.ones(1, np.int64), 0, 1)
 
 
 STEPS = (("marching cubes (int16)", lambda: _marching(np.int16)),
