@@ -36,7 +36,7 @@ __all__ = [
     "ANTIALIAS", "MODES", "PRESETS", "EGL_PACKAGES", "Camera", "CameraSetup", "EGLUnavailable", "Light",
     "Material", "Renderer", "RenderOptions", "Scene", "SceneMesh", "SceneVolume", "SlicePlane",
     "egl_available", "encode_png", "flythrough_cameras", "flythrough_frames", "flythrough_scene", "get_renderer", "preset_names",
-    "render", "save_animation", "save_flythrough", "save_png", "save_turntable", "setup_camera",
+    "render", "save_animation", "save_flythrough", "save_png", "save_turntable", "setup_camera", "turntable_frames",
 ]
 
 
