@@ -294,7 +294,7 @@ async def test_edits_wait_while_propagation_runs(monkeypatch):
     orig = Pipeline.final_region
 
     def slow(self, *a, **k):
-        time.sleep(0.05)
+        time.sleep(0.2)  # long enough that Escape comes while it runs, even on a loaded machine
         return orig(self, *a, **k)
 
     monkeypatch.setattr(Pipeline, "final_region", slow)
