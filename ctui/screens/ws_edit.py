@@ -208,7 +208,7 @@ class EditMixin:
     def action_tools(self) -> None:
         from ctui.screens.dialogs import ChoiceScreen
 
-        options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels"),
+        options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels (X)"),
                    ("fill_between", "Fill between slices (F)"), ("edit_mode", "Mode add / replace / subtract (R)"),
                    ("limits", "Limits: slice range and HU range (i)"), ("stop_slice", "Stop at this slice (s)")]
 
