@@ -464,26 +464,7 @@ def connect_contours(
     def end(loop_group: list[_Loop], up: bool) -> None:
         _end_cap(builder, loop_group, up, half_slice_ends)
 
-    nz = len(slices)
-    for z in range(nz + 1):
-        below = slices[z - 1] if z > 0 else []
-        above = slices[z] if z < nz else []
-        # overlap graph between slice z-1 (below) and z (above), same loop type
-        groups, matched_b, matched_a = _slice_pair_groups(below, above)
-        for lo, hi in groups:
-            tile(lo, hi)
-        # ends: loops of `below` with no partner above -> top caps; `above` with none below -> bottom caps
-        for loops, matched, up in ((below, matched_b, True), (above, matched_a, False)):
-            for i, lp in enumerate(loops):
-                if matched[i]:
-                    continue
-                if lp.hole:
-                    if lp.parent >= 0 and not matched[lp.parent]:
-                        continue  # capped with its outer loop
-                    end([lp], up)
-                else:
-                    holes = [h for k, h in enumerate(loops) if h.hole and h.parent == i and not matched[k]]
-                    end([lp] + holes, up)
+    _walk_slice_pairs(slices, tile, end)
     n_points = sum(len(j[1]) + len(j[3]) for j in jobs)
     compiled = n_points > contour_tiling.PY_TILING_MAX_POINTS or contour_tiling.kernels_ready()
     _run_tiling(jobs, builder, band=band, method=method)
@@ -506,6 +487,34 @@ def connect_contours(
         mesh = split_non_manifold(drop_opposite_twins(mesh))
     mesh.normals = vertex_normals(mesh.vertices, mesh.faces)
     return mesh
+
+
+def _walk_slice_pairs(slices: list[list[_Loop]], tile: Any, end: Any) -> None:
+    """Tile every pair of neighbouring slices' matched loops and cap the unmatched ones.
+
+    ``tile(lower, upper)`` joins groups of overlapping loops; ``end(loops, up)`` caps
+    a loop (with its unmatched holes) that has no partner above (up) or below.
+    """
+    nz = len(slices)
+    for z in range(nz + 1):
+        below = slices[z - 1] if z > 0 else []
+        above = slices[z] if z < nz else []
+        # overlap graph between slice z-1 (below) and z (above), same loop type
+        groups, matched_b, matched_a = _slice_pair_groups(below, above)
+        for lo, hi in groups:
+            tile(lo, hi)
+        # ends: loops of `below` with no partner above -> top caps; `above` with none below -> bottom caps
+        for loops, matched, up in ((below, matched_b, True), (above, matched_a, False)):
+            for i, lp in enumerate(loops):
+                if matched[i]:
+                    continue
+                if lp.hole:
+                    if lp.parent >= 0 and not matched[lp.parent]:
+                        continue  # capped with its outer loop
+                    end([lp], up)
+                else:
+                    holes = [h for k, h in enumerate(loops) if h.hole and h.parent == i and not matched[k]]
+                    end([lp] + holes, up)
 
 
 def _has_nonmanifold_edge(faces: np.ndarray, n_vertices: int) -> bool:
