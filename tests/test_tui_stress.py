@@ -309,9 +309,8 @@ async def test_edits_wait_while_propagation_runs(monkeypatch):
         await pilot.pause(0.05)
         assert ws._prop is not None
         labels = s.seg.labels.copy()
-        t0 = time.monotonic()
         await pilot.press("enter", "u", "U", "pageup", "pagedown")  # edits refused, navigation works
-        assert time.monotonic() - t0 < 2.0  # the UI did not wait for the propagation
+        assert ws._prop is not None  # the keys were handled while the propagation still runs
         assert np.array_equal(s.seg.labels, labels)
         await pilot.press("escape")
         await wait_for(pilot, lambda: ws._prop is None and ws.proposal is not None, what="the cancelled proposal")

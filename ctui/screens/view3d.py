@@ -285,6 +285,11 @@ class View3DScreen(GuardMixin, Screen):
         opts = self.scene.options
         if opts.slice_plane is None:
             opts.slice_plane = render.SlicePlane(axis="z", index=int(self.s.z))
+            cam = self.scene.camera
+            if abs(cam.elevation) < 15.0:
+                # an axial plane seen edge-on is an invisible line: look at it from above
+                cam.elevation = 30.0
+                self.app.notify("Slice plane: camera raised to 30° so the axial slice shows", timeout=3)
         else:
             opts.slice_plane = None
         self._info()

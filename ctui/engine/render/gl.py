@@ -173,6 +173,8 @@ class GLEngine:
             for m, _ in opaque + transparent:
                 self._draw(m, 2, m.rgb(), cull=False)
             ctx.wireframe = False
+            if opts.slice_plane is not None and scene.volume is not None:
+                self._draw_slice(scene, cs)
             return
         if opts.wireframe_overlay:
             ctx.polygon_offset = (1.0, 1.0)
