@@ -10,12 +10,14 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, Static
 
+from ctui.engine.actions.drift import drift_check
 from ctui.engine.core.colors import object_color
 from ctui.engine.segment import drift
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import Call
 from ctui.screens.plot import line_plot
+from ctui.screens.projects import opened_of
 
 
 class DriftScreen(GuardMixin, Screen):
@@ -62,7 +64,7 @@ class DriftScreen(GuardMixin, Screen):
             self.post_message(Call(self._info, "No objects yet: segment one (Enter, p) to check drift."))
             return
         try:
-            rep = drift.analyze_drift(labels, self.s.volume)
+            rep = drift_check(opened_of(self.s)).report  # the same check as `ctui drift`
         except Exception as exc:
             self.app.notify(f"Drift analysis failed: {exc}", severity="error")
             return

@@ -9,12 +9,11 @@ from pathlib import Path
 import numpy as np
 
 from ctui.engine.actions.mesh import mesh_objects
-from ctui.engine.actions.opened import Opened
 from ctui.engine.core import borders
 from ctui.engine.io import labels as labelio
 from ctui.engine.io import meshes as meshio
 from ctui.engine.io import mric
-from ctui.engine.io.project import Project
+from ctui.screens.projects import opened_of
 from ctui.screens.session import safe_cwd
 from ctui.screens.ws_jobs import run_job
 
@@ -33,13 +32,6 @@ KINDS = [
     ("csv", "Measurements of all objects: CSV", ".csv"),
     ("image", "Current slice view: PNG", ".png"),
 ]
-
-
-def opened_of(s) -> Opened:
-    """The session as the actions see it: its series, labels and objects (names, colours)."""
-    objects = s.seg.object_list() if s.seg is not None else []
-    return Opened.of_volume(s.volume, s.labels(), path=str(s.project_path or s.source_path or "ctui"),
-                            project=Project(source_path=str(s.source_path or ""), labels=s.labels(), objects=objects))
 
 
 def default_name(session, suffix: str, kind: str) -> str:

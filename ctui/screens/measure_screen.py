@@ -178,7 +178,10 @@ class MeasureScreen(GuardMixin, Screen):
         self.post_message(JobDone("sections", res, oid=oid))
 
     def _show_sections(self, oid: int, res) -> None:
-        rows = res.rows
+        # the cross-sections only (as `ctui measure` reports them): caps, branches and
+        # sections outside the object are counted, not drawn as areas
+        rows = [r for r in res.rows if r.get("status", "ok") == "ok"]
+        left_out = len(res.rows) - len(rows)
         self.sections, self.sections_obj, self.result = rows, oid, res
         iv = self.query_one("#ms-plot", ImageView)
         sm = [r["s_mm"] for r in rows]
@@ -189,7 +192,8 @@ class MeasureScreen(GuardMixin, Screen):
         ok = a[np.isfinite(a)]
         length = float(sm[-1]) if sm else 0.0
         src = "grey levels (partial volume)" if self.grey else "mask"
-        lines = [f"[b]Sections of object {oid}[/b] from the {src}", f"path {length:.1f} mm, {len(rows)} sections", "",
+        lines = [f"[b]Sections of object {oid}[/b] from the {src}", f"path {length:.1f} mm, {len(rows)} sections"
+                 + (f" ({left_out} at caps/branches left out)" if left_out else ""), "",
                  f"area {lim[2]:.0f}..{lim[3]:.0f} mm² (y axis)", f"arc 0..{length:.0f} mm (x axis)"]
         if ok.size:
             lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
@@ -222,7 +226,8 @@ class MeasureScreen(GuardMixin, Screen):
     def _save(self, path: str) -> None:
         png = path.rsplit(".", 1)[0] + ".png"
         try:
-            save_sections(self.result, csv=path, plot=png)
+            save_sections(self.result, csv=path, plot=png,
+                          inputs=[str(p) for p in (self.s.source_path, self.s.project_path) if p])
         except Exception as exc:
             self.post_message(JobFailed("Not saved", str(exc)))
             return

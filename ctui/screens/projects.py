@@ -7,7 +7,7 @@ from ctui.engine.actions.opened import Opened
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io import project
 from ctui.engine.segment import pipeline, selection
-from ctui.screens import edittools
+from ctui.engine.actions import edit as edittools
 from ctui.screens.planes import PLANES
 from ctui.screens.session import Session
 

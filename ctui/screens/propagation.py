@@ -44,11 +44,7 @@ def settings_for(session, direction: str):
     if lim is not None:
         if not lim[0] <= s.z <= lim[1]:
             raise CtuiError(f"slice {s.z} is outside the limits {lim[0]}..{lim[1]} (i changes them)")
-        fields = propagate.PropagationSettings.__dataclass_fields__
-        if "slices" in fields:
-            kw["slices"] = (int(lim[0]), int(lim[1]))
-        else:
-            kw["max_slices"] = max(lim[1] - s.z, s.z - lim[0])
+        kw["slices"] = (int(lim[0]), int(lim[1]))
     return propagate.PropagationSettings(low=lo, high=hi, direction=direction, mode=s.prop_mode,
                                          connectivity=int(st.get("connectivity", s.connectivity)), **kw)
 

@@ -20,7 +20,7 @@ from ctui.engine.core.windows import CT_PRESETS, apply_window
 from ctui.engine.io import phantom
 from ctui.engine.io import series as loaders
 from ctui.engine.segment import pipeline, selection
-from ctui.screens.edittools import EditLimits
+from ctui.engine.actions.edit import EditLimits
 
 VIEWS = ("original", "overlay", "intermediate", "final")
 

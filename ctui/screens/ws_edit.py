@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError
-from ctui.screens import edittools as et
+from ctui.engine.actions import edit as et
 from ctui.screens.planes import plane_view
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -54,7 +54,8 @@ class EditMixin:
                 image = s.pipeline.final_slice(s.volume, s.z)
             kw = {"low": s.range_[0], "high": s.range_[1]} if s.range_ else {"tolerance": s.tolerance}
             n, reason, (lo, hi) = et.fill_slice(s.seg, image, s.x, s.y, s.z, object_id=s.current, mode=s.edit_mode,
-                                                connectivity=s.connectivity, limits=s.limits, data=s.volume.data, **kw)
+                                                connectivity=s.connectivity, limits=s.limits, data=s.volume.data,
+                                                spacing_yx=tuple(s.volume.spacing[1:]), **kw)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return

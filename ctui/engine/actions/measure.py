@@ -12,6 +12,7 @@ import numpy as np
 
 from ctui.engine.actions import defaults
 from ctui.engine.actions.opened import Opened, input_kind, open_input
+from ctui.engine.core.atomic import check_outputs
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
 from ctui.engine.measure.report import plot_sections, write_sections_csv
@@ -124,8 +125,14 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
 
 
 def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None,
-                  plot: str | os.PathLike | None = None, references: Sequence[float] | None = None) -> list[str]:
-    """Write the section table (CSV) and/or the area plot (PNG); returns the paths written."""
+                  plot: str | os.PathLike | None = None, references: Sequence[float] | None = None,
+                  inputs: Sequence[str | os.PathLike] = ()) -> list[str]:
+    """Write the section table (CSV) and/or the area plot (PNG); returns the paths written.
+
+    Refuses (CtuiError) an output that is the measured input (``result.input``) or one of
+    ``inputs``, or two outputs that are the same file, before writing anything."""
+    srcs = [p for p in (result.input, *inputs) if p and os.path.exists(p)]
+    check_outputs({k: v for k, v in (("section table", csv), ("section plot", plot)) if v}, inputs=srcs)
     written = []
     if csv:
         write_sections_csv(csv, result.rows)

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
+from ctui.engine.core.atomic import check_output
 from ctui.engine.core.volume import Volume
 from ctui.engine.io import project as projectio
 from ctui.engine.io.project import Project
@@ -31,11 +32,13 @@ def new_project(volume: Volume | None, *, source_path: str | os.PathLike = "", s
 
 
 def save_project(path: str | os.PathLike, project: Project, *, volume: Volume | None = None,
-                 autosave: bool = False) -> Path:
+                 autosave: bool = False, inputs: Sequence[str | os.PathLike] = ()) -> Path:
     """Write ``project`` atomically (its source identity refreshed from ``volume`` when
-    given); ``autosave`` writes the recovery file for ``path`` instead."""
+    given); ``autosave`` writes the recovery file for ``path`` instead. Refuses a
+    ``path`` that is (or lies inside) the project's source series or one of ``inputs``."""
     if volume is not None:
         project.set_source(volume)
     if autosave:
         return projectio.autosave(project, path)
+    check_output(path, inputs=[project.source_path, *inputs], label="project")
     return projectio.save_project(path, project)

@@ -1,4 +1,5 @@
-"""Editing settings of the slice workspace and the calls into the engine's editing
+"""Editing actions of the slice workspace (the TUI's Enter, brush, eraser, islands, fill
+between slices), one engine function each, calling the engine's editing
 tools (:mod:`ctui.engine.segment.edit`, methods of ``Segmentation``; one undo step each):
 brush and eraser dabs on any plane limited to a slice range and a value (HU) range,
 fill in three modes (add, replace, subtract), keep the largest island, remove islands
@@ -15,7 +16,8 @@ from dataclasses import dataclass
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.segment.edit import MODES
-from ctui.engine.segment.selection import Segmentation, fill_range, threshold_fill
+from ctui.engine.segment.necks import DEFAULT_NECK_MM
+from ctui.engine.segment.selection import Segmentation, fill_range, neck_fill
 
 __all__ = ["MODES", "EditLimits", "dab", "fill_slice", "parse_limits"]
 
@@ -84,10 +86,13 @@ def dab(seg: Segmentation, volume, zyx: tuple[int, int, int], *, axis: int, obje
 def fill_slice(seg: Segmentation, image, x: int, y: int, z: int, *, object_id: int, mode: str,
                low: float | None = None, high: float | None = None, tolerance: float | None = None,
                connectivity: int = 8, min_area: int = 5, limits: EditLimits | None = None,
-               data=None) -> tuple[int, str, tuple[float, float]]:
-    """Threshold fill at (x, y) on slice z applied in ``mode`` (one undo step); the HU
-    limit masks it as it does the brush. Returns (pixels changed, the reason when
-    nothing changed, (low, high))."""
+               data=None, neck_mm: float = DEFAULT_NECK_MM,
+               spacing_yx: tuple[float, float] = (1.0, 1.0)) -> tuple[int, str, tuple[float, float]]:
+    """Threshold fill at (x, y) on slice z, cut at necks narrower than ``neck_mm`` (the
+    same seed-slice fill as ``ctui segment``: :func:`neck_fill`; pixel size
+    ``spacing_yx`` (dy, dx) mm), applied in ``mode`` (one undo step); the HU limit masks
+    it as it does the brush. Returns (pixels changed, the reason when nothing changed,
+    (low, high))."""
     nz, ny, nx = seg.shape
     if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
         raise CtuiError(f"seed ({x}, {y}, {z}) outside the volume")
@@ -95,7 +100,8 @@ def fill_slice(seg: Segmentation, image, x: int, y: int, z: int, *, object_id: i
     if not lim.allows_slice(z):
         raise CtuiError(f"slice {z} is outside the edit limits ({lim.describe()})")
     lo, hi = fill_range(float(image[y, x]), tolerance=tolerance, low=low, high=high)
-    mask = threshold_fill(image, x, y, low=lo, high=hi, connectivity=connectivity)
+    mask = neck_fill(image, x, y, low=lo, high=hi, connectivity=connectivity, neck_mm=neck_mm,
+                     spacing_yx=spacing_yx)
     if data is not None and lim.values is not None:
         mask &= (data[z] >= lim.values[0]) & (data[z] <= lim.values[1])
     area = int(mask.sum())
@@ -107,7 +113,7 @@ def fill_slice(seg: Segmentation, image, x: int, y: int, z: int, *, object_id: i
         seg.add_object(object_id=object_id)
         info = seg.objects[object_id]
         info.seeds.append((int(x), int(y), int(z)))
-        info.settings.update({"low": lo, "high": hi, "connectivity": connectivity})
+        info.settings.update({"low": lo, "high": hi, "connectivity": connectivity, "neck_mm": neck_mm})
     verb = {"add": "fill", "replace": "replace", "subtract": "subtract"}[mode]
     n = seg.apply_mask(mask, object_id, offset=(z, 0, 0), mode=mode, axis=0, overwrite=(mode == "replace"),
                        label=f"{verb} object {object_id} at ({x}, {y}, {z})")
