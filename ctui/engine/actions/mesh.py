@@ -52,6 +52,8 @@ class MeshResult:
             d["objects"] = list(self.objects)
         if self.iso is not None:
             d["iso"] = self.iso
+        if self.notes:
+            d["notes"] = list(self.notes)
         return d
 
 
@@ -178,6 +180,10 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
     else:
         raise CtuiError(f"cannot mesh a {kind} file", path=opened.path)
     parts = [res.meshes[k] for k in sorted(res.meshes)]
+    for part in parts:  # e.g. "greedy tiling: the minimum-area kernel is being compiled (first use)"
+        note = (part.meta or {}).get("note")
+        if note and note not in res.notes:
+            res.notes.append(str(note))
     mesh = parts[0] if len(parts) == 1 and kind in ("series", "mric") else meshtools.merge(
         parts, object_id=res.objects[0] if len(res.objects) == 1 else 0, meta={"method": method})
     if smooth:
