@@ -167,3 +167,35 @@ def test_labels_only_stand_in_series(project):
     vol = labels_only_volume(p)
     assert vol.shape == p.labels.shape and vol.geometry.same_grid(p.geometry) and not vol.data.any()
     assert vol.meta["labels_only"] and vol.modality == "CT" and vol.window == p.window
+
+
+async def test_tui_opens_a_project_without_its_series_labels_only(project, tmp_path):
+    """The TUI opens a project whose series moved away: its objects on the recorded grid
+    (no grey levels, said in a warning); saving it keeps the series' identity, so the
+    project still opens over the series once it is back."""
+    from ctui.engine.actions.opened import open_project
+    from ctui.engine.io.project import load_project
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.testing import wait_workspace
+
+    d, series, proj = project
+    before = load_project(proj)
+    away = d / "series-away"
+    series.rename(away)
+    try:
+        app = CtuiApp(project=str(proj))
+        async with app.run_test(size=(120, 40)) as pilot:
+            await wait_workspace(pilot, app)
+            s = app.session
+            assert s.volume.meta.get("labels_only") and not s.volume.data.any()
+            assert np.array_equal(s.labels(), before.labels)
+            assert any("labels only" in w for w in s.volume.warnings)
+            out = tmp_path / "copy.ctui"
+            app._save_to(str(out))
+            assert not app.internal_errors
+        saved = load_project(out)
+        assert saved.voxel_hash == before.voxel_hash and saved.geometry.same_grid(before.geometry)
+        assert np.array_equal(saved.labels, before.labels)
+    finally:
+        away.rename(series)
+    assert open_project(str(out), with_series=True).volume is not None  # the series is back: it opens over it

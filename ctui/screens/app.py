@@ -15,7 +15,7 @@ from textual.app import App, SystemCommand
 from textual.binding import Binding
 from textual.screen import Screen
 
-from ctui.engine.actions.opened import check_source, series_available
+from ctui.engine.actions.opened import check_source, labels_only_volume, series_available
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io import project
 from ctui.engine.io.project import source_load_options
@@ -160,11 +160,11 @@ class CtuiApp(App):
     def load_project_worker(self, path: str) -> None:
         try:
             proj = project.load_project(path)
-            if not series_available(proj):  # an empty source path must not load the current folder
-                raise CtuiError(f"the source series {proj.source_path or '(none)'} is missing; ctui measure, mesh "
-                                "and render work from the project alone", path=path)
-            vol = load_volume(proj.source_path, **source_load_options(proj))
-            check_source(proj, vol, path)  # a series whose voxels changed is refused
+            if series_available(proj):  # an empty source path must not load the current folder
+                vol = load_volume(proj.source_path, **source_load_options(proj))
+                check_source(proj, vol, path)  # a series whose voxels changed is refused
+            else:  # the series moved: the objects on the recorded geometry, no grey levels
+                vol = labels_only_volume(proj, path)
             sess = session_from_project(proj, vol, path)
         except CtuiError as exc:
             self.post_message(LoadFailed(path, [str(exc)]))

@@ -41,7 +41,7 @@ def project_from_session(s: Session):
     seg = s.seg
     labels = getattr(seg, "labels", None)
     objects = seg.object_list() if seg is not None else []
-    return project.Project(
+    proj = project.Project(
         source_path=str(s.source_path),
         source_options=dict(s.source_options or {}),
         pipeline=s.pipeline.to_dict() if s.pipeline is not None else {},
@@ -54,7 +54,12 @@ def project_from_session(s: Session):
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view, "plane": s.plane, "edit_mode": s.edit_mode,
               "brush": s.brush, "limit_slices": list(s.limits.slices) if s.limits.slices else None,
               "limit_values": list(s.limits.values) if s.limits.values else None},
-    ).set_source(s.volume, data=getattr(s, "original_data", None))  # geometry + identity (of the voxels as loaded)
+    )
+    if s.source_identity:  # labels only: the missing series' identity, not the stand-in's
+        for key, value in s.source_identity.items():
+            setattr(proj, key, value)
+        return proj
+    return proj.set_source(s.volume, data=getattr(s, "original_data", None))  # geometry + identity (as loaded)
 
 
 def session_from_project(proj, volume, path: str) -> Session:
@@ -80,4 +85,7 @@ def session_from_project(proj, volume, path: str) -> Session:
     _editing_from_meta(s, meta)
     s.drift_info = dict(proj.drift or {})
     s.project_path = path
+    if (volume.meta or {}).get("labels_only"):
+        s.source_identity = {"geometry": proj.geometry, "modality": proj.modality, "series_uid": proj.series_uid,
+                             "voxel_hash": proj.voxel_hash}
     return s

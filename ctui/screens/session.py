@@ -72,6 +72,9 @@ class Session:
     brush: int = 3  # brush/eraser radius, pixels of the finest in-plane spacing
     tool: str | None = None  # "brush" / "eraser" while the pen is down (moving paints)
     limits: EditLimits = field(default_factory=EditLimits)  # where edits and propagation may write
+    # a project opened without its series (labels only): the series' recorded identity,
+    # kept when the project is saved (the stand-in zeros must not replace it)
+    source_identity: dict | None = None
     _lock: Any = field(default_factory=threading.RLock)
 
     def __post_init__(self) -> None:
