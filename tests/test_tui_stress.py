@@ -123,15 +123,17 @@ async def test_source_folder_vanishes_while_running(tmp_path):
         assert type(app.screen).__name__ == "OpenScreen"
         await pilot.press("escape")
         await pilot.pause()
-    # resuming a project whose source is gone: the reasons on screen, the app alive
+    # resuming a project whose source is gone: its objects, labels only, and a warning saying so
     app2 = CtuiApp(project=str(proj))
     async with app2.run_test(size=(120, 40)) as pilot:
-        await wait_for(pilot, lambda: app2.errors, what="the load error")
-        assert isinstance(app2.screen, LoadingScreen)
-        assert "vanishing" in " ".join(app2.errors)
+        await wait_workspace(pilot, app2)
+        vol = app2.session.volume
+        assert vol.meta.get("labels_only") and any("vanishing" in w and "labels only" in w for w in vol.warnings)
+        assert np.array_equal(app2.session.seg.labels, s.seg.labels)
         await pilot.press("o")
         await pilot.pause()
         assert type(app2.screen).__name__ == "OpenScreen"
+        assert not app2.internal_errors
 
 
 async def test_unloadable_path_shows_reasons(tmp_path):

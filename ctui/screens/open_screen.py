@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rich.text import Text
 from textual import work
+from textual.worker import get_current_worker
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
@@ -15,6 +16,7 @@ from textual.screen import ModalScreen
 from textual.widgets import DirectoryTree, Footer, Input, Label, OptionList
 from textual.widgets.option_list import Option
 
+from ctui.engine.core.progress import Cancelled
 from ctui.engine.io import series as loaders
 from ctui.screens.guard import GuardMixin
 from ctui.screens.messages import Call
@@ -74,6 +76,8 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
         self.scan(Path(event.path))
 
     def on_tree_node_highlighted(self, event) -> None:
+        if getattr(event.node, "is_root", False):
+            return  # the parent folder, highlighted on mount: scanned on Enter only (it may be a large tree)
         data = getattr(event.node, "data", None)
         path = getattr(data, "path", None)
         if path is not None and Path(path).is_dir():
@@ -103,13 +107,25 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
 
     @work(thread=True, exclusive=True, group="scan")
     def scan(self, path: Path) -> None:
+        """Series in ``path`` (headers only). A newer scan (the user moved on) or closing the
+        screen cancels this one between headers: a large tree is not read to the end."""
+        worker = get_current_worker()
         self.post_message(Call(self._status, f"Scanning {path} ..."))
+
+        def progress(done: float, total: float, message: str = "") -> None:
+            if worker.is_cancelled:
+                raise Cancelled()
+            self.post_message(Call(self._status, f"Scanning {path}: {message} {done:g}/{total:g}"))
+
         try:
-            found = loaders.scan(str(path))
+            found = loaders.scan(str(path), progress=progress)
             err = None
+        except Cancelled:
+            return
         except Exception as exc:  # unreadable folder, loader error: a reason, not a traceback
             found, err = [], str(exc)
-        self.post_message(Call(self._show, path, found, err))
+        if not worker.is_cancelled:
+            self.post_message(Call(self._show, path, found, err))
 
     def _status(self, text: str) -> None:
         self.query_one("#op-status", Label).update(text)

@@ -38,6 +38,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_key
 
@@ -339,8 +340,12 @@ def _with_series(vol: Volume) -> Volume:
 
 
 def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = None, dtype: Any = None,
-         spacing: Any = None) -> list[dict[str, Any]]:
+         spacing: Any = None, progress: Progress | None = None) -> list[dict[str, Any]]:
     """Series found at ``path``, from headers only (no pixel decoding).
+
+    ``progress(done, total, message)`` is called while DICOM headers are read; it may
+    raise :class:`~ctui.engine.core.progress.Cancelled` to stop (the TUI's open screen
+    when the user moves on to another folder).
 
     Returns a list of dicts ``{"uid", "description", "modality", "files",
     "shape_zyx", "spacing_zyx_mm", "kind"}`` (DICOM: one per SeriesInstanceUID, in the
@@ -367,7 +372,8 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if kind == "dicom":
         from ctui.engine.io.series import dicom
 
-        found, _, ids = dicom.read_headers(files, base=base)
+        found, _, ids = dicom.read_headers(files, base=base, progress=(
+            None if progress is None else lambda done, total: report(progress, done, total, "reading headers")))
         return [dicom.series_summary(s, ids=ids) for s in dicom._ordered_series(found)]
     if kind == "images":
         from ctui.engine.io.series.stacks import image_entries, parse_spacing
