@@ -147,8 +147,9 @@ def marching_cubes(
     if isinstance(thr, np.int64) and data.dtype != np.int64:
         # level below the dtype's range: everything inside, no surface
         return empty
-    if not jit.use_compiled(_KERNELS, data.dtype):
-        jit.compile_in_background()
+    if not jit.use_compiled(_KERNELS, data.dtype, work=int(data.size)):
+        if data.size >= jit.SMALL_WORK:
+            jit.compile_in_background()
         return marching_cubes_numpy(data, thr, float(level), m, org, ginv, bool(normals), progress=progress)
     return _marching_cubes_compiled(data, thr, float(level), m, org, ginv, bool(normals), progress) or empty
 

@@ -202,7 +202,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, float32 (n, 3) (outward for CCW-outside faces)."""
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    if jit.use_compiled([_vertex_normals], np.float64):
+    if jit.use_compiled([_vertex_normals], np.float64, work=len(f) * 4):
         return _vertex_normals(v, f)
     # not compiled yet (fresh install): the same sums by bincount, no compilation
     nrm = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]) if len(f) else np.zeros((0, 3))
