@@ -217,7 +217,9 @@ def test_sigkill_during_save_leaves_old_or_new(tmp_path):
     assert not stats["failures"], stats["failures"][:10]
     # killed mid-save often enough for the test to mean something
     assert sum(stats["inflight"].values()) >= 100
-    assert stats["old"] > 10 and stats["new"] >= 1
+    # (a kill landing after the rename but before the writer reported it leaves the new
+    # version: counted in stats["new"]; that window is too narrow to require it)
+    assert stats["old"] > 10
     # leftovers of killed writers are cleaned on the next save of the same target
     assert stats["stray_after_final_save"] == []
     assert stats["max_stray_tmp"] <= 2 * len(stats["writers"])
