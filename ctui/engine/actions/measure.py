@@ -131,8 +131,7 @@ def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None
 
     Refuses (CtuiError) an output that is the measured input (``result.input``) or one of
     ``inputs``, or two outputs that are the same file, before writing anything."""
-    srcs = [p for p in (result.input, *inputs) if p and os.path.exists(p)]
-    check_outputs({k: v for k, v in (("section table", csv), ("section plot", plot)) if v}, inputs=srcs)
+    check_outputs({"section table": csv, "section plot": plot}, inputs=[result.input, *inputs])
     written = []
     if csv:
         write_sections_csv(csv, result.rows)

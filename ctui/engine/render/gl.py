@@ -168,22 +168,21 @@ class GLEngine:
         for p in (self.progs["surface"], self.progs["surface_v"]):
             self._set_surface_uniforms(p, scene, cs, lpos, ldir, light_vp, shadows)
         self._draw_ctx = (cs, (w, h), opts.lighting)
-        if scene.mode == "wire":
+        wire = scene.mode == "wire"
+        if wire:
             ctx.wireframe = True
             for m, _ in opaque + transparent:
                 self._draw(m, 2, m.rgb(), cull=False)
             ctx.wireframe = False
-            if opts.slice_plane is not None and scene.volume is not None:
-                self._draw_slice(scene, cs)
-            return
-        if opts.wireframe_overlay:
-            ctx.polygon_offset = (1.0, 1.0)
-        for m, _ in opaque:
-            self._draw(m, 0, m.rgb())
-        ctx.polygon_offset = (0.0, 0.0)
+        else:
+            if opts.wireframe_overlay:
+                ctx.polygon_offset = (1.0, 1.0)
+            for m, _ in opaque:
+                self._draw(m, 0, m.rgb())
+            ctx.polygon_offset = (0.0, 0.0)
         if opts.slice_plane is not None and scene.volume is not None:
             self._draw_slice(scene, cs)
-        if opts.wireframe_overlay and opaque:
+        if opts.wireframe_overlay and opaque and not wire:
             ctx.wireframe = True
             ctx.depth_func = "<="
             for m, _ in opaque:
