@@ -12,6 +12,7 @@ printed as one line on stderr with exit status 2.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ctui import __version__
@@ -60,8 +61,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     _quiet_libraries()
     stdout = sys.stdout
-    if args.command != "open" and not getattr(args, "keep_identifiers", False):
-        _hide_input_paths(args)
+    if stdout is None:  # started with stdout closed (`ctui info X >&-`)
+        sys.stdout = stdout = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
+    if args.command != "open":
+        _hide_input_paths(args, hide=not getattr(args, "keep_identifiers", False))
     try:
         return _run(args)
     finally:
@@ -82,7 +85,9 @@ def _run(args: argparse.Namespace) -> int:
         message, code = fault
         if code == 2:
             message = _naming_the_file(message, exc, args)
-        print(f"ctui {args.command}: {message}", file=sys.stderr)
+        from ctui.engine.core.safetext import printable
+
+        _print_error(f"ctui {args.command}: {printable(message)}")
         return code
     return int(rc or 0)
 
@@ -112,8 +117,6 @@ _PATH_ARGS = ("path", "input", "manifest", "out", "outdir", "project", "mask", "
 def _naming_the_file(msg: str, exc: BaseException, args: argparse.Namespace) -> str:
     """``msg`` prefixed with the command's input when it names no file (an engine check
     deep down, e.g. of a geometry field, does not know which file it came from)."""
-    import os
-
     src = next((v for k in ("path", "input", "manifest") if (v := getattr(args, k, None))), None)
     if isinstance(src, list):
         src = src[0] if len(src) == 1 else None
@@ -141,34 +144,46 @@ def _quiet_libraries() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
+def _print_error(line: str) -> None:
+    """The one error line on stderr (nothing when stderr is closed)."""
+    if sys.stderr is None:  # started with stderr closed
+        return
+    try:
+        print(line, file=sys.stderr)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 class _PathHidingStdout:
     """stdout with the command's input path(s) shown as ``<input>`` (reports only show the
-    path when asked: --keep-identifiers). Error messages on stderr still name the file."""
+    path when asked: --keep-identifiers) and every control character escaped (text from a
+    file -- a DICOM description, a segment name -- cannot drive the terminal). Error
+    messages on stderr still name the file."""
 
     def __init__(self, stream, hide) -> None:
+        from ctui.engine.core.safetext import printable
+
         self._stream, self._hide = stream, hide
+        self._safe = lambda t: printable(t, keep_newlines=True)
 
     def write(self, text: str) -> int:
-        self._stream.write(self._hide(text))
+        self._stream.write(self._safe(self._hide(text)))
         return len(text)
 
     def __getattr__(self, name: str):
         return getattr(self._stream, name)
 
 
-def _hide_input_paths(args: argparse.Namespace) -> None:
+def _hide_input_paths(args: argparse.Namespace, *, hide: bool = True) -> None:
     from ctui.engine.core.privacy import path_hider
 
     paths = [getattr(args, k, None) for k in ("path", "input")]
-    if any(paths):
-        sys.stdout = _PathHidingStdout(sys.stdout, path_hider(paths))
+    sys.stdout = _PathHidingStdout(sys.stdout, path_hider(paths) if hide and any(paths) else (lambda t: t))
 
 
 def _broken_pipe() -> int:
     """stdout's reader went away (``ctui ... --json | head``): stop quietly like other
     Unix tools, exit 141 (128 + SIGPIPE), and keep Python from complaining at exit."""
-    import os
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

@@ -6,6 +6,11 @@ so a crash (even SIGKILL) leaves either the previous complete file or the new on
 never a half-written file. On failure (disk full, permission denied) the temporary
 file is removed and a :class:`~ctui.engine.core.errors.CtuiError` names the target.
 
+Only regular files are written: a target that is a device node, a FIFO, a socket or a
+folder (also through a symlink, e.g. ``/dev/null`` or a link to ``/proc/self/fd/1``) is
+refused with one line (:func:`regular_target`), never renamed over; a symlink to a
+regular file is written through (the file it points to is replaced, the link kept).
+
 Permissions: a new file gets ``0o666 & ~umask`` (what ``open()`` would give; with
 umask 077 the user's projects stay private), a replaced file keeps its mode.
 
@@ -111,6 +116,40 @@ def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 0.2) -> int
     return removed
 
 
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"))
+
+
+def regular_target(path: str | os.PathLike) -> Path:
+    """The file an output to ``path`` replaces: ``path`` itself, or the regular file a
+    symlink at ``path`` points to (the link is kept). Raises a one-line CtuiError when
+    ``path`` is (or links to) anything but a regular file, or is a dangling link: renaming
+    over ``/dev/null``, a FIFO or a link to a terminal would destroy it."""
+    target = Path(path)
+    try:
+        lst = os.lstat(target)
+    except OSError:
+        return target  # nothing there yet: a new file
+    except ValueError as exc:  # a NUL byte in the name
+        raise CtuiError(f"{target!r}: not a valid file name ({exc})") from exc
+    if stat.S_ISLNK(lst.st_mode):
+        try:
+            st = os.stat(target)
+        except OSError as exc:
+            raise CtuiError(f"{target}: a symbolic link to nothing that can be written ({exc.strerror or exc}); "
+                            "remove it or choose another file") from exc
+    else:
+        st = lst
+    if not stat.S_ISREG(st.st_mode):
+        what = next((name for test, name in _KINDS if test(st.st_mode)), "not a regular file")
+        via = " (through a symbolic link)" if stat.S_ISLNK(lst.st_mode) else ""
+        raise CtuiError(f"{target}: is {what}{via}; ctui writes only regular files, choose another output")
+    if stat.S_ISLNK(lst.st_mode):
+        real = Path(os.path.realpath(target))
+        return real if real.is_file() else target
+    return target
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it onto ``path``.
@@ -119,7 +158,7 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     temporary name keeps the target's suffix (or ``suffix``) so writers that pick the
     format from the extension still work.
     """
-    target = Path(path)
+    target = regular_target(path)
     folder = target.parent if str(target.parent) else Path(".")
     if suffix is None:
         suffix = "".join(target.suffixes) or ""
@@ -226,6 +265,12 @@ def check_output(out: str | os.PathLike | None, *, inputs: Iterable, label: str 
     if out is None or out == "":
         return
     out_s = os.fspath(out)
+    try:
+        st = os.stat(out_s)
+    except (OSError, ValueError):
+        st = None
+    if st is not None and not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+        regular_target(out_s)  # a device, FIFO or socket (or a link to one): refused before any work
     out_id = _ident(out_s)
     up = None
     for inp in _flat(inputs):

@@ -227,6 +227,8 @@ def equalize(image: np.ndarray, *, window: tuple[float, float] | None = None) ->
 
 def clahe(image: np.ndarray, *, clip_limit: float = 2.0, tiles: int = 8, window: tuple[float, float] | None = None) -> np.ndarray:
     """Contrast-limited adaptive histogram equalization (OpenCV CLAHE, tiles x tiles grid)."""
+    tiles = _bounded("clahe", "tiles", tiles, *_INT_BOUNDS["tiles"], integer=True)  # 0 tiles: SIGFPE in OpenCV
+    clip_limit = _bounded("clahe", "clip_limit", clip_limit, *_FLOAT_BOUNDS["clip_limit"], integer=False)
     eq = cv2.createCLAHE(clipLimit=float(clip_limit), tileGridSize=(int(tiles), int(tiles)))
     if image.dtype == np.uint8:
         return eq.apply(image)
@@ -275,6 +277,24 @@ _NEEDS_WINDOW = {"equalize", "clahe", "invert"}
 _GLOBAL = {"equalize", "clahe"}  # depend on the whole slice (histograms): cannot be cropped
 
 
+# bounds of the numeric parameters (a slice is at most a few thousand pixels wide: larger
+# kernels, iteration counts or tile grids only cost time and memory, or crash OpenCV)
+_INT_BOUNDS = {"size": (0, 255), "iterations": (1, 100), "tiles": (1, 64)}
+_FLOAT_BOUNDS = {"sigma": (0.0, 100.0), "amount": (-100.0, 100.0), "clip_limit": (0.0, 1000.0)}
+
+
+def _bounded(name: str, key: str, value: Any, lo: float, hi: float, *, integer: bool) -> float | int:
+    """``value`` as a finite number in [lo, hi] (an int when ``integer``), else ValueError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"filter {name}: {key} must be a number, got {value!r}") from None
+    if not np.isfinite(v) or not lo <= v <= hi or (integer and v != int(v)):
+        kind = "a whole number" if integer else "a finite number"
+        raise ValueError(f"filter {name}: {key} must be {kind} from {lo:g} to {hi:g}, got {value!r}")
+    return int(v) if integer else v
+
+
 def check_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     """Validate a filter's name and parameters; return the full parameter dict (defaults filled).
 
@@ -292,12 +312,12 @@ def check_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"filter {name}: shape must be one of {', '.join(SHAPES)}")
         if full["shape"] == "custom":
             make_kernel(shape="custom", kernel=full["kernel"])
-    for key in ("size", "iterations", "tiles"):
+    for key, (lo, hi) in _INT_BOUNDS.items():
         if key in full and full[key] is not None:
-            full[key] = int(full[key])
-    for key in ("sigma", "amount", "clip_limit"):
+            full[key] = _bounded(name, key, full[key], lo, hi, integer=True)
+    for key, (lo, hi) in _FLOAT_BOUNDS.items():
         if key in full:
-            full[key] = float(full[key])
+            full[key] = _bounded(name, key, full[key], lo, hi, integer=False)
     if name in ("median",) and (full["size"] < 1 or full["size"] % 2 == 0):
         raise ValueError(f"filter median: size must be odd, got {full['size']}")
     if "size" in full and name not in ("gaussian",) and full["size"] < 1:
