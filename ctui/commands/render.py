@@ -8,31 +8,34 @@ import argparse
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.info import add_load_options
+    from ctui.engine.actions import defaults
+    from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 
     p = subparsers.add_parser(
         "render",
         help="render a mesh, project or series to PNG / turntable GIF (offscreen, EGL)",
         description="Render offscreen (moderngl on EGL: no display needed). INPUT is a mesh file "
         "(STL/PLY/OBJ), a .ctui project (its segmented objects) or a series (DICOM folder, image stack, "
-        "volume file) for the volume modes mip/minip/dvr, or for surface modes with --iso. "
+        f"volume file) for the volume modes {'/'.join(VOLUME_MODES)}, or for surface modes with --iso. "
         "--out FILE: .png (one image; with --turntable N an APNG), .gif/.apng (turntable).",
     )
     p.add_argument("input", help="mesh file, .ctui project, or series path")
     p.add_argument("--out", "-o", required=True, help="output .png, .gif or .apng")
-    p.add_argument("--mode", choices=("surface", "wire", "transparent", "mip", "minip", "dvr"),
+    p.add_argument("--mode", choices=MODES,
                    help="default: surface for meshes/projects and with --iso, dvr for series")
     p.add_argument("--preset", default=None,
                    help="DVR transfer function: ct-bone, ct-soft-tissue, ct-vessels, mr-default "
                         "(default: ct-bone for CT, mr-default otherwise)")
-    p.add_argument("--azimuth", type=float, default=30.0, help="degrees about the patient's z axis (0 = from the front)")
-    p.add_argument("--elevation", type=float, default=15.0, help="degrees above the horizontal (90 = from above)")
+    p.add_argument("--azimuth", type=float, default=defaults.RENDER_AZIMUTH, help="degrees about the patient's z axis (0 = from the front)")
+    p.add_argument("--elevation", type=float, default=defaults.RENDER_ELEVATION, help="degrees above the horizontal (90 = from above)")
     p.add_argument("--roll", type=float, default=0.0, help="degrees about the view axis")
     p.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1 = fit)")
-    p.add_argument("--size", default="800x600", help="WxH pixels (default 800x600)")
+    p.add_argument("--size", default="{}x{}".format(*defaults.RENDER_SIZE),
+                   help="WxH pixels (default {}x{})".format(*defaults.RENDER_SIZE))
     p.add_argument("--light", default=None, help="AZ,EL of the movable light relative to the camera (default 35,35)")
     p.add_argument("--shadows", action="store_true", help="shadow mapping from the light")
     p.add_argument("--turntable", type=int, default=None, metavar="N", help="N frames around the object (GIF/APNG)")
-    p.add_argument("--fps", type=float, default=15.0, help="turntable frames per second")
+    p.add_argument("--fps", type=float, default=defaults.ANIMATION_FPS, help="turntable frames per second")
     p.add_argument("--iso", type=float, default=None, help="iso value (HU) for surface modes on a series")
     p.add_argument("--object", type=int, action="append", default=None, metavar="ID",
                    help="project: render only this object id (repeatable)")
@@ -50,8 +53,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--flythrough", default=None, metavar="auto|X,Y,Z;X,Y,Z;...",
                    help="endoscopic fly-through along a path in patient mm, or 'auto': the centreline of "
                         "the project object given with --object; --out a .gif/.apng or a folder for PNG frames")
-    p.add_argument("--frames", type=int, default=48, help="fly-through frames (default 48)")
-    p.add_argument("--fov", type=float, default=70.0, help="fly-through view angle in degrees (default 70)")
+    p.add_argument("--frames", type=int, default=defaults.FLY_FRAMES,
+                   help=f"fly-through frames (default {defaults.FLY_FRAMES})")
+    p.add_argument("--fov", type=float, default=defaults.FLY_FOV_DEG,
+                   help=f"fly-through view angle in degrees (default {defaults.FLY_FOV_DEG:g})")
     p.add_argument("--labels", metavar="FILE", default=None,
                    help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     add_load_options(p)

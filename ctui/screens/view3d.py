@@ -17,15 +17,16 @@ from textual.screen import Screen
 from textual.widgets import Footer, Static
 
 from ctui.engine import render
+from ctui.engine.actions import defaults
 from ctui.engine.actions.mesh import label_meshes
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 from ctui.engine.measure import centreline
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import JobDone, JobFailed, Status
 
-MODES = ("surface", "wire", "transparent", "mip", "dvr")
 METHODS = ("marching-cubes", "contours")
 
 
@@ -156,7 +157,7 @@ class View3DScreen(GuardMixin, Screen):
         if self.scene is not None:  # keep the camera and light when switching methods
             scene.camera, scene.light, scene.options = self.scene.camera, self.scene.light, self.scene.options
         self.scene = scene
-        if not meshes and self.mode in ("surface", "wire", "transparent"):
+        if not meshes and self.mode not in VOLUME_MODES:
             self.mode = "mip"
             self.app.notify("No objects yet: showing the volume (MIP); segment objects in the workspace", timeout=5)
         self._status(f"{len(meshes)} surface(s) in {dt:.2f} s")
@@ -171,7 +172,7 @@ class View3DScreen(GuardMixin, Screen):
         self.scene.mode = self.mode
         self.scene.options.window = tuple(self.s.window)
         # the volume only in volume modes: surfaces alone frame the objects, not the whole series
-        need_volume = self.mode in ("mip", "dvr") or not self.meshes or self.scene.options.slice_plane is not None
+        need_volume = self.mode in VOLUME_MODES or not self.meshes or self.scene.options.slice_plane is not None
         self.scene.set_volume(self.s.volume if need_volume else None)
         scene = self.scene.snapshot() if hasattr(self.scene, "snapshot") else copy.deepcopy(self.scene)
         size = self.query_one(ImageView).target_pixels()
@@ -333,14 +334,14 @@ class View3DScreen(GuardMixin, Screen):
         scene.mode = self.mode
         self.post_message(Status(f"Writing turntable {path} ..."))
         try:
-            render.save_turntable(path, scene, 36, (384, 384))
+            render.save_turntable(path, scene, defaults.TURNTABLE_FRAMES, (384, 384))
         except Exception as exc:
             self.post_message(JobFailed("Turntable not saved", str(exc)))
             return
         self.post_message(JobDone("saved", path))
 
     # ------------------------------------------------------------------ fly-through
-    FLY_FRAMES = 60
+    FLY_FRAMES = defaults.FLY_FRAMES
 
     def _fly_path(self):
         """Centreline (m, 3) mm of the workspace's current object, or raise CtuiError."""
@@ -359,7 +360,7 @@ class View3DScreen(GuardMixin, Screen):
         """The current scene for a flight inside the surfaces: no volume, no slice plane
         (volume modes fall back to surfaces)."""
         scene = self.scene.snapshot()
-        scene.mode = "surface" if self.mode in ("mip", "dvr") else self.mode
+        scene.mode = "surface" if self.mode in VOLUME_MODES else self.mode
         scene.set_volume(None)
         scene.options.slice_plane = None
         return scene

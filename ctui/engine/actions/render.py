@@ -15,15 +15,13 @@ from ctui.engine.actions import defaults
 from ctui.engine.actions.mesh import label_meshes
 from ctui.engine.actions.opened import Opened, input_kind, open_input, open_project, series_available
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.rendermodes import SURFACE_MODES, VOLUME_MODES
 from ctui.engine.io.project import load_project
 from ctui.engine.measure.centreline import centreline
 from ctui.engine.mesh.surface import isosurface
 from ctui.engine.render import (Light, Scene, SceneMesh, SceneVolume, SlicePlane, get_renderer, save_animation,
                                 save_flythrough, save_png, turntable_frames)
 from ctui.engine.render.transfer import resolve_preset
-
-VOLUME_MODES = ("mip", "minip", "dvr")
-SURFACE_MODES = ("surface", "wire", "transparent")
 
 
 @dataclass

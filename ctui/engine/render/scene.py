@@ -30,9 +30,8 @@ import numpy as np
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
+from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 
-MODES = ("surface", "wire", "transparent", "mip", "minip", "dvr")
-VOLUME_MODES = ("mip", "minip", "dvr")
 PROJECTIONS = ("orthographic", "perspective")
 ANTIALIAS = ("fxaa", "msaa", "none")
 
