@@ -1,0 +1,158 @@
+"""Review of a propagation proposal at a glance: the area per slice, the slices where it
+goes wrong, and cuts that keep the part joined to the seed.
+
+A proposal is :class:`ctui.engine.segment.propagate.Proposal` (``masks`` {z: (y0, x0,
+bool (h, w))}, ``areas`` {z: pixels}, ``start_slice``). The TUI's review strip draws
+:func:`profile` and :func:`marks`; ``cut here`` is :func:`cut_at` and "accept from the
+seed to here" is :func:`keep_to`.
+
+Marks, walking outward from the seed slice (each slice compared with its neighbour on
+the seed's side):
+
+* ``jump``: the area changes by more than ``area_jump`` (a fraction, 0.5 = +-50 %) and by
+  more than ``min_px`` pixels: a leak into a neighbour, or the fill losing the organ;
+* ``shift``: the centroid moves by more than ``shift_frac`` of the previous slice's
+  equivalent radius (and more than one pixel): the fill jumped to another structure.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Mark", "cut_at", "keep_to", "marks", "next_mark", "profile"]
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A marked slice: ``z``, ``kind`` ("jump" or "shift") and a one-line reason."""
+
+    z: int
+    kind: str
+    why: str
+
+
+def profile(proposal, nz: int, seed_area: int = 0) -> np.ndarray:
+    """int64 (nz,): the proposal's area (pixels) per slice, ``seed_area`` on the seed slice
+    when the proposal has none there (the seed slice is in the labels already)."""
+    out = np.zeros(int(nz), np.int64)
+    for z, a in proposal.areas.items():
+        if 0 <= z < nz:
+            out[z] = int(a)
+    s = int(proposal.start_slice)
+    if 0 <= s < nz and out[s] == 0:
+        out[s] = int(seed_area)
+    return out
+
+
+def _centroid(entry) -> tuple[float, float] | None:
+    y0, x0, m = entry
+    ys, xs = np.nonzero(m)
+    if ys.size == 0:
+        return None
+    return float(ys.mean() + y0), float(xs.mean() + x0)
+
+
+def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: np.ndarray | None = None,
+          area_jump: float = 0.5, min_px: int = 20, shift_frac: float = 0.5) -> list[Mark]:
+    """The slices where the area jumps or the centroid moves (see the module docstring),
+    sorted by slice. ``seed_mask``: bool (ny, nx) of the object on the seed slice (the
+    reference for the first slice on each side when the proposal has none there)."""
+    s = int(proposal.start_slice)
+    entries = dict(proposal.masks)
+    if s not in entries and seed_mask is not None and seed_mask.any():
+        entries[s] = (0, 0, seed_mask)
+    dy, dx = float(spacing_yx[0]), float(spacing_yx[1])
+    out: list[Mark] = []
+    for step in (1, -1):
+        prev = s
+        z = s + step
+        while z in entries:
+            a_prev = int(entries[prev][2].sum()) if prev in entries else 0
+            a = int(entries[z][2].sum())
+            if a_prev > 0:
+                change = (a - a_prev) / a_prev
+                if abs(change) > area_jump and abs(a - a_prev) > min_px:
+                    out.append(Mark(z, "jump", f"area {a_prev} -> {a} px ({change:+.0%})"))
+                c0, c1 = _centroid(entries[prev]), _centroid(entries[z])
+                if c0 is not None and c1 is not None:
+                    moved_mm = float(np.hypot((c1[0] - c0[0]) * dy, (c1[1] - c0[1]) * dx))
+                    radius_mm = float(np.sqrt(a_prev * dy * dx / np.pi))
+                    if moved_mm > shift_frac * radius_mm and moved_mm > max(dy, dx):
+                        out.append(Mark(z, "shift", f"centre moved {moved_mm:.1f} mm"))
+            prev, z = z, z + step
+    merged: dict[int, Mark] = {}
+    for m in out:
+        merged[m.z] = Mark(m.z, "jump+shift", f"{merged[m.z].why}; {m.why}") if m.z in merged else m
+    return [merged[z] for z in sorted(merged)]
+
+
+def next_mark(found: list[Mark], z: int, step: int) -> int | None:
+    """The first marked slice after (``step`` 1) or before (-1) slice ``z``, or None."""
+    zs = [m.z for m in found]
+    after = [v for v in zs if (v - z) * step > 0]
+    if not after:
+        return None
+    return min(after) if step > 0 else max(after)
+
+
+def _restricted(proposal, keep_z, seed_mask: np.ndarray | None):
+    """A copy of the proposal with only slices ``keep_z(z)`` and, of those, the 3D parts
+    joined (6-connected through the slices) to the seed: the seed slice's object
+    (``seed_mask``), else the proposal on the slices next to the seed."""
+    from scipy import ndimage
+
+    out = copy.copy(proposal)
+    out.masks = {z: e for z, e in proposal.masks.items() if keep_z(z)}
+    out.areas = {z: a for z, a in proposal.areas.items() if z in out.masks}
+    out.leaks = [lk for lk in proposal.leaks if keep_z(int(lk.get("slice", -1)))]
+    out.necks = [z for z in getattr(proposal, "necks", []) if keep_z(z)]
+    if not out.masks:
+        return out
+    s = int(proposal.start_slice)
+    ny, nx = proposal.shape[1:]
+    zs = sorted(set(out.masks) | {s})
+    z0, z1 = zs[0], zs[-1]
+    vol = np.zeros((z1 - z0 + 1, ny, nx), bool)
+    for z, (y0, x0, m) in out.masks.items():
+        vol[z - z0, y0:y0 + m.shape[0], x0:x0 + m.shape[1]] |= m
+    root = np.zeros_like(vol)
+    if seed_mask is not None and seed_mask.any():
+        root[s - z0] = seed_mask
+    else:  # no seed slice given: what the proposal holds on the seed slice and its neighbours
+        for z in (s - 1, s, s + 1):
+            if z0 <= z <= z1:
+                root[z - z0] = vol[z - z0]
+    lab, _n = ndimage.label(vol | root)
+    ids = np.unique(lab[root])
+    joined = np.isin(lab, ids[ids > 0]) & vol
+    masks, areas = {}, {}
+    for z in out.masks:
+        sl = joined[z - z0]
+        a = int(sl.sum())
+        if a:
+            ys, xs = np.nonzero(sl)
+            ya, yb, xa, xb = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+            masks[z], areas[z] = (ya, xa, sl[ya:yb, xa:xb].copy()), a
+    out.masks, out.areas = masks, areas
+    return out
+
+
+def cut_at(proposal, z: int, *, seed_mask: np.ndarray | None = None):
+    """The proposal ended at slice ``z`` (slices beyond it, away from the seed, dropped; the
+    other side kept), keeping the part joined to the seed. A new proposal; the input is
+    unchanged. ``z`` on the seed slice keeps only what is joined to the seed."""
+    s = int(proposal.start_slice)
+    if z >= s:
+        return _restricted(proposal, lambda v: v <= z, seed_mask)
+    return _restricted(proposal, lambda v: v >= z, seed_mask)
+
+
+def keep_to(proposal, z: int, *, seed_mask: np.ndarray | None = None):
+    """Only the slices from the seed to ``z`` (inclusive), joined to the seed: "accept from
+    the seed to here". A new proposal; the input is unchanged."""
+    s = int(proposal.start_slice)
+    lo, hi = min(s, z), max(s, z)
+    return _restricted(proposal, lambda v: lo <= v <= hi, seed_mask)
