@@ -342,7 +342,10 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         self.post_message(Call(self._show, z, views))
 
     def _show(self, z: int, views) -> None:
-        sp = self.s.volume.spacing[1:]
+        from ctui.screens import planes
+
+        pv = planes.plane_view(self.s.volume, planes.slice_plane(self.s.volume))  # the patient's frame
+        cursor = planes.cursor_in(pv, self.s.zyx, self.s.shape)
         for wid, arr in (("#pe-inter", views.intermediate), ("#pe-final", views.final)):
-            self.query_one(wid, ImageView).set_image(self.s.display(arr), token=(z, wid), spacing_yx=sp,
-                                                     cursor=(self.s.x, self.s.y))
+            self.query_one(wid, ImageView).set_image(planes.orient(self.s.display(arr), pv), token=(z, wid),
+                                                     spacing_yx=pv.spacing_yx, cursor=cursor)

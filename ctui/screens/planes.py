@@ -2,15 +2,24 @@
 the volume with the objects (filled and outlined), the pending propagation proposal
 (hatched, outlined in yellow) and orientation letters from the direction cosines.
 
-A plane image is a 2D array with rows and columns in index order of the volume, except
-that the rows of the sagittal and coronal planes run from the slice axis' superior end
-(or its high end when the series has no S/I axis) at the top, as radiologists read them.
-Pixel spacing goes with the image, so anisotropic voxels show at their true aspect
-(:func:`ctui.screens.cells.fit_view` resamples by spacing).
+Every plane is shown in the patient's frame, as radiologists read it, whatever the
+file's axis order and signs (RAS or LPS NIfTI, NRRD, DICOM head-first or feet-first, a
+sagittal acquisition): axial with the patient's right on screen left and anterior up,
+coronal right on the left and superior up, sagittal anterior on the left and superior
+up. Each index axis is matched to its nearest patient axis (an oblique stack is shown
+to the nearest axes, with a note); the display only transposes and mirrors the file's
+voxels, so labels, seeds, measurements and exports stay on the file's grid.
+
+Every conversion between display pixels and voxels lives here (one place, exact both
+ways): :func:`take` / :func:`orient` (voxels -> image), :func:`cursor_in` (voxel ->
+pixel), :func:`voxel_of` (pixel -> voxel) and :func:`moved` (arrow keys on screen ->
+voxel step). Pixel spacing goes with the image, so anisotropic voxels show at their
+true aspect (:func:`ctui.screens.cells.fit_view` resamples by spacing).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,15 +29,26 @@ from ctui.engine.core.geometry import Geometry
 
 PLANES = ("axial", "sagittal", "coronal")
 PROPOSAL_EDGE = (255, 230, 0)  # yellow outline of a pending proposal
+OBLIQUE_DEG = 1.0  # index axes further than this from their patient axis get a note
+
+# plane -> (patient axis across the plane, (patient axis, sign) to the screen's right,
+# (patient axis, sign) down the screen); patient axes in LPS: 0 x (+L), 1 y (+P), 2 z (+S)
+_FRAME = {
+    "axial": (2, (0, 1), (1, 1)),  # right on the left (L to the right), A up (P down)
+    "coronal": (1, (0, 1), (2, -1)),  # R on the left, S up (I down)
+    "sagittal": (0, (1, 1), (2, -1)),  # A on the left (P to the right), S up
+}
 
 
 @dataclass(frozen=True)
 class PlaneView:
-    """How one plane maps the volume to a 2D image.
+    """How one plane maps the volume to a 2D display image.
 
-    ``rows``/``cols``: the volume axes (0 z, 1 y, 2 x) along the image rows and columns;
-    ``flip_rows``: rows run from the high index down; ``letters``: (left, right, top,
-    bottom) patient letters; ``spacing_yx``: (row, column) mm per pixel.
+    ``rows``/``cols``: the volume axes (0 z, 1 y, 2 x) along the image rows (down) and
+    columns (right); ``flip_rows``/``flip_cols``: that axis' index runs from its high
+    end at the top / left; ``letters``: (left, right, top, bottom) patient letters;
+    ``spacing_yx``: (row, column) mm per pixel; ``note``: "" or why the picture is only
+    near the patient's axes (an oblique stack).
     """
 
     plane: str
@@ -37,6 +57,8 @@ class PlaneView:
     flip_rows: bool
     letters: tuple[str, str, str, str]
     spacing_yx: tuple[float, float]
+    flip_cols: bool = False
+    note: str = ""
 
     @property
     def normal(self) -> int:
@@ -44,46 +66,102 @@ class PlaneView:
         return 3 - self.rows - self.cols
 
 
+def patient_axes(direction: np.ndarray) -> tuple[tuple[int, int, int], tuple[int, int, int], float]:
+    """Nearest patient axis and sign of each volume axis, and the worst angle.
+
+    ``direction``: 3x3, columns the LPS unit vectors of the x, y, z index axes. Returns
+    (patient axis of volume axes 0 z, 1 y, 2 x), (+1/-1: does the index run towards
+    the L/P/S end), and the largest angle (degrees) between an index axis and its
+    patient axis. The pairing is the permutation with the largest total alignment, so
+    two index axes never share a patient axis.
+    """
+    d = np.asarray(direction, np.float64).reshape(3, 3)
+    cols = [d[:, 2 - i] for i in range(3)]  # unit vector of volume axis i (0 z, 1 y, 2 x)
+    best = max(itertools.permutations(range(3)), key=lambda p: sum(abs(cols[i][p[i]]) for i in range(3)))
+    signs = tuple(1 if cols[i][best[i]] >= 0 else -1 for i in range(3))
+    cosines = [min(1.0, abs(cols[i][best[i]]) / max(np.linalg.norm(cols[i]), 1e-12)) for i in range(3)]
+    worst = float(np.degrees(np.arccos(min(cosines))))
+    return tuple(best), signs, worst  # type: ignore[return-value]
+
+
 def plane_view(volume, plane: str) -> PlaneView:
-    """The :class:`PlaneView` of ``plane`` ("axial", "sagittal", "coronal") for a volume."""
+    """The :class:`PlaneView` of ``plane`` ("axial", "sagittal", "coronal") for a volume
+    (anything with shape, spacing, origin and direction)."""
     if plane not in PLANES:
         raise ValueError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
     geo = Geometry.of(volume)
     lab = geo.orientation_labels()
     sp = geo.spacing
-    if plane == "axial":
-        return PlaneView(plane, 1, 2, False, (lab["x"][0], lab["x"][1], lab["y"][0], lab["y"][1]), (sp[1], sp[2]))
-    zlo, zhi = lab["z"]
-    flip = zlo != "S"  # superior at the top (the high end unless the index runs from S down)
-    top, bottom = (zhi, zlo) if flip else (zlo, zhi)
-    if plane == "sagittal":
-        return PlaneView(plane, 0, 1, flip, (lab["y"][0], lab["y"][1], top, bottom), (sp[0], sp[1]))
-    return PlaneView(plane, 0, 2, flip, (lab["x"][0], lab["x"][1], top, bottom), (sp[0], sp[2]))
+    axis_of, signs, worst = patient_axes(geo.direction)
+    _normal, (p_right, s_right), (p_down, s_down) = _FRAME[plane]
+    cols = axis_of.index(p_right)
+    rows = axis_of.index(p_down)
+    flip_cols = signs[cols] != s_right
+    flip_rows = signs[rows] != s_down
+    lc, hc = lab["zyx"[cols]]
+    lr, hr = lab["zyx"[rows]]
+    left, right = (hc, lc) if flip_cols else (lc, hc)
+    top, bottom = (hr, lr) if flip_rows else (lr, hr)
+    note = f"oblique stack (up to {worst:.0f}°): shown to the nearest patient axes" if worst > OBLIQUE_DEG else ""
+    return PlaneView(plane, rows, cols, flip_rows, (left, right, top, bottom), (sp[rows], sp[cols]),
+                     flip_cols=flip_cols, note=note)
+
+
+def slice_plane(volume) -> str:
+    """The plane whose images are the file's slices (normal along volume axis 0): the
+    plane the pipeline, the Enter fill and propagation work on ("axial" for an axial
+    acquisition, "sagittal" for a sagittal one)."""
+    for p in PLANES:
+        if plane_view(volume, p).normal == 0:
+            return p
+    return "axial"  # unreachable: the three planes' normals are the three axes
+
+
+def orient(img2d: np.ndarray, pv: PlaneView) -> np.ndarray:
+    """A plane's 2D array with its axes in volume order (the lower volume axis first,
+    e.g. a z slice as (y, x)) -> the display image (rows down, columns right). A view
+    (no copy); trailing axes (RGB) are kept."""
+    img = np.swapaxes(img2d, 0, 1) if pv.rows > pv.cols else img2d
+    if pv.flip_rows:
+        img = img[::-1]
+    if pv.flip_cols:
+        img = img[:, ::-1]
+    return img
 
 
 def take(array: np.ndarray, pv: PlaneView, index: int) -> np.ndarray:
-    """The 2D plane ``index`` (along ``pv.normal``) of a (z, y, x) array, rows flipped as the view says."""
-    img = np.take(array, int(index), axis=pv.normal)  # the other two axes stay in order: rows < cols
-    return img[::-1] if pv.flip_rows else img
+    """The display image of plane ``index`` (along ``pv.normal``) of a (z, y, x) array."""
+    return orient(np.take(array, int(index), axis=pv.normal), pv)
 
 
 def cursor_in(pv: PlaneView, zyx: tuple[int, int, int], shape: tuple[int, int, int]) -> tuple[int, int]:
-    """(column, row) image pixel of voxel ``zyx`` in the plane image."""
-    r = zyx[pv.rows]
+    """(column, row) display pixel of voxel ``zyx`` in the plane image."""
+    c, r = int(zyx[pv.cols]), int(zyx[pv.rows])
+    if pv.flip_cols:
+        c = shape[pv.cols] - 1 - c
     if pv.flip_rows:
         r = shape[pv.rows] - 1 - r
-    return int(zyx[pv.cols]), int(r)
+    return c, r
 
 
 def voxel_of(pv: PlaneView, col: float, row: float, zyx: tuple[int, int, int],
              shape: tuple[int, int, int]) -> tuple[int, int, int]:
-    """The voxel (z, y, x) under image pixel (col, row); the normal axis keeps ``zyx``'s index."""
+    """The voxel (z, y, x) under display pixel (col, row) (rounded, clamped into the
+    volume); the normal axis keeps ``zyx``'s index. Inverse of :func:`cursor_in`."""
     out = list(zyx)
-    r = int(round(row))
-    if pv.flip_rows:
-        r = shape[pv.rows] - 1 - r
-    out[pv.rows] = min(max(r, 0), shape[pv.rows] - 1)
-    out[pv.cols] = min(max(int(round(col)), 0), shape[pv.cols] - 1)
+    r = min(max(int(round(row)), 0), shape[pv.rows] - 1)
+    c = min(max(int(round(col)), 0), shape[pv.cols] - 1)
+    out[pv.rows] = shape[pv.rows] - 1 - r if pv.flip_rows else r
+    out[pv.cols] = shape[pv.cols] - 1 - c if pv.flip_cols else c
+    return out[0], out[1], out[2]
+
+
+def moved(pv: PlaneView, zyx: tuple[int, int, int], dx: int, dy: int) -> tuple[int, int, int]:
+    """``zyx`` moved ``dx`` display pixels right and ``dy`` down (not clamped): the
+    arrow keys move on screen in the arrow's direction whatever the flips."""
+    out = list(zyx)
+    out[pv.cols] += -dx if pv.flip_cols else dx
+    out[pv.rows] += -dy if pv.flip_rows else dy
     return out[0], out[1], out[2]
 
 

@@ -136,8 +136,8 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
         p = self.proposal
         if p is None:
             return None
-        if pv.plane == "axial":
-            return p.slice_mask(index)
+        if pv.normal == 0:  # the file's slice plane (axial for an axial acquisition)
+            return planes.orient(p.slice_mask(index), pv)
         if self._proposal_full is None or self._proposal_full[0] != id(p):
             full = np.zeros(self.s.shape, bool)
             got = p.mask3d()
@@ -166,16 +166,18 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
         axis = "zyx"[pv.normal]
         left, right, top, bottom = pv.letters
         idx, last = s.zyx[pv.normal], s.shape[pv.normal] - 1
-        return f"{plane} {axis} {idx}/{last}  [b]{left}[/b]◀▶[b]{right}[/b]  [b]{top}[/b]▲▼[b]{bottom}[/b]"
+        note = "  [yellow]≈ oblique[/]" if pv.note else ""
+        return f"{plane} {axis} {idx}/{last}  [b]{left}[/b]◀▶[b]{right}[/b]  [b]{top}[/b]▲▼[b]{bottom}[/b]{note}"
 
     def _targets(self) -> list[tuple[str, str, ImageView]]:
         """(plane, view, widget) of every visible slice view."""
         s = self.s
         if self.grid_mode:
-            return [("axial", v, self.query_one(f"#g-{v}", ImageView)) for v in VIEWS]
+            sp = planes.slice_plane(s.volume)
+            return [(sp, v, self.query_one(f"#g-{v}", ImageView)) for v in VIEWS]
         if self.ortho_mode:
             return [(p, "overlay", self.query_one(f"#o-{p}", ImageView)) for p in planes.PLANES]
-        view = s.view if s.plane == "axial" else "overlay"
+        view = s.view if s.plane == planes.slice_plane(s.volume) else "overlay"
         return [(s.plane, view, self.main_view)]
 
     # ------------------------------------------------------------------ drawing
@@ -201,7 +203,7 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
                 img = self.plane_image(plane, "original")  # placeholder until the worker answers
             else:
                 img = self.plane_image(plane, view)
-            iv.set_image(img, token=(s.z, view if plane == "axial" else plane, self._views_token),
+            iv.set_image(img, token=(s.z, view if view != "overlay" else plane, self._views_token),
                          spacing_yx=pv.spacing_yx, zoom=s.zoom, center=center, cursor=cursor)
         self._captions()
         if need_stage:
@@ -233,10 +235,11 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
             return  # superseded
         self.last_views = views
         for plane, view, iv in self._targets():
-            if plane == "axial" and view in ("intermediate", "final"):
-                img = s.display(getattr(views, view))
-                iv.set_image(img, token=(z, view, token), spacing_yx=s.volume.spacing[1:], zoom=s.zoom,
-                             center=self._view_center("axial"), cursor=(s.x, s.y))
+            if view in ("intermediate", "final"):
+                pv = planes.plane_view(s.volume, plane)
+                img = planes.orient(s.display(getattr(views, view)), pv)
+                iv.set_image(img, token=(z, view, token), spacing_yx=pv.spacing_yx, zoom=s.zoom,
+                             center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
 
     def _object_volumes(self) -> dict[int, float]:
         """Volume (ml) per object; recomputed only when the labels changed."""

@@ -46,8 +46,9 @@ class EditMixin:
         if not self._editable():
             return
         s = self.s
-        if s.plane != "axial":
-            self.app.notify("Fill works on axial slices: press 1 for the axial view", severity="warning", timeout=3)
+        if plane_view(s.volume, s.plane).normal != 0:
+            self.app.notify("Fill works on the file's slices (the axial view of an axial series: press 1)",
+                            severity="warning", timeout=3)
             return
         try:
             with s._lock:

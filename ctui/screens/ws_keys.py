@@ -88,10 +88,7 @@ class NavMixin:
         s = self.s
         pv = planes.plane_view(s.volume, s.plane)
         before = s.zyx
-        zyx = list(before)
-        zyx[pv.cols] += dx
-        zyx[pv.rows] += -dy if pv.flip_rows else dy
-        s.z, s.y, s.x = zyx
+        s.z, s.y, s.x = planes.moved(pv, before, dx, dy)
         s.clamp()
         if s.tool and s.zyx != before and not self._busy():
             self.stroke(before, s.zyx)
@@ -209,12 +206,12 @@ class NavMixin:
         if self.grid_mode:
             self._layout()
             return
-        self.s.plane = "axial"
+        self.s.plane = planes.slice_plane(self.s.volume)
         self.s.view = VIEWS[(VIEWS.index(self.s.view) + 1) % len(VIEWS)]
         self._layout(ortho=self.ortho_mode)
 
     def action_grid(self) -> None:
-        self.s.plane = "axial"
+        self.s.plane = planes.slice_plane(self.s.volume)
         self._layout(grid=not self.grid_mode)
 
     def action_plane(self, plane: str) -> None:
@@ -242,7 +239,7 @@ class NavMixin:
         if pos is None:
             return
         wid = widget.id or ""
-        plane = wid[2:] if wid.startswith("o-") else ("axial" if wid.startswith("g-") else self.s.plane)
+        plane = wid[2:] if wid.startswith("o-") else (planes.slice_plane(self.s.volume) if wid.startswith("g-") else self.s.plane)
         s = self.s
         s.plane = plane
         pv = planes.plane_view(s.volume, plane)
