@@ -386,6 +386,39 @@ def _crop(mask: np.ndarray) -> tuple[tuple[slice, slice, slice] | None, np.ndarr
     return box, mask[box].copy()  # type: ignore[return-value]
 
 
+def _check_frames(p: Path) -> None:
+    """Refuse a SEG whose NumberOfFrames its pixel data or per-frame groups contradict,
+    before highdicom builds per-frame tables for it (NumberOfFrames 2**31-1 in a 130 KB
+    file: > 6 GB), and check one frame stack against the memory available."""
+    import pydicom
+
+    try:
+        ds = pydicom.dcmread(str(p), defer_size=1024, force=True)
+        nf = int(ds.get("NumberOfFrames", 1) or 1)
+        rows, cols = int(ds.get("Rows", 0) or 0), int(ds.get("Columns", 0) or 0)
+        bits = int(ds.get("BitsAllocated", 1) or 1)
+        pffg = ds.get("PerFrameFunctionalGroupsSequence")
+        elem = ds.get_item("PixelData") if "PixelData" in ds else None
+        length = int(getattr(elem, "length", 0) or 0) if elem is not None else 0
+        size = p.stat().st_size
+    except Exception:  # noqa: BLE001 - not a readable DICOM file: highdicom reports it below
+        return
+    if nf < 1 or rows < 1 or cols < 1:
+        raise FormatError(f"NumberOfFrames {nf}, Rows {rows}, Columns {cols}: not a segmentation's frames", path=p)
+    if pffg is not None and len(pffg) != nf:
+        raise FormatError(f"NumberOfFrames {nf} but {len(pffg)} per-frame functional groups: the DICOM-SEG is "
+                          "inconsistent", path=p)
+    if length in (0, 0xFFFFFFFF):  # encapsulated: each frame takes at least an 8-byte item
+        if nf * 8 > size:
+            raise FormatError(f"NumberOfFrames {nf} cannot fit in a file of {size} bytes", path=p)
+    else:
+        need = (nf * rows * cols * max(bits, 1) + 7) // 8
+        if length < need:
+            raise FormatError(f"NumberOfFrames {nf} of {rows}x{cols} needs {need} bytes of pixel data, the file "
+                              f"holds {length}", path=p)
+    check_allocation(2 * nf * rows * cols * max(bits // 8, 1), what="a DICOM-SEG's frames", path=p)
+
+
 def read_seg(path: str | os.PathLike) -> SegContents:
     """Read a DICOM-SEG (BINARY, FRACTIONAL thresholded at half, or LABELMAP), one segment at a time.
 
@@ -397,6 +430,7 @@ def read_seg(path: str | os.PathLike) -> SegContents:
     import highdicom as hd
 
     p = Path(path)
+    _check_frames(p)
     try:
         seg = hd.seg.segread(str(p))
         numbers = [int(n) for n in seg.segment_numbers if n != 0]  # a LABELMAP's 0 is its background

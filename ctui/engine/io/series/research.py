@@ -22,6 +22,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import check_memory, checked_axes, make_plan
+from ctui.engine.io.series.nrrd_data import HEADER_LIMIT, header_end, read_payload, regular_file
 
 _LPS_FROM_RAS = np.diag([-1.0, -1.0, 1.0])
 
@@ -164,12 +165,7 @@ _TYPE = {name: code for code, names in _NRRD_TYPES.items() for name in names}
 
 def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
               spacing=None) -> Volume:
-    import nrrd
-
-    try:
-        hdr = nrrd.read_header(str(path))
-    except Exception as exc:
-        raise LoadError(f"not a readable NRRD header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
+    hdr = _read_nrrd_header(path)
     dim = int(hdr.get("dimension", 0))
     sizes = [int(s) for s in np.atleast_1d(hdr.get("sizes", []))]
     if dim not in (2, 3) or len(sizes) != dim or min(sizes) < 1:
@@ -208,11 +204,7 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
         skip = int(hdr.get("byte skip", 0) or 0)
         if datafile is None:
             # attached: data right after the header's blank line
-            raw = path.read_bytes()[: 1 << 16]
-            end = raw.find(b"\n\n")
-            if end < 0:
-                raise LoadError("NRRD header without the blank line that ends it", path=path)
-            files, target, off = None, path, end + 2 + max(skip, 0)
+            files, target, off = None, path, header_end(path) + max(skip, 0)
         else:
             files, target, off = _nrrd_data_files(path, str(datafile), nz), None, max(skip, 0)
             if files is None:
@@ -238,14 +230,36 @@ def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress
         return vol
     plan = make_plan(full, crop=crop, downsample=downsample, path=path)
     check_memory(2 * int(np.prod(full)) * dt.itemsize, shape=full, path=path, limit=memory_limit)
-    try:
-        data, _ = nrrd.read(str(path), index_order="C")
-    except Exception as exc:
-        raise LoadError(f"cannot read the NRRD data ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
-    data = data.reshape(full)[plan.z, plan.y, plan.x]
+    if datafile is not None and _nrrd_data_files(path, str(datafile), nz) is not None:
+        raise LoadError(f"NRRD {encoding} data in several data files is not supported (raw only)", path=path)
+    data = read_payload(path, hdr, dtype=dt, full=full, datafile=None if datafile is None else str(datafile))
+    data = data[plan.z, plan.y, plan.x]
     data = np.ascontiguousarray(data, dtype=dt.newbyteorder("="))
     return _finish(data, sp, direction, origin, path=path, fmt=f"NRRD ({encoding})", skipped=skipped, warnings=warnings,
                    plan=plan, full=full)
+
+
+def _read_nrrd_header(path: Path) -> dict:
+    """The NRRD header, read from at most 1 MB of lines (a file of one endless line is refused)."""
+    import nrrd
+
+    def lines(fh):
+        total = 0
+        while True:
+            line = fh.readline(HEADER_LIMIT - total + 1)
+            total += len(line)
+            if not line or total > HEADER_LIMIT:
+                return
+            yield line.decode("latin-1")
+
+    try:
+        regular_file(path, what="the file", owner=path)
+        with open(path, "rb") as fh:
+            return nrrd.read_header(lines(fh))
+    except LoadError:
+        raise
+    except Exception as exc:
+        raise LoadError(f"not a readable NRRD header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
 
 
 def _nrrd_axes(hdr: dict, dim: int, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -313,12 +327,7 @@ def header_info(path: Path) -> dict[str, Any]:
         sp, _ = _geometry_from_matrix(m)
         kind = "nifti"
     else:
-        import nrrd
-
-        try:
-            hdr = nrrd.read_header(str(path))
-        except Exception as exc:
-            raise LoadError(f"not a readable NRRD header ({type(exc).__name__})", path=path) from None
+        hdr = _read_nrrd_header(path)
         shp = ([int(s) for s in np.atleast_1d(hdr.get("sizes", []))] + [1, 1])[:3]
         m, _ = _nrrd_axes(hdr, int(hdr.get("dimension", 3) or 3), [])
         m, _, _ = checked_axes(m, np.zeros(3), what="NRRD")
