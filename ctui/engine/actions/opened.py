@@ -232,12 +232,27 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     if spacing is not None:
         load_options["spacing"] = spacing
     volume = load(s, **load_options)
-    imp = read_label_file(lp, grid=volume)
+    imp = read_label_file(lp, grid=volume, frame_of_reference=_frame_of_reference(s, volume, lp))
     project = Project(source_path=os.path.abspath(s), source_options=dict(load_options), labels=imp.labels,
                       objects=imp.objects, window=tuple(volume.window) if volume.window else None)
     project.set_source(volume)
     return Opened("project", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
                   notes=list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)
+
+
+def _frame_of_reference(series: str, volume: Volume, labels: str) -> str:
+    """The DICOM series' FrameOfReferenceUID when ``labels`` is an RTSTRUCT (its contours are
+    checked against it), else "" (not read: a header pass over the series)."""
+    try:
+        from ctui.engine.io.imports import label_kind
+
+        if label_kind(labels) != "rtstruct":
+            return ""
+        from ctui.engine.io.dicomseg import source_datasets
+
+        return str(source_datasets(series, volume)[0].get("FrameOfReferenceUID", "") or "")
+    except (CtuiError, OSError, ValueError, IndexError):  # not a DICOM series, or not its own grid: no check
+        return ""
 
 
 def labels_only_volume(project: Project, path: str = "") -> Volume:

@@ -244,7 +244,7 @@ def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
     return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, warnings, str(p))
 
 
-def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
+def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "") -> ImportedLabels:
     from ctui.engine.io.rtstruct import read_rtstruct, roi_mask
 
     if grid is None:
@@ -253,14 +253,29 @@ def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
     c = read_rtstruct(p)
     if not c.rois:
         raise FormatError("the RTSTRUCT holds no ROI (empty or cut short)", path=p)
-    warnings: list[str] = []
+    warnings = _frame_warnings(c, frame_of_reference)
     placed = {"any": False}
+    voxel_ml = float(np.prod(grid.spacing)) / 1000.0
 
     def mask_of(k: int) -> np.ndarray:
-        m, off = roi_mask(c.rois[k], grid)
+        roi = c.rois[k]
+        m, info = roi_mask(roi, grid)
         placed["any"] |= bool(m.any())
-        if off and not any(w.startswith(f"ROI {c.rois[k].name}:") for w in warnings):
-            warnings.append(f"ROI {c.rois[k].name}: {off} contours are not on a slice of the series and were left out")
+        if any(w.startswith(f"ROI {roi.name}:") for w in warnings):
+            return m  # called again for overlapping ROIs: said once
+        notes = []
+        if info.off_slice:
+            notes.append(f"{info.off_slice} contours are not on a slice of the series and were left out")
+        if info.outside_slices:
+            lost = f"{info.outside_voxels} voxels ({info.outside_voxels * voxel_ml:.1f} mL)" if info.outside_voxels \
+                else "parts"
+            notes.append(f"contours reach beyond the image on {info.outside_slices} slices: {lost} outside the "
+                         f"series were cut off (the object measures {int(m.sum()) * voxel_ml:.1f} mL inside)")
+        for why, n in sorted(roi.left_out.items()):
+            notes.append(f"{n} contours with {why} were left out" if why.startswith("non-finite") else
+                         f"{n} {why} contours (points or lines, not areas) were left out")
+        if notes:
+            warnings.append(f"ROI {roi.name}: " + "; ".join(notes))
         return m
 
     labels, objects, overlap, w = assemble(mask_of, [r.number for r in c.rois], [r.name for r in c.rois],
@@ -269,6 +284,18 @@ def _from_rtstruct(p: Path, grid: Geometry | None) -> ImportedLabels:
         raise CtuiError("no contour of the RTSTRUCT lies on a slice of the series: it was drawn on another series",
                         path=p)
     return ImportedLabels(labels, objects, grid, "rtstruct", overlap, warnings + w, str(p))
+
+
+def _frame_warnings(c: Any, frame_of_reference: str) -> list[str]:
+    """A warning when the RTSTRUCT's (or an ROI's) Frame of Reference UID is not the series'."""
+    if not frame_of_reference:
+        return []
+    theirs = {u for u in [c.frame_of_reference, *(r.frame_of_reference for r in c.rois)] if u}
+    other = sorted(theirs - {frame_of_reference})
+    if not other:
+        return []
+    return [f"Frame of Reference mismatch: the RTSTRUCT's contours are in {', '.join(other)[:120]}, the series is "
+            f"in {frame_of_reference}: positions may not correspond (check it was drawn on this series)"]
 
 
 def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
@@ -306,11 +333,13 @@ def _nrrd_names(p: Path) -> dict[int, str]:
     return out
 
 
-def read_label_file(path: str | os.PathLike, *, grid: Any = None) -> ImportedLabels:
+def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_reference: str = "") -> ImportedLabels:
     """Read a label file, placed on ``grid`` (a Volume or Geometry of the series) when given.
 
     Without ``grid`` the file's own geometry is used (DICOM-SEG, NIfTI, NRRD); an RTSTRUCT
-    needs one. Raises FormatError (unreadable file) or CtuiError (geometry mismatch, said how).
+    needs one. ``frame_of_reference``: the series' FrameOfReferenceUID, when known (an
+    RTSTRUCT in another frame gets a warning). Raises FormatError (unreadable file) or
+    CtuiError (geometry mismatch, said how).
     """
     p = Path(path)
     if not p.exists():
@@ -320,5 +349,5 @@ def read_label_file(path: str | os.PathLike, *, grid: Any = None) -> ImportedLab
     if kind == "dicom-seg":
         return _from_seg(p, g)
     if kind == "rtstruct":
-        return _from_rtstruct(p, g)
+        return _from_rtstruct(p, g, frame_of_reference)
     return _from_labelmap(p, g, kind)
