@@ -121,6 +121,41 @@ def auto_window(
     return percentile_window(data, percentiles)
 
 
+_CT_WORDS = ("ct", "computed tomograph", "hounsfield", "hu", "cta", "pet-ct", "pet/ct")
+
+
+def ct_hint(text: str) -> bool:
+    """Whether a free-text header field (NIfTI descrip/intent_name, NRRD content,
+    MetaImage Modality) names CT or Hounsfield units."""
+    import re
+
+    words = re.findall(r"[a-z/-]+", str(text).lower())
+    joined = " ".join(words)
+    return any(w in _CT_WORDS for w in words) or "computed tomograph" in joined or "hounsfield" in joined
+
+
+def looks_like_ct(data: np.ndarray, *, max_samples: int = 400_000) -> bool:
+    """Whether voxel values look like CT in Hounsfield units: air near -1000 HU (or
+    padding at -1024..-3024), soft tissue near 0 HU and almost nothing outside
+    -3100..4000. A strided sample of at most ``max_samples`` values of ``data`` (any
+    shape) is looked at. Label maps, MR and plain images (no negative air) fail."""
+    if data.size == 0 or data.dtype.kind not in "if":
+        return False
+    step = int(np.ceil(data.size / max_samples)) if data.size > max_samples else 1
+    s = np.asarray(data).ravel()[::step]
+    if s.dtype.kind == "f":
+        s = s[np.isfinite(s)]
+        if s.size == 0:
+            return False
+    s = s.astype(np.float32)
+    lo, hi = float(s.min()), float(np.percentile(s, 99.9))
+    if lo < -3100 or lo > -900 or hi > 4000:
+        return False
+    air = float(np.mean((s >= -1100) & (s <= -850))) + float(np.mean(s < -1100))
+    soft = float(np.mean((s >= -150) & (s <= 150)))
+    return air >= 0.01 and soft >= 0.02
+
+
 def window_range(window: tuple[float, float]) -> tuple[float, float]:
     """(centre, width) -> (low, high) values."""
     c, w = window

@@ -330,8 +330,28 @@ def _rel(p: Path, base: Path | None) -> str:
     return rel(p, base)
 
 
+def _recognise_ct(vol: Volume) -> None:
+    """A non-DICOM volume with no modality is CT when its header's free text says so
+    (NIfTI descrip/intent_name, NRRD content) and its values reach below -500, or when
+    its values look like Hounsfield units (air near -1000, soft tissue near 0): it then
+    gets modality "CT" (HU shown, CT window presets) and the CT default window."""
+    from ctui.engine.core.windows import auto_window, ct_hint, looks_like_ct
+
+    if str(vol.modality or "OT").upper() not in ("OT", "") or vol.data.size == 0 or vol.data.dtype.kind not in "if":
+        return
+    hint = ct_hint(vol.meta.get("content_hint", ""))
+    by = "header" if hint and float(np.nanmin(vol.data)) <= -500 else "values" if looks_like_ct(vol.data) else ""
+    if by:
+        vol.modality = "CT"
+        vol.meta["modality_from"] = by
+        vol.window = auto_window(vol.data, modality="CT")
+
+
 def _with_series(vol: Volume) -> Volume:
-    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it)."""
+    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it), and CT
+    is recognised by its header's text or its values (:func:`_recognise_ct`)."""
+    if not vol.meta.get("headers_only"):
+        _recognise_ct(vol)
     if not vol.series:
         vol.series = [{"uid": "", "description": vol.meta.get("format", ""), "modality": vol.modality,
                        "files": int(vol.meta.get("files", 1)), "shape_zyx": list(vol.shape),

@@ -77,8 +77,22 @@ def _raw_pixdim(nib: Any, path: Path, hdr: Any) -> np.ndarray:
         return np.asarray(hdr["pixdim"][1:4], float)
 
 
-def load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
-               spacing=None) -> Volume:
+def load_nifti(path: Path, **options: Any) -> Volume:
+    """A NIfTI volume; ``meta["content_hint"]``: its free-text fields (descrip,
+    intent_name, aux_file), which may name the modality (CT recognition)."""
+    vol = _load_nifti(path, **options)
+    try:
+        hdr = _nib().load(str(path)).header
+        vol.meta["content_hint"] = " ".join(
+            bytes(np.asarray(hdr[k]).item()).decode("latin-1", "replace").strip("\x00 ")
+            for k in ("descrip", "intent_name", "aux_file")).strip()
+    except Exception:  # noqa: BLE001 - a hint only; the volume loaded
+        pass
+    return vol
+
+
+def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
+                spacing=None) -> Volume:
     nib = _nib()
 
     try:
@@ -163,8 +177,15 @@ _NRRD_TYPES = {
 _TYPE = {name: code for code, names in _NRRD_TYPES.items() for name in names}
 
 
-def load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
-              spacing=None) -> Volume:
+def load_nrrd(path: Path, **options: Any) -> Volume:
+    """An NRRD volume; ``meta["content_hint"]``: its ``content`` field (CT recognition)."""
+    vol = _load_nrrd(path, **options)
+    vol.meta["content_hint"] = str(_read_nrrd_header(path).get("content", "") or "")
+    return vol
+
+
+def _load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progress=None, memory_limit=None,
+               spacing=None) -> Volume:
     hdr = _read_nrrd_header(path)
     dim = int(hdr.get("dimension", 0))
     sizes = [int(s) for s in np.atleast_1d(hdr.get("sizes", []))]
