@@ -100,7 +100,8 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
     from ctui.engine.core.errors import CtuiError
 
     if isinstance(exc, CtuiError):
-        return str(exc), 2
+        option = getattr(exc, "option", None)
+        return (f"{exc} (see {flag_of(option)})" if option else str(exc)), 2
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted", 130
     if isinstance(exc, MemoryError):
@@ -109,6 +110,15 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
         where = f"{exc.filename}: " if exc.filename else ""
         return " ".join(f"{where}{exc.strerror or exc}".split()), 2
     return None
+
+
+#: Engine keywords whose CLI flag is not ``--`` + the keyword with ``-`` for ``_``.
+FLAGS: dict[str, str] = {}
+
+
+def flag_of(option: str) -> str:
+    """The CLI flag of an engine action's keyword (``fit_window`` -> ``--fit-window``)."""
+    return FLAGS.get(option, "--" + option.replace("_", "-"))
 
 
 _PATH_ARGS = ("path", "input", "manifest", "out", "outdir", "project", "mask", "mric", "csv", "plot", "labels")

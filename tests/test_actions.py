@@ -80,19 +80,22 @@ def test_measure_cli_equals_tui(case, capsys):
 def test_mesh_cli_equals_tui_export_and_3d_view(case, capsys):
     from ctui.engine.io.meshes import load_mesh
     from ctui.engine.mesh.meshtools import mesh_report
-    from ctui.screens.export import export_all_meshes, export_mesh
+    from ctui.screens.export import export_session
     from ctui.screens.view3d import build_meshes
 
     d, path, session = case
     cli = _cli_json(capsys, "mesh", path, "--out", d / "cli.stl", "--json")
-    tui_mesh, n = export_all_meshes(session, str(d / "tui.stl"))
-    assert n == 2 and cli["objects"] == [1, 3]
+    res = export_session(session, "stl", str(d / "tui.stl"))  # the export menu's "STL: object surfaces"
+    tui_mesh = load_mesh(d / "tui.stl")
+    assert len(res.objects) == 2 and cli["objects"] == [1, 3]
     a, b = load_mesh(d / "cli.stl"), load_mesh(d / "tui.stl")
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     assert mesh_report(tui_mesh)["volume_ml"] == pytest.approx(cli["volume_ml"], abs=1e-4)
     # one object, and the 3D view's surfaces
     one = _cli_json(capsys, "mesh", path, "--object", 3, "--out", d / "cli3.ply", "--json")
-    m3 = export_mesh(session, str(d / "tui3.ply"), 3)
+    session.current = 3
+    export_session(session, "ply:current", str(d / "tui3.ply"))  # "PLY: surface of the current object"
+    m3 = load_mesh(d / "tui3.ply")
     assert mesh_report(m3)["triangles"] == one["triangles"]
     assert mesh_report(m3)["volume_ml"] == pytest.approx(one["volume_ml"], abs=1e-4)
     view = build_meshes(session, "marching-cubes")
@@ -101,12 +104,12 @@ def test_mesh_cli_equals_tui_export_and_3d_view(case, capsys):
 
 def test_export_cli_equals_tui(case, capsys):
     from ctui.engine.io.labels import load_labels
-    from ctui.screens.export import export_labels
+    from ctui.screens.export import export_session
 
     d, path, session = case
     rc = main(["export", str(path), "--format", "nifti", "--out", str(d / "cli.nii.gz")])
     assert rc == 0, capsys.readouterr().err
-    export_labels(session, str(d / "tui.nii.gz"))
+    export_session(session, "nifti", str(d / "tui.nii.gz"))
     (la, va), (lb, vb) = load_labels(d / "cli.nii.gz"), load_labels(d / "tui.nii.gz")
     assert np.array_equal(la, lb) and np.array_equal(la, session.labels())
     assert np.allclose(va.affine, vb.affine) and np.allclose(va.spacing, SPACING) and np.allclose(va.origin, ORIGIN)

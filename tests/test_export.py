@@ -34,7 +34,7 @@ def case(tmp_path_factory):
 
 @pytest.mark.parametrize("fmt", ["nifti", "nrrd", "dicom-seg", "rtstruct"])
 def test_label_formats_read_back_equal(case, fmt):
-    out = case["out"] / f"labels{FORMATS[fmt]}" if fmt not in ("rtstruct",) else case["out"] / "rt.dcm"
+    out = case["out"] / f"labels{FORMATS[fmt].suffix}" if fmt not in ("rtstruct",) else case["out"] / "rt.dcm"
     res = export(case["project"], format=fmt, out=out)
     assert [o["name"] for o in res.objects] == ["box", "small box"]
     back = read_label_file(out, grid=case["volume"])
@@ -86,9 +86,13 @@ def test_cli_export_and_errors(case, capsys):
     assert main(["export", str(case["project"]), "--format", "rtstruct", "--out",
                  str(case["root"] / "series" / "rt.dcm")]) == 2
     assert "input folder" in capsys.readouterr().err
-    # a SEG has no series of its own: RTSTRUCT from it needs --series
-    with pytest.raises(CtuiError, match="--series"):
+    # a SEG has no series of its own: RTSTRUCT from it needs the series (the engine names the
+    # keyword, the CLI its flag)
+    with pytest.raises(CtuiError, match="needs the DICOM series") as err:
         export(out, format="rtstruct", out=case["out"] / "x.dcm")
+    assert err.value.option == "series" and "--" not in str(err.value)
+    assert main(["export", str(out), "--format", "rtstruct", "--out", str(case["out"] / "x.dcm")]) == 2
+    assert "(see --series)" in capsys.readouterr().err
     res = export(out, format="rtstruct", out=case["out"] / "x.dcm", series=case["root"] / "series")
     assert len(res.objects) == 2
     with pytest.raises(CtuiError, match="no object 7"):

@@ -4,25 +4,26 @@ from __future__ import annotations
 
 import argparse
 
-FORMATS = ("dicom-seg", "rtstruct", "nifti", "nrrd", "stl", "ply", "obj", "mric", "csv")
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions.formats import FORMATS  # the registry: plain data, cheap to import
+
     p = subparsers.add_parser(
         "export",
-        help="write a project's objects as DICOM-SEG, RTSTRUCT, NIfTI, NRRD, STL/PLY/OBJ, MRIC or CSV",
+        help=f"write a project's objects as {', '.join(f.title for f in FORMATS.values())}",
         description="Export the objects of INPUT (a .ctui project, or a label file: DICOM-SEG, RTSTRUCT, "
         ".nii, .nii.gz, .nrrd, placed on --series when given). dicom-seg and rtstruct reference the "
         "source DICOM series' images (the project's recorded series, or --series); nifti and nrrd carry "
         "the series' geometry; stl, ply and obj hold the object surfaces in patient mm; csv one row of "
-        "measurements per object. No patient name, ID or birth date is written unless --keep-identifiers.",
+        "measurements per object. No patient name, ID or birth date is written unless --keep-identifiers.\n\n"
+        "Formats:\n" + "\n".join(f"  {f.name:<10} {f.label} ({', '.join(f.suffixes)})" for f in FORMATS.values()),
         epilog="Examples: ctui export kidney.ctui --format dicom-seg --out kidney-seg.dcm\n"
         "          ctui export labels.nii.gz --series scan/ --format rtstruct --out rt.dcm\n"
         "          ctui export kidney.ctui --format csv --out volumes.csv",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="a .ctui project or a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)")
-    p.add_argument("--format", required=True, choices=FORMATS, help="output format")
+    p.add_argument("--format", required=True, choices=tuple(FORMATS), help="output format")
     p.add_argument("--out", required=True, metavar="PATH", help="file to write")
     p.add_argument("--series", default=None, metavar="SERIES",
                    help="the DICOM series the labels were drawn on (default: the project's source)")

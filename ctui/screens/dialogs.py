@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from rich.text import Text
 from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -49,7 +50,8 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
         with Vertical():
             yield Label(self.title_text)
             yield PromptInput(value=self.value, placeholder=self.placeholder, id="prompt")
-            yield Label("[dim]Enter to accept, Escape to cancel[/dim]")
+            clear = ", Ctrl+U clears it" if self.value else ""  # a pre-filled value: say how to empty it
+            yield Label(f"[dim]Enter accepts{clear}, Escape cancels[/dim]")
 
     def on_mount(self) -> None:
         inp = self.query_one(Input)
@@ -134,16 +136,20 @@ class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
     """
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, title: str, options: list[tuple[str, str]]) -> None:
-        """options: (id, label) pairs."""
+    def __init__(self, title: str, options: list[tuple[str, str]], *, note: str = "") -> None:
+        """options: (id, label) pairs; ``note``: dim text under the list (e.g. why some
+        choices are not offered)."""
         super().__init__()
         self.title_text = title
         self.options = options
+        self.note = note
 
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Label(self.title_text)
             yield OptionList(*[Option(label, id=oid) for oid, label in self.options])
+            if self.note:
+                yield Label(Text(self.note, style="dim italic"))
 
     def on_mount(self) -> None:
         self.query_one(OptionList).focus()

@@ -1,6 +1,6 @@
 """Export: :func:`export`, the one engine function behind ``ctui export`` and the TUI's export screen.
 
-Formats (:data:`FORMATS`): ``dicom-seg`` (highdicom, over the source series' SOP
+Formats (:data:`ctui.engine.actions.formats.FORMATS`, the registry the CLI and the TUI read): ``dicom-seg`` (highdicom, over the source series' SOP
 instances), ``rtstruct`` (closed planar contours per slice), ``nifti`` / ``nrrd`` (label
 maps with the series' geometry; ``.seg.nrrd`` names the segments for 3D Slicer),
 ``stl`` / ``ply`` / ``obj`` (object surfaces in patient mm, merged in one file), ``mric``
@@ -15,8 +15,6 @@ project's recorded source. No patient name, ID or birth date is written unless
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -25,21 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from ctui.engine.actions import defaults
+from ctui.engine.actions.formats import FORMATS, ExportFormat, unsupported
 from ctui.engine.actions.opened import Opened, input_kind, open_project
-from ctui.engine.core.atomic import check_output, write_text
+from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report, scaled
 from ctui.engine.core.volume import Volume
-
-#: format -> default file suffix
-FORMATS: dict[str, str] = {"dicom-seg": ".dcm", "rtstruct": ".dcm", "nifti": ".nii.gz", "nrrd": ".seg.nrrd",
-                           "stl": ".stl", "ply": ".ply", "obj": ".obj", "mric": ".mric", "csv": ".csv"}
-CSV_KEYS = ("id", "name", "voxels", "volume_voxels_ml", "volume_mesh_ml", "volume_difference_percent", "area_mm2",
-            "centroid_x_mm", "centroid_y_mm", "centroid_z_mm")
-
 
 @dataclass
 class ExportSource:
@@ -139,75 +130,62 @@ def _from_opened(opened: Opened, series: Any, series_uid: str | None) -> ExportS
                         opened.volume, masks, list(opened.notes))
 
 
-# =========================================================================== writers
-def _dicom_sources(src: ExportSource) -> list[Any]:
-    from ctui.engine.io.dicomseg import source_datasets
+# =========================================================================== one export
+@dataclass
+class ExportJob:
+    """What a writer (:attr:`ExportFormat.write`) gets: the file ``path``, the ``src``,
+    the objects ``objs`` [{id, name, color}] to write and their ``ids``, ``labels`` (z, y,
+    x) uint8 holding only those objects, and the options."""
 
-    if not src.series:
-        raise CtuiError("DICOM-SEG and RTSTRUCT need the DICOM series the labels were drawn on: give --series",
-                        path=src.path)
-    return source_datasets(src.series, src.volume if src.volume is not None else src.geometry, series=src.series_uid)
+    path: Path
+    src: ExportSource
+    objs: list[dict]
+    labels: np.ndarray
+    keep_identifiers: bool = False
+    mesh_method: str | None = None
+    progress: Progress | None = None
 
+    @property
+    def ids(self) -> list[int]:
+        return [o["id"] for o in self.objs]
 
-def _write_csv(path: Path, src: ExportSource, objs: list[dict], progress: Progress | None) -> list[dict]:
-    from ctui.engine.measure.stats import object_stats
+    def masks(self) -> dict[int, np.ndarray]:
+        """Full masks of the written objects that overlap others (DICOM keeps them overlapping)."""
+        return {k: m for k, m in self.src.masks.items() if k in self.ids}
 
-    g = src.geometry
-    rows = []
-    for n, o in enumerate(objs):
-        report(progress, n, len(objs), f"measuring {o['name']}")
-        st = object_stats(src.mask(o["id"]), o["id"], spacing=g.spacing, origin=g.origin, direction=g.direction)
-        c = [float(v) for v in st["centroid_mm"]]
-        rows.append({"id": o["id"], "name": o["name"], "voxels": st["voxels"],
-                     "volume_voxels_ml": round(st["volume_voxels_ml"], 6),
-                     "volume_mesh_ml": None if st["volume_mesh_ml"] is None else round(st["volume_mesh_ml"], 6),
-                     "volume_difference_percent": None if st["volume_difference_percent"] is None
-                     else round(st["volume_difference_percent"], 4),
-                     "area_mm2": None if st["area_mm2"] is None else round(st["area_mm2"], 4),
-                     "centroid_x_mm": round(c[0], 4), "centroid_y_mm": round(c[1], 4), "centroid_z_mm": round(c[2], 4)})
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_KEYS, lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    write_text(path, buf.getvalue())
-    return rows
+    def grid(self) -> Volume:
+        """The labels as a Volume on their geometry (what the label-map writers take)."""
+        g = self.src.geometry
+        return Volume(self.labels, spacing=g.spacing, origin=g.origin, direction=g.direction, modality="SEG",
+                      window=(5, 10))
 
 
-def _write_mesh(path: Path, src: ExportSource, objs: list[dict], method: str | None, progress: Progress | None) -> None:
-    from ctui.engine.actions.mesh import label_meshes
-    from ctui.engine.io.meshes import save_mesh
-    from ctui.engine.mesh.meshtools import merge
+def series_kind(src: ExportSource | Opened) -> str | None:
+    """The format of the series the labels were drawn on, as :func:`formats.unsupported`
+    takes it: ``"dicom"``, ``"nifti"``...; ``""`` when there is none (labels only, or the
+    recorded series is gone); None when only loading it would tell."""
+    volume = src.volume
+    if volume is not None and not (volume.meta or {}).get("labels_only"):
+        return str((volume.meta or {}).get("format") or "") or None
+    if isinstance(src, Opened):
+        proj = src.project
+        series = str(proj.source_path or "") if proj is not None else ""
+    else:
+        series = src.series
+    return None if series and os.path.exists(series) else ""
 
-    meshes = {}
-    for n, o in enumerate(objs):
-        lab = src.mask(o["id"]).astype(np.uint8) * np.uint8(o["id"]) if o["id"] in src.masks else src.labels
-        meshes.update(label_meshes(lab, src.geometry, [o["id"]], method=method or defaults.MESH_METHOD,
-                                   progress=scaled(progress, n / len(objs), (n + 1) / len(objs))))
-    parts = [meshes[k] for k in sorted(meshes)]
-    mesh = parts[0] if len(parts) == 1 else merge(parts, object_id=0, meta={"objects": sorted(meshes)})
-    save_mesh(path, mesh)
 
-
-def _write_mric(path: Path, src: ExportSource, ids: list[int]) -> None:
-    from ctui.engine.core.borders import borders_for_mric
-    from ctui.engine.io.mric import write_mric
-
-    nz, ny, nx = src.labels.shape
-    image = None
-    if src.volume is not None:
-        from ctui.engine.core.windows import apply_window
-
-        image = apply_window(src.volume.data[nz // 2], tuple(src.volume.window))
-    g = src.geometry  # the sidecar <name>.mric.json keeps the true voxel size
-    write_mric(path, borders_for_mric(src.labels, ids), width=nx, height=ny, image=image,
-               spacing=g.spacing, origin=g.origin, direction=g.direction)
+def available_formats(source: ExportSource | Opened) -> list[tuple[ExportFormat, str | None]]:
+    """Every registered format with the reason it cannot be written for ``source`` (None when it can)."""
+    kind = series_kind(source)
+    return [(fmt, unsupported(name, series_kind=kind)) for name, fmt in FORMATS.items()]
 
 
 def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.PathLike,
            series: str | os.PathLike | None = None, series_uid: str | None = None,
            objects: int | Sequence[int] | None = None, keep_identifiers: bool = False,
            mesh_method: str | None = None, progress: Progress | None = None) -> ExportResult:
-    """Write ``source``'s objects to ``out`` in ``format`` (one of :data:`FORMATS`).
+    """Write ``source``'s objects to ``out`` in ``format`` (a name in :data:`formats.FORMATS`).
 
     ``series``: the DICOM series the labels were drawn on (DICOM-SEG, RTSTRUCT; also puts a
     label file on that series' grid); ``series_uid`` picks one series in a folder of several.
@@ -219,6 +197,9 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     report(progress, 0.0, 1.0, "reading")
     check_output(out, inputs=[source.path if isinstance(source, Opened) else source, series], label="--out")
     src = export_source(source, series=series, series_uid=series_uid)
+    why = unsupported(fmt, series_kind=series_kind(src))
+    if why:
+        raise CtuiError(f"{FORMATS[fmt].title} {why}", path=src.path, option="series")
     objs = _objects(src.labels, src.objects)
     if src.masks:  # objects hidden under overlaps still count
         have = {o["id"] for o in objs}
@@ -240,37 +221,10 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     res = ExportResult(fmt, os.fspath(out), [{"id": o["id"], "name": o["name"]} for o in objs],
                        warnings=list(src.notes))
     p = Path(out)
-    sub = scaled(progress, 0.1, 1.0)
-    if fmt == "dicom-seg":
-        from ctui.engine.io.dicomseg import write_seg
-
-        masks = {k: m for k, m in src.masks.items() if k in ids}  # overlapping segments stay overlapping
-        write_seg(p, labels, _dicom_sources(src), objects=objs, keep_identifiers=keep_identifiers, masks=masks,
-                  progress=sub)
-    elif fmt == "rtstruct":
-        from ctui.engine.io.rtstruct import write_rtstruct
-
-        masks = {k: m for k, m in src.masks.items() if k in ids}  # overlapping segments keep their contours
-        write_rtstruct(p, labels, src.geometry, _dicom_sources(src), objects=objs, keep_identifiers=keep_identifiers,
-                       masks=masks, progress=sub)
-    elif fmt in ("nifti", "nrrd"):
-        from ctui.engine.io.labels import save_labels
-
-        name = p.name.lower()
-        if fmt == "nifti" and not name.endswith((".nii", ".nii.gz")):
-            raise CtuiError("a NIfTI file name ends in .nii or .nii.gz", path=p)
-        if fmt == "nrrd" and not name.endswith(".nrrd"):
-            raise CtuiError("an NRRD file name ends in .nrrd or .seg.nrrd", path=p)
-        g = src.geometry  # save_labels takes a Volume: the labels on their grid
-        grid = Volume(labels, spacing=g.spacing, origin=g.origin, direction=g.direction, modality="SEG", window=(5, 10))
-        save_labels(p, labels, grid, names={o["id"]: o["name"] for o in objs})
-    elif fmt in ("stl", "ply", "obj"):
-        if p.suffix.lower() != "." + fmt:
-            raise CtuiError(f"a {fmt.upper()} file name ends in .{fmt}", path=p)
-        _write_mesh(p, src, objs, mesh_method, sub)
-    elif fmt == "mric":
-        _write_mric(p, src, ids)
-    else:
-        res.rows = _write_csv(p, src, objs, sub)
+    spec = FORMATS[fmt]
+    if spec.strict_suffix and not p.name.lower().endswith(spec.suffixes):
+        raise CtuiError(f"a {spec.title} file name ends in {' or '.join(spec.suffixes)}", path=p)
+    rows = spec.write(ExportJob(p, src, objs, labels, keep_identifiers, mesh_method, scaled(progress, 0.1, 1.0)))
+    res.rows = list(rows or [])
     report(progress, 1.0, 1.0, f"wrote {p.name}")
     return res

@@ -9,14 +9,20 @@ from __future__ import annotations
 
 
 class CtuiError(Exception):
-    """An error meant for the user: ``str(err)`` is one clear line."""
+    """An error meant for the user: ``str(err)`` is one clear line, in the domain's words.
 
-    def __init__(self, message: str, *, path: object | None = None) -> None:
+    ``option``: the keyword of the engine action whose value would fix it (e.g.
+    ``"series"``, ``"fit_window"``); each front end names it its own way (the CLI appends
+    its flag, ``--series``), so engine messages name no CLI flag.
+    """
+
+    def __init__(self, message: str, *, path: object | None = None, option: str | None = None) -> None:
         message = " ".join(str(message).split())  # one line, always
         if path is not None and str(path) not in message:
             message = f"{path}: {message}"
         super().__init__(message)
         self.path = path
+        self.option = option
 
 
 class LoadError(CtuiError):
