@@ -23,6 +23,8 @@ from ctui.screens.messages import JobDone, JobFailed, JobProgress, LabelsChanged
 from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
+from ctui.screens.strip import ReviewStrip
+from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
 
 
 def label_counts(labels: np.ndarray) -> np.ndarray:
@@ -44,10 +46,10 @@ class SidePanel(Static):
     """
 
 
-class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
+class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
     """Slice views + side panel. Thin: every computation is an engine call."""
 
-    BINDINGS = BINDINGS
+    BINDINGS = BINDINGS + MOUSE_BINDINGS
 
     DEFAULT_CSS = """
     WorkspaceScreen #views { height: 1fr; }
@@ -55,6 +57,7 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
     WorkspaceScreen #grid.on, WorkspaceScreen #ortho.on { display: block; }
     WorkspaceScreen #main-box.off { display: none; }
     WorkspaceScreen .cell-label { height: 1; color: $text-muted; }
+    WorkspaceScreen #oc-3d { height: auto; max-height: 3; }
     WorkspaceScreen #progress-row { height: 1; display: none; }
     WorkspaceScreen #progress-row.on { display: block; }
     WorkspaceScreen #progress-row Label { width: auto; padding: 0 1; }
@@ -83,6 +86,7 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
             with Vertical(id="main-box"):
                 yield Label("", id="main-caption", classes="cell-label")
                 yield ImageView(id="main")
+                yield ReviewStrip(id="strip")
             with Grid(id="grid"):
                 for v in VIEWS:
                     with Vertical(classes="cell"):
@@ -195,6 +199,7 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
             pv = planes.plane_view(s.volume, plane)
             cursor = planes.cursor_in(pv, s.zyx, s.shape)
             center = self._view_center(plane)
+            iv.overlay = lambda grid, vm, _p=plane: draw_overlay(self, _p, grid, vm)
             if view in ("intermediate", "final"):
                 need_stage = True
                 if iv.rgb is not None and iv.token is not None and iv.token[0] == s.z:
@@ -262,6 +267,7 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
 
     def update_panel(self) -> None:
         self.query_one("#panel", SidePanel).update(panel_text(self), layout=False)  # fixed size: no relayout
+        self.update_strip()
 
     def set_status(self, msg: str) -> None:
         self.query_one("#status", Static).update(msg, layout=False)
@@ -274,8 +280,8 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
         elif msg.kind == "3d":
             self._job = None
             self.show_progress(None)
-            if msg.result is not None:
-                self.query_one("#o-3d", ImageView).set_image(msg.result, token=("3d", self._labels_version))
+            # no image (no EGL, a failure): the cell is emptied and its caption says why
+            self.query_one("#o-3d", ImageView).set_image(msg.result, token=("3d", self._labels_version))
             self.query_one("#oc-3d", Label).update(msg.info.get("caption", "3d"))
         elif msg.kind == "propagation":
             from ctui.screens.propagation import finished
@@ -323,6 +329,11 @@ class WorkspaceScreen(EditMixin, NavMixin, GuardMixin, Screen):
         from ctui.screens.ws_jobs import render_cell
 
         iv = self.query_one("#o-3d", ImageView)
+        if not self.ortho_mode:
+            return
+        if iv.size.width < 4 or iv.size.height < 2:  # the 2x2 layout is not laid out yet: a 1x2 px render
+            self.call_after_refresh(self.request_3d)  # would show as one flat colour over the whole cell
+            return
         if self._job is not None:
             self._job.cancel()
         self._job = render_cell(self, iv.target_pixels())

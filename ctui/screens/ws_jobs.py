@@ -35,7 +35,10 @@ def _render_cell(ws, size: tuple[int, int]) -> None:
             scene.mode = "mip"
         img = render.get_renderer().submit(scene, size).result()
     except Exception as exc:  # no EGL, no objects: the cell says so, no error toast on every edit
-        ws.post_message(JobDone("3d", None, caption=f"3d: {str(exc).splitlines()[0][:60] if str(exc) else type(exc).__name__}"))
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, render.EGLUnavailable):
+            why = f"no offscreen OpenGL (EGL); apt-get install {render.EGL_PACKAGES}"
+        ws.post_message(JobDone("3d", None, caption=f"[b]3d unavailable[/b]: {why[:150]}"))
         return
     if not worker.is_cancelled:
         ws.post_message(JobDone("3d", img, caption=f"3d: {len(meshes)} object(s), r opens the 3D view"))

@@ -1,0 +1,85 @@
+"""The 2x2 layout's 3D cell draws the objects with the 3D view's renderer (a shaded
+surface, not one flat colour), redraws after an edit, and says why when there is no
+OpenGL; the exported view PNG has the physical aspect ratio."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine import render
+from ctui.engine.core.volume import Volume
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.session import Session
+from ctui.screens.testing import wait_for, wait_workspace
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+
+
+def _ball_session(n: int = 40) -> Session:
+    """A 300 HU ball (radius 8 px) in air, labelled as object 1."""
+    zz, yy, xx = np.mgrid[:n, :n, :n]
+    ball = (zz - n / 2) ** 2 + (yy - n / 2) ** 2 + (xx - n / 2) ** 2 <= 64
+    data = np.where(ball, 300, -1000).astype(np.int16)
+    s = Session(Volume(data, modality="CT"), source_path="synthetic", z=n // 2, y=n // 2, x=n // 2)
+    s.seg.labels[ball] = 1
+    return s
+
+
+def _egl():
+    try:
+        render.get_renderer()
+    except render.EGLUnavailable as exc:
+        pytest.skip(f"no EGL: {exc}")
+
+
+async def test_3d_cell_shows_shaded_objects_and_follows_edits():
+    _egl()
+    s = _ball_session()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("0")
+        iv = ws.query_one("#o-3d")
+        await wait_for(pilot, lambda: iv.rgb is not None and iv.rgb.shape[0] > 8, what="the 3D cell", timeout=60)
+        img = iv.rgb
+        w, h = iv.target_pixels()
+        assert (img.shape[1], img.shape[0]) == (w, h)  # rendered at the cell's size, not 1x2 px
+        red = (img[:, :, 0].astype(int) - img[:, :, 1]) > 40  # the object's colour
+        assert 0.02 < red.mean() < 0.6  # an object on a background, not a filled rectangle
+        assert np.unique(img[red][:, 0]).size > 10  # shaded: many levels of red
+        area = red.sum()
+        # an edit (a bigger object) redraws the cell
+        version = ws._labels_version
+        s.seg.labels[:, 4:36, 4:36] = np.maximum(s.seg.labels[:, 4:36, 4:36], 1)
+        ws.labels_changed()
+        await wait_for(pilot, lambda: iv.token == ("3d", version + 1) and iv.rgb is not img, what="the redraw",
+                       timeout=60)
+        assert ((iv.rgb[:, :, 0].astype(int) - iv.rgb[:, :, 1]) > 40).sum() > area
+        assert "object" in str(ws.query_one("#oc-3d").render())
+        assert not app.internal_errors
+
+
+async def test_3d_cell_without_egl_says_so(monkeypatch):
+    def no_egl():
+        raise render.EGLUnavailable("cannot create an offscreen OpenGL (EGL) context (test)")
+
+    monkeypatch.setattr(render, "get_renderer", no_egl)
+    s = _ball_session(24)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("0")
+        cap = ws.query_one("#oc-3d")
+        await wait_for(pilot, lambda: "unavailable" in str(cap.render()), what="the caption", timeout=30)
+        text = str(cap.render())
+        assert "EGL" in text and "libegl1" in text
+        assert ws.query_one("#o-3d").rgb is None  # nothing drawn, no flat rectangle
