@@ -74,6 +74,8 @@ def _wanted_series(volume: Any, series: str | None, groups: dict[str, list[Any]]
         key = str(series).strip()
         if key in groups:
             return key
+        if key.startswith("(no SeriesInstanceUID)") and "" in groups:  # the loader's name for a UID-less series
+            return ""
         listed = getattr(volume, "series", None) or []  # a Volume lists its series; a Geometry does not
         if key.isdigit() and int(key) < len(listed):
             return str(listed[int(key)].get("uid"))
@@ -231,7 +233,9 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     import highdicom as hd
 
     from ctui import __version__
+    from ctui.engine.io.dicomrefs import require_references
 
+    require_references(sources, what="DICOM-SEG", path=path)  # never invents the UIDs it points at
     lab = np.asarray(labels)
     masks = masks or {}
     objs = _objects_in(lab, objects, masks)

@@ -254,6 +254,9 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     if len(sources) != lab.shape[0]:
         raise CtuiError(f"RTSTRUCT needs one source image per slice ({len(sources)} images, {lab.shape[0]} slices); "
                         "a multi-frame source is not supported for RTSTRUCT: export DICOM-SEG")
+    from ctui.engine.io.dicomrefs import require_references
+
+    require_references(sources, what="RTSTRUCT")  # never invents a UID for the images it points at
     src = sources[0]
     ds = pydicom.Dataset()
     ds.file_meta = FileMetaDataset()
@@ -282,7 +285,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     ds.StructureSetLabel = label[:16]
     ds.StructureSetDate, ds.StructureSetTime = now.strftime("%Y%m%d"), now.strftime("%H%M%S")
     ds.InstanceCreationDate, ds.InstanceCreationTime = ds.StructureSetDate, ds.StructureSetTime
-    for_uid = str(src.get("FrameOfReferenceUID", "")) or generate_uid()
+    for_uid = str(src.FrameOfReferenceUID)
     ds.FrameOfReferenceUID = for_uid
     series_ref = _item(SeriesInstanceUID=src.SeriesInstanceUID, ContourImageSequence=[_image_ref(s) for s in sources])
     study_ref = _item(ReferencedSOPClassUID=STUDY_COMPONENT_MANAGEMENT, ReferencedSOPInstanceUID=src.StudyInstanceUID,
