@@ -83,3 +83,28 @@ async def test_3d_cell_without_egl_says_so(monkeypatch):
         text = str(cap.render())
         assert "EGL" in text and "libegl1" in text
         assert ws.query_one("#o-3d").rgb is None  # nothing drawn, no flat rectangle
+
+
+async def test_view_png_has_the_physical_aspect(tmp_path):
+    import cv2
+
+    from ctui.screens.export import run_export
+
+    n, nz = 48, 20
+    data = np.full((nz, n, n), -1000, np.int16)
+    data[:, 8:40, 8:40] = 40
+    s = Session(Volume(data, spacing=(3.0, 0.75, 0.75), modality="CT"), source_path="synthetic", z=10, y=24, x=24)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        for key, (rows_mm, cols_mm) in (("1", (n * 0.75, n * 0.75)), ("2", (nz * 3.0, n * 0.75)),
+                                        ("3", (nz * 3.0, n * 0.75))):
+            await pilot.press(key)
+            await pilot.pause()
+            path = tmp_path / f"view{key}.png"
+            run_export(ws, "image", str(path))
+            img = cv2.imread(str(path))
+            h, w = img.shape[:2]
+            assert abs((h / w) / (rows_mm / cols_mm) - 1) < 0.02, (key, img.shape)
+            assert max(h, w) >= n  # never shrunk below the voxel grid

@@ -139,6 +139,23 @@ def render_view(
     return out, vm
 
 
+def physical_image(rgb: np.ndarray, spacing_yx: tuple[float, float], *, max_side: int = 4096) -> np.ndarray:
+    """An (h, w[, 3]) image resampled to square pixels of its finer spacing (mm), so a
+    saved view has the physical aspect ratio the screen shows (a 512x134 coronal view of
+    3 mm slices at 0.7 mm pixels becomes 512x574). Linear interpolation along the
+    stretched axis; the longer side is kept at most ``max_side`` pixels. Unchanged
+    (the same array) when the pixels are already square."""
+    dy, dx = float(spacing_yx[0]), float(spacing_yx[1])
+    h, w = rgb.shape[:2]
+    if not (dy > 0 and dx > 0) or abs(dy - dx) <= 1e-6 * max(dy, dx):
+        return rgb
+    fine = min(dy, dx)
+    nw, nh = w * dx / fine, h * dy / fine
+    shrink = min(1.0, max_side / max(nw, nh))
+    size = (max(1, int(round(nw * shrink))), max(1, int(round(nh * shrink))))
+    return cv2.resize(np.ascontiguousarray(rgb), size, interpolation=cv2.INTER_LINEAR)
+
+
 def draw_cursor(grid: np.ndarray, vm: ViewMap, x: float, y: float, *, color=(255, 40, 40), radius: int | None = None) -> None:
     """Draw the red cursor circle (in place) at image pixel (x, y) on a target grid.
 

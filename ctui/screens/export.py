@@ -79,6 +79,9 @@ def run_export(ws, kind: str, path: str) -> str:
         rgb = ws.main_view.rgb
         if rgb is None:
             raise ValueError("no image shown")
+        from ctui.screens.cells import physical_image
+
+        rgb = physical_image(rgb, ws.main_view.spacing_yx)  # the physical aspect, as on screen
         export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
         return f"Wrote {path}"
     res = export_session(ws.s, kind, path)
