@@ -81,7 +81,7 @@ async def test_open_filter_select_propagate_export_project(tmp_path):
         # e: export the mesh as STL
         stl = tmp_path / "kidney.stl"
         await pilot.press("e")
-        await choose(pilot, "mesh-stl")
+        await choose(pilot, "stl:current")
         await answer_prompt(pilot, str(stl))
         await wait_for(pilot, lambda: stl.exists(), what="the STL file")
         from ctui.engine.io.meshes import load_mesh
@@ -91,7 +91,7 @@ async def test_open_filter_select_propagate_export_project(tmp_path):
         # e: label map as NIfTI
         nii = tmp_path / "labels.nii.gz"
         await pilot.press("e")
-        await choose(pilot, "labels-nii")
+        await choose(pilot, "nifti")
         await answer_prompt(pilot, str(nii))
         await wait_for(pilot, lambda: nii.exists(), what="the NIfTI file")
         from ctui.engine.io.labels import load_labels
@@ -201,7 +201,7 @@ async def test_export_all_objects_in_one_mesh_file(tmp_path):
             total += o["volume_ml"]
         out = tmp_path / "both.stl"
         await pilot.press("e")
-        await choose(pilot, "meshall-stl")
+        await choose(pilot, "stl")
         await answer_prompt(pilot, str(out))
         await wait_for(pilot, lambda: out.exists(), what="the STL file")
         mesh = load_mesh(out)

@@ -50,15 +50,10 @@ def _source(args: argparse.Namespace):
             raise CtuiError("no such file", path=args.path)
         return open_input(args.path, kind="project", require_labels=True,
                           with_series=True if args.estimate == "phase" else None), None, None, []
+    if args.labels:  # placed on the series' grid: its geometry (not only its shape) must match
+        return open_input(args.path, labels=args.labels, **({"series": args.series} if args.series else {})), \
+            None, None, []
     volume = load_volume(args.path, series=args.series)
-    if args.labels:
-        from ctui.engine.io.labels import load_labels
-
-        labels, _geom = load_labels(args.labels)
-        if labels.shape != volume.data.shape:
-            raise CtuiError(f"label shape {labels.shape} does not match the series {volume.data.shape}",
-                            path=args.labels)
-        return Opened.of_volume(volume, labels, path=args.path), None, None, []
     if args.seed:
         seg, pipeline, settings, _ = segment_volume(volume, args)
         return Opened.of_volume(volume, seg.labels, path=args.path), seg, pipeline, settings
@@ -67,7 +62,7 @@ def _source(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from ctui.engine.actions.drift import drift_check
-    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.actions.project import new_project, propagation_record, save_project
     from ctui.engine.core.errors import CtuiError
     from ctui.engine.core.atomic import check_outputs
     from ctui.engine.core.jsonio import dumps
@@ -90,13 +85,11 @@ def run(args: argparse.Namespace) -> int:
             save_project(args.project, project)
         else:
             pipeline = pipeline or build_pipeline(args)
-            prop = dict(settings[0]) if settings else {}
-            if len(settings) > 1:
-                prop["per_object"] = settings
             project = new_project(opened.volume, source_path=args.path,
                                   source_options={"series": args.series} if args.series else {},
                                   labels=opened.labels, objects=seg.object_list() if seg is not None else [],
-                                  pipeline=pipeline.to_dict(), propagation=prop, drift=res.project_drift())
+                                  pipeline=pipeline.to_dict(), propagation=propagation_record(settings),
+                                  drift=res.project_drift())
             save_project(args.project, project)
         written.append(args.project)
     if args.json:

@@ -232,42 +232,42 @@ def objects_report(seg, volume, results) -> list[dict]:
     return out
 
 
-def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, series: str | None = None, drift: dict | None = None):
-    import os
+def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, series: str | None = None,
+                 drift: dict | None = None):
+    """The project of a segmentation (the one constructor: ``actions.project.new_project``)."""
+    from ctui.engine.actions.project import new_project, propagation_record
 
-    from ctui.engine.io.project import Project
-
-    prop = dict(settings[0]) if settings else {}
-    if len(settings) > 1:
-        prop["per_object"] = settings
-    return Project(source_path=os.path.abspath(path), source_options={"series": series} if series else {},
-                   pipeline=pipeline.to_dict(), labels=seg.labels, objects=seg.object_list(), propagation=prop,
-                   drift=drift or {}, window=tuple(volume.window) if volume.window else None,
-                   meta={}).set_source(volume)  # geometry + identity: the project stands on its own
+    return new_project(volume, source_path=path, source_options={"series": series} if series else {},
+                       pipeline=pipeline.to_dict(), labels=seg.labels, objects=seg.object_list(),
+                       propagation=propagation_record(settings), drift=drift)
 
 
 def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: list[dict]) -> list[str]:
+    """--project, --mask and --mric: the project by ``actions.project``, the label map and
+    the contours by ``actions.export`` (what ``ctui export`` writes)."""
     written = []
+    project = make_project(args.path, volume, seg, pipeline, settings, series=args.series)
     if getattr(args, "project", None):
-        from ctui.engine.io.project import save_project
+        from ctui.engine.actions.project import save_project
 
-        save_project(args.project, make_project(args.path, volume, seg, pipeline, settings, series=args.series))
+        save_project(args.project, project, inputs=[args.path])
         written.append(args.project)
-    if getattr(args, "mask", None):
-        from ctui.engine.io.labels import save_labels
+    mask, mric = getattr(args, "mask", None), getattr(args, "mric", None)
+    if mask or mric:
+        from ctui.engine.actions.export import export
+        from ctui.engine.actions.formats import format_for_path
+        from ctui.engine.actions.opened import Opened
 
-        save_labels(args.mask, seg.labels, volume, names={o["id"]: o["name"] for o in seg.object_list()})
-        written.append(args.mask)
-    if getattr(args, "mric", None):
-        from ctui.engine.core.borders import borders_for_mric
-        from ctui.engine.io.mric import write_mric
-
-        nz, ny, nx = seg.labels.shape
-        mid = nz // 2
-        image = pipeline.run_slice(volume, mid).display("original")
-        write_mric(args.mric, borders_for_mric(seg.labels), width=nx, height=ny, image=image,
-                   spacing=volume.spacing, origin=volume.origin, direction=volume.direction)
-        written.append(args.mric)
+        opened = Opened.of_volume(volume, seg.labels, path=args.path, project=project)
+        if mask:
+            fmt = format_for_path(mask, kinds=("nifti", "nrrd"))
+            if fmt is None:
+                raise _err(f"--mask {mask}: a label map's name ends in .nii, .nii.gz, .nrrd or .seg.nrrd")
+            export(opened, format=fmt.name, out=mask)
+            written.append(mask)
+        if mric:
+            export(opened, format="mric", out=mric)
+            written.append(mric)
     return written
 
 

@@ -15,7 +15,9 @@ from textual.app import App, SystemCommand
 from textual.binding import Binding
 from textual.screen import Screen
 
+from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.opened import check_source, labels_only_volume, series_available
+from ctui.engine.actions.project import save_project
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io import project
 from ctui.engine.io.project import source_load_options
@@ -282,7 +284,7 @@ class CtuiApp(App):
             return
         from ctui.screens.dialogs import PromptScreen
 
-        default = str(safe_cwd() / (Path(s.source_path or "project").name.replace(" ", "_") + ".ctui"))
+        default = str(safe_cwd() / output_name(s.source_path, ".ctui"))  # ct.nii.gz -> ct.ctui
 
         def done(val: str | None) -> None:
             if val:
@@ -300,7 +302,7 @@ class CtuiApp(App):
             if not p.is_absolute():  # relative to where ctui started (the folder may be gone: then home)
                 p = safe_cwd() / p
             proj = project_from_session(s)
-            project.save_project(str(p), proj)
+            save_project(str(p), proj)  # the CLI's writer: refuses the source folder and the inputs
         except (CtuiError, OSError, ValueError) as exc:
             self.notify(f"Project not saved: {exc}", severity="error", timeout=10)
             return

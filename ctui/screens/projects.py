@@ -4,8 +4,8 @@ for the actions the screens call (measure, export)."""
 from __future__ import annotations
 
 from ctui.engine.actions.opened import Opened
+from ctui.engine.actions.project import new_project, propagation_record
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.io import project
 from ctui.engine.segment import pipeline, selection
 from ctui.engine.actions import edit as edittools
 from ctui.screens.planes import PLANES
@@ -37,29 +37,21 @@ def _editing_from_meta(s: Session, meta: dict) -> None:
 
 
 def project_from_session(s: Session):
-    """A ctui.engine.io.project.Project of the session's state."""
+    """A ctui.engine.io.project.Project of the session's state (built by the one project
+    constructor, :func:`ctui.engine.actions.project.new_project`)."""
     seg = s.seg
-    labels = getattr(seg, "labels", None)
-    objects = seg.object_list() if seg is not None else []
-    proj = project.Project(
-        source_path=str(s.source_path),
-        source_options=dict(s.source_options or {}),
+    prop = {"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None, "connectivity": s.connectivity}
+    return new_project(
+        s.volume, source_path=str(s.source_path or ""), source_options=dict(s.source_options or {}),
         pipeline=s.pipeline.to_dict() if s.pipeline is not None else {},
-        labels=labels,
-        objects=objects,
-        propagation={"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None,
-                     "connectivity": s.connectivity, "current": s.current, "mode": s.prop_mode},
-        drift=dict(s.drift_info or {}),
-        window=tuple(s.window),
+        labels=getattr(seg, "labels", None), objects=seg.object_list() if seg is not None else [],
+        propagation=propagation_record([prop], current=s.current, mode=s.prop_mode),
+        drift=dict(s.drift_info or {}), window=tuple(s.window),
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view, "plane": s.plane, "edit_mode": s.edit_mode,
               "brush": s.brush, "limit_slices": list(s.limits.slices) if s.limits.slices else None,
               "limit_values": list(s.limits.values) if s.limits.values else None},
-    )
-    if s.source_identity:  # labels only: the missing series' identity, not the stand-in's
-        for key, value in s.source_identity.items():
-            setattr(proj, key, value)
-        return proj
-    return proj.set_source(s.volume, data=getattr(s, "original_data", None))  # geometry + identity (as loaded)
+        data=getattr(s, "original_data", None),  # the voxels as loaded (before a drift correction)
+        identity=s.source_identity)  # labels only: the missing series' identity, not the stand-in's
 
 
 def session_from_project(proj, volume, path: str) -> Session:
