@@ -135,7 +135,7 @@ def test_paint_and_erase_in_tmux_voxel_counts(tmux_session, tmp_path):
     _keys(tmux_session, "b")
     _wait(tmux_session, "Brush lifted")
     _keys(tmux_session, ",", ",")  # radius 1: a 5-px eraser
-    _wait(tmux_session, "Brush radius 1")
+    _wait(tmux_session, "Brush radius 2 mm")
     _keys(tmux_session, "E")
     _wait(tmux_session, "Eraser down")
     _keys(tmux_session, "E")

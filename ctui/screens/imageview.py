@@ -46,6 +46,7 @@ class ImageView(Widget):
         self.token: object = None
         self.painted: tuple[object, float] = (None, 0.0)
         self.view_map: cells.ViewMap | None = None
+        self.overlay = None  # callable(grid, view_map) drawing marks in display pixels (seeds, box, brush)
         self._strips: list[Strip] | None = None
         self._strips_key: tuple | None = None
         self._tii = None  # textual-image child widget for sixel/kitty
@@ -101,6 +102,10 @@ class ImageView(Widget):
             if grid is self.rgb:
                 grid = grid.copy()
             cells.draw_cursor(grid, vm, *self.cursor)
+        if self.overlay is not None and self.mode != "ascii":
+            if grid is self.rgb:
+                grid = grid.copy()
+            self.overlay(grid, vm)
         return grid
 
     def compose(self):

@@ -69,9 +69,15 @@ class Session:
     original_data: Any = None  # volume data before a drift correction
     plane: str = "axial"  # "axial" | "sagittal" | "coronal" (ctui.screens.planes)
     edit_mode: str = "add"  # fill/paint mode: "add" | "replace" | "subtract"
-    brush: int = 3  # brush/eraser radius, pixels of the finest in-plane spacing
+    brush: float | None = None  # brush/eraser radius in mm (None: 3 pixels of the finest in-plane spacing)
     tool: str | None = None  # "brush" / "eraser" while the pen is down (moving paints)
     limits: EditLimits = field(default_factory=EditLimits)  # where edits and propagation may write
+    click_fills: bool = False  # a left click on a view fills there (as Enter) instead of only moving the cursor
+    # voxel indices (x, y, z) on the file's grid: the other side of a fill / grow (actions.segment)
+    background_seeds: list[tuple[int, int, int]] = field(default_factory=list)
+    # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
+    roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
+    box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
     # a project opened without its series (labels only): the series' recorded identity,
     # kept when the project is saved (the stand-in zeros must not replace it)
     source_identity: dict | None = None
@@ -83,6 +89,8 @@ class Session:
         self.x = nx // 2 if self.x is None else int(self.x)
         self.y = ny // 2 if self.y is None else int(self.y)
         self.clamp()
+        if self.brush is None:
+            self.brush = 3.0 * float(min(self.volume.spacing[1:]))
         if self.volume.window:
             self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
         if self.pipeline is None:
@@ -111,6 +119,32 @@ class Session:
 
     def value(self) -> float:
         return float(self.volume.data[self.z, self.y, self.x])
+
+    def filtered_value(self) -> float | None:
+        """The value the fill uses at the cursor (the pipeline's final image of the slice,
+        in its domain: HU or 0..255), or None when no pipeline step is active."""
+        if self.pipeline is None or not (getattr(self.pipeline, "steps", None) or []):
+            return None
+        with self._lock:
+            image = self.pipeline.final_slice(self.volume, self.z)
+        return float(image[self.y, self.x])
+
+    def brush_px(self, axis: int = 0) -> float:
+        """The brush radius in pixels of the finer in-plane spacing of the plane across ``axis``."""
+        from ctui.engine.actions.edit import brush_radius_px
+
+        return brush_radius_px(self.brush, self.volume.spacing, axis)
+
+    def toggle_background_seed(self, zyx: tuple[int, int, int] | None = None) -> bool:
+        """Place a background seed at voxel ``zyx`` (the cursor), or remove the one there;
+        True when placed."""
+        z, y, x = self.zyx if zyx is None else zyx
+        seed = (int(x), int(y), int(z))
+        if seed in self.background_seeds:
+            self.background_seeds.remove(seed)
+            return False
+        self.background_seeds.append(seed)
+        return True
 
     # ------------------------------------------------------------ images
     def labels(self) -> np.ndarray | None:

@@ -56,12 +56,14 @@ class EditMixin:
             kw = {"low": s.range_[0], "high": s.range_[1]} if s.range_ else {"tolerance": s.tolerance}
             n, reason, (lo, hi) = et.fill_slice(s.seg, image, s.x, s.y, s.z, object_id=s.current, mode=s.edit_mode,
                                                 connectivity=s.connectivity, limits=s.limits, data=s.volume.data,
-                                                spacing_yx=tuple(s.volume.spacing[1:]), **kw)
+                                                spacing_yx=tuple(s.volume.spacing[1:]), box=s.roi_box, **kw)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
         if reason:
-            self.app.notify(f"Fill rejected: {reason}", severity="warning")
+            fv = s.filtered_value()
+            used = "" if fv is None else f" (the fill uses the filtered value {fv:g}; raw {s.value():g})"
+            self.app.notify(f"Fill rejected: {reason}{used}", severity="warning")
             return
         verb = {"add": "Filled", "replace": "Replaced with", "subtract": "Subtracted"}[s.edit_mode]
         self._edited(f"{verb} {n} px, object {s.current} (range {lo:g}..{hi:g}); p propagates, u undoes")
@@ -73,7 +75,7 @@ class EditMixin:
         pv = plane_view(s.volume, s.plane)
         mode = "subtract" if tool == "eraser" else s.edit_mode
         return et.dab(s.seg, s.volume, s.zyx if zyx is None else zyx, axis=pv.normal, object_id=s.current,
-                      radius=s.brush, mode=mode, limits=s.limits)
+                      radius=0, radius_mm=s.brush, mode=mode, limits=s.limits, box=s.roi_box)
 
     def action_dab(self) -> None:
         if not self._editable():
@@ -84,7 +86,7 @@ class EditMixin:
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
-        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {self.s.brush} px); u undoes")
+        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {self.s.brush:g} mm); u undoes")
 
     def action_pen(self, tool: str) -> None:
         """b / E: put the brush (eraser) down, so moving the cursor paints (erases); again lifts it."""
@@ -96,7 +98,7 @@ class EditMixin:
             return
         s.tool = tool
         self.action_dab()
-        self.set_status(f"{tool.capitalize()} down ({s.brush} px, {s.edit_mode}): move to paint; "
+        self.set_status(f"{tool.capitalize()} down ({s.brush:g} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to paint; "
                         f"{'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
 
     def stroke(self, start: tuple[int, int, int], end: tuple[int, int, int]) -> None:
@@ -114,9 +116,12 @@ class EditMixin:
             self.labels_changed()
 
     def action_brush_size(self, d: int) -> None:
-        self.s.brush = int(min(max(self.s.brush + d, 0), 50))
-        self.set_status(f"Brush radius {self.s.brush} px")
-        self.update_panel()
+        """,/. : the brush radius in mm, one in-plane pixel per step (0 mm: a single pixel)."""
+        s = self.s
+        step = float(min(s.volume.spacing[1:]))
+        s.brush = float(min(max(round((s.brush + d * step) / step) * step, 0.0), 100.0))
+        self.set_status(f"Brush radius {s.brush:g} mm ({s.brush_px(plane_view(s.volume, s.plane).normal):.1f} px)")
+        self.refresh_view()
 
     def action_edit_mode(self) -> None:
         s = self.s
@@ -211,7 +216,18 @@ class EditMixin:
         from ctui.screens.dialogs import ChoiceScreen
 
         options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels (X)"),
-                   ("fill_between", "Fill between slices (F)"), ("edit_mode", "Mode add / replace / subtract (R)"),
+                   ("fill_between", "Fill between slices (F)"),
+                   ("keep_island", "Keep the island under the cursor (3D)"),
+                   ("keep_island_slice", "Keep the island under the cursor (this slice)"),
+                   ("remove_island", "Remove the island under the cursor (3D)"),
+                   ("scissors_in_slice", "Scissors: erase inside the box, this slice"),
+                   ("scissors_in_box", "Scissors: erase inside the box, its slices"),
+                   ("scissors_in_all", "Scissors: erase inside the box, all slices"),
+                   ("scissors_out_box", "Scissors: erase outside the box, its slices"),
+                   ("scissors_out_all", "Scissors: erase outside the box, all slices"),
+                   ("smooth", "Smooth: median / opening / closing, size in mm"),
+                   ("box_corner", "ROI box: a corner at the cursor (y)"), ("box_clear", "ROI box off (Y)"),
+                   ("edit_mode", "Mode add / replace / subtract (R)"),
                    ("limits", "Limits: slice range and HU range (i)"), ("stop_slice", "Stop at this slice (s)")]
 
         def done(choice: str | None) -> None:

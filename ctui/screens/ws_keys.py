@@ -337,7 +337,12 @@ def panel_text(ws) -> Text:
     t.append(f"Cursor x {s.x}  y {s.y}\n")
     t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
     t.append("Value ", style="bold")
-    t.append(f"{s.value():g} {'HU' if v.modality == 'CT' else ''}\n")
+    t.append(f"{s.value():g} {'HU' if v.modality == 'CT' else ''}")
+    try:
+        fv = s.filtered_value()
+    except Exception:  # a filter error is reported by the views; the readout stays
+        fv = None
+    t.append(f"  filtered {fv:.4g}\n" if fv is not None else "\n")
     c, w = s.window
     t.append(f"Window C {c:g} W {w:g}")
     if getattr(ws, "_window_name", None):
@@ -348,7 +353,14 @@ def panel_text(ws) -> Text:
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
     t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     pen = f" {s.tool} down" if s.tool else ""
-    t.append(f"Mode {s.edit_mode}  brush {s.brush} px{pen}\n")
+    t.append(f"Mode {s.edit_mode}  brush {s.brush:g} mm{pen}\n")
+    if s.click_fills:
+        t.append("Click fills (z)\n", style="yellow")
+    if s.roi_box is not None:
+        (z0, z1), (y0, y1), (x0, x1) = s.roi_box
+        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}\n", style="rgb(255,150,0)")
+    if s.background_seeds:
+        t.append(f"Background seeds {len(s.background_seeds)}\n", style="cyan")
     if s.limits.slices is not None or s.limits.values is not None:
         t.append(f"Limits {s.limits.describe()}\n", style="yellow")
     t.append("\nPipeline", style="bold underline")

@@ -158,6 +158,7 @@ def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[
 # =========================================================================== one job
 def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
     """(labels uint8, pipeline dict, propagation dict) of one object from the job's seed (the segment action)."""
+    from ctui.engine.actions.project import propagation_record
     from ctui.engine.actions.segment import SegmentOptions, segment
     from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
 
@@ -167,7 +168,7 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
         raise CtuiError(f"filter: {exc}") from None
     res = segment(volume, [job.seed], [job.range], background=job.background, pipeline=pipeline,
                   options=SegmentOptions(method=job.method, mode=job.mode), names=[job.name])
-    return res.segmentation.labels, pipeline.to_dict(), dict(res.settings[0]) if res.settings else {}
+    return res.segmentation.labels, pipeline.to_dict(), propagation_record(res.settings)
 
 
 def run_job(job: Job) -> dict:

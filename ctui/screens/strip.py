@@ -1,0 +1,106 @@
+"""The review strip: a one-line sparkline of a pending proposal's area per slice under the
+main view, with the slice cursor, the seed slice and the slices marked by
+:func:`ctui.engine.segment.review.marks` (the area jumps or the centre moves), and a
+second line of markers. A click on it goes to that slice (to the marked slice when the
+column holds one); ``{`` / ``}`` jump between marks (``ctui.screens.ws_mouse``)."""
+
+from __future__ import annotations
+
+import numpy as np
+from rich.segment import Segment
+from rich.style import Style
+from textual.strip import Strip
+from textual.widget import Widget
+
+BARS = " ▁▂▃▄▅▆▇█"
+_BAR = Style(color="rgb(120,200,255)", bgcolor="rgb(20,20,30)")
+_MARK = Style(color="rgb(255,80,80)", bgcolor="rgb(20,20,30)", bold=True)
+_SEED = Style(color="rgb(80,230,80)", bgcolor="rgb(20,20,30)")
+_CURSOR = Style(color="black", bgcolor="rgb(255,230,0)")
+_DIM = Style(color="rgb(150,150,150)", bgcolor="rgb(20,20,30)")
+
+
+def columns(nz: int, width: int) -> list[tuple[int, int]]:
+    """The slices (first, last inclusive) each column of a strip ``width`` cells wide
+    shows: one slice per column (several columns per slice when they fit), or several
+    slices per column when there are more slices than columns."""
+    width = max(int(width), 1)
+    if nz <= 0:
+        return []
+    if nz <= width:
+        k = width // nz
+        return [(c // k, c // k) for c in range(nz * k)]
+    m = -(-nz // width)  # slices per column, rounded up
+    return [(c * m, min((c + 1) * m, nz) - 1) for c in range(-(-nz // m))]
+
+
+def bars(profile: np.ndarray, cols: list[tuple[int, int]]) -> list[int]:
+    """Bar heights 0..8 per column (the column's largest area over the largest area)."""
+    if not cols:
+        return []
+    vals = np.array([int(profile[a:b + 1].max()) for a, b in cols], np.float64)
+    top = vals.max()
+    if top <= 0:
+        return [0] * len(cols)
+    h = np.ceil(vals / top * 8).astype(int)
+    return [int(v) for v in h]
+
+
+class ReviewStrip(Widget):
+    """Two lines: the sparkline and the markers (``▲`` the slice, ``s`` the seed, ``!`` a mark)."""
+
+    DEFAULT_CSS = """
+    ReviewStrip { height: 2; width: 1fr; display: none; }
+    ReviewStrip.on { display: block; }
+    """
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.profile: np.ndarray | None = None
+        self.marked: set[int] = set()
+        self.cursor = 0
+        self.seed: int | None = None
+
+    def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None) -> None:
+        self.profile = profile
+        self.marked = set(int(z) for z in marked)
+        self.cursor = int(cursor)
+        self.seed = seed
+        self.refresh()
+
+    def _cols(self) -> list[tuple[int, int]]:
+        if self.profile is None:
+            return []
+        return columns(len(self.profile), self.size.width)
+
+    def slice_at(self, col: int) -> int | None:
+        """The slice a click on column ``col`` goes to (a marked slice in it first)."""
+        cols = self._cols()
+        if not 0 <= col < len(cols):
+            return None
+        a, b = cols[col]
+        inside = sorted(z for z in self.marked if a <= z <= b)
+        return inside[0] if inside else (a + b) // 2
+
+    def render_line(self, y: int) -> Strip:
+        cols = self._cols()
+        width = self.size.width
+        if not cols or y > 1:
+            return Strip.blank(width)
+        segs = []
+        if y == 0:
+            for (a, b), h in zip(cols, bars(self.profile, cols)):
+                style = _CURSOR if a <= self.cursor <= b else (_MARK if any(a <= z <= b for z in self.marked) else _BAR)
+                segs.append(Segment(BARS[h], style))
+        else:
+            for a, b in cols:
+                if a <= self.cursor <= b:
+                    segs.append(Segment("▲", _CURSOR))
+                elif any(a <= z <= b for z in self.marked):
+                    segs.append(Segment("!", _MARK))
+                elif self.seed is not None and a <= self.seed <= b:
+                    segs.append(Segment("s", _SEED))
+                else:
+                    segs.append(Segment(" ", _DIM))
+        strip = Strip(segs, len(segs))
+        return strip.extend_cell_length(width, _DIM)

@@ -1,0 +1,499 @@
+"""The workspace's mouse (a mixin of :class:`ctui.screens.workspace.WorkspaceScreen`), the
+review of a pending proposal, the ROI box, background seeds and the 3D edit tools.
+
+Mouse (any terminal that reports mouse events: xterm SGR, tmux with ``mouse on``, SSH):
+
+=============================  ==========================================================
+left click                     the cursor (and the crosshair of the other planes) moves
+                               there; with ``z`` (click fills) on, it fills as Enter; with
+                               the brush/eraser down (b / E) it paints a dab
+left drag                      brush/eraser down: paints (erases) along the drag; after
+                               ``y`` (box): the ROI box from press to release; else the
+                               cursor follows
+right click, Ctrl+click        place (or remove) a background seed
+Shift/Alt drag, middle drag    pan (when zoomed in)
+wheel / Ctrl+wheel             next/previous slice / zoom
+click on the side panel        select that object
+click on the review strip      go to that slice
+=============================  ==========================================================
+
+Every display <-> voxel conversion goes through :mod:`ctui.screens.planes`.
+"""
+
+from __future__ import annotations
+
+import cv2
+from textual.binding import Binding
+
+from ctui.engine.actions import edit as et
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.segment import review
+from ctui.screens import planes
+from ctui.screens.imageview import ImageView
+from ctui.screens.strip import ReviewStrip
+
+EDIT_ERRORS = (CtuiError, ValueError, IndexError)
+SEED_COLOR = (0, 230, 255)
+BOX_COLOR = (255, 150, 0)
+
+MOUSE_BINDINGS = [
+    Binding("z", "click_fills", "Click fills on/off", show=False),
+    Binding("B", "background_seed", "Background seed at the cursor (again: remove)", show=False),
+    Binding("y", "box_corner", "ROI box: a corner at the cursor (or drag)", show=False),
+    Binding("Y", "box_clear", "ROI box off", show=False),
+    Binding("right_curly_bracket", "mark(1)", "Next marked slice of the proposal", show=False),
+    Binding("left_curly_bracket", "mark(-1)", "Previous marked slice of the proposal", show=False),
+    Binding("C", "cut_here", "Cut the proposal at this slice", show=False),
+    Binding("A", "accept_to_here", "Accept the proposal from the seed to here", show=False),
+]
+
+
+def _plane_of(ws, widget) -> str:
+    wid = widget.id or ""
+    if wid.startswith("o-"):
+        return wid[2:]
+    if wid.startswith("g-"):
+        sp = getattr(planes, "slice_plane", None)
+        return sp(ws.s.volume) if sp is not None else "axial"
+    return ws.s.plane
+
+
+def _corner_box(a, b, normal: int, shape, slices=None):
+    """The box of corners ``a``, ``b`` (z, y, x); along the plane's normal axis a box drawn
+    in one plane spans ``slices`` (the slice limits) or the whole volume."""
+    box = list(et.box_of_corners(a, b))
+    if a[normal] == b[normal]:
+        box[normal] = tuple(slices) if (normal == 0 and slices is not None) else (0, shape[normal] - 1)
+    return tuple(box)
+
+
+def draw_overlay(ws, plane: str, grid, vm) -> None:
+    """Background seeds (cyan crosses), the ROI box (orange) and, with the brush or eraser
+    down, its footprint (a circle of the brush radius in mm) on a display grid."""
+    s = ws.s
+    pv = planes.plane_view(s.volume, plane)
+    idx = s.zyx[pv.normal]
+
+    def disp(zyx):
+        c, r = planes.cursor_in(pv, zyx, s.shape)
+        return vm.to_display(c, r)
+
+    for x, y, z in s.background_seeds:
+        if (z, y, x)[pv.normal] == idx:
+            xd, yd = (int(v) for v in disp((z, y, x)))
+            cv2.line(grid, (xd - 2, yd - 2), (xd + 2, yd + 2), SEED_COLOR, 1)
+            cv2.line(grid, (xd - 2, yd + 2), (xd + 2, yd - 2), SEED_COLOR, 1)
+    if s.roi_box is not None:
+        lo = tuple(r[0] for r in s.roi_box)
+        hi = tuple(r[1] for r in s.roi_box)
+        if lo[pv.normal] <= idx <= hi[pv.normal]:
+            (x0, y0), (x1, y1) = disp(lo), disp(hi)
+            hx, hy = vm.sx / 2, vm.sy / 2
+            cv2.rectangle(grid, (int(min(x0, x1) - hx), int(min(y0, y1) - hy)),
+                          (int(max(x0, x1) + hx), int(max(y0, y1) + hy)), BOX_COLOR, 1)
+    if s.box_corner is not None and s.box_corner[pv.normal] == idx:
+        xd, yd = (int(v) for v in disp(s.box_corner))
+        cv2.rectangle(grid, (xd - 2, yd - 2), (xd + 2, yd + 2), BOX_COLOR, 1)
+    if s.tool in ("brush", "eraser"):
+        xd, yd = disp(s.zyx)
+        ax = (max(int(round((s.brush / pv.spacing_yx[1] + 0.5) * vm.sx)), 1),
+              max(int(round((s.brush / pv.spacing_yx[0] + 0.5) * vm.sy)), 1))
+        col = (80, 255, 80) if s.tool == "brush" else (255, 80, 255)
+        cv2.ellipse(grid, (int(xd), int(yd)), ax, 0, 0, 360, col, 1)
+
+
+class MouseMixin:
+    """Mouse handlers and the review/box/seed/3D-edit actions; the host provides ``s``,
+    ``app``, ``refresh_view``, ``update_panel``, ``set_status``, ``labels_changed``,
+    ``action_fill``, ``dab``, ``stroke``, ``_editable`` and ``proposal``."""
+
+    _drag: tuple | None = None
+
+    # ------------------------------------------------------------------ where the mouse is
+    def _voxel_at(self, widget: ImageView, event, *, inside: bool = True):
+        """(plane, (z, y, x)) under the mouse, or None off the image (``inside``)."""
+        region = widget.content_region
+        col, row = event.screen_x - region.x, event.screen_y - region.y
+        pos = widget.display_to_image(int(col), int(row))
+        if pos is None or widget.rgb is None:
+            return None
+        h, w = widget.rgb.shape[:2]
+        if inside and not (-0.5 <= pos[0] < w - 0.5 and -0.5 <= pos[1] < h - 0.5):
+            return None
+        plane = _plane_of(self, widget)
+        pv = planes.plane_view(self.s.volume, plane)
+        return plane, planes.voxel_of(pv, pos[0], pos[1], self.s.zyx, self.s.shape)
+
+    @staticmethod
+    def _image_view(event) -> ImageView | None:
+        w = getattr(event, "widget", None)
+        if isinstance(w, ImageView) and w.id not in (None, "o-3d"):
+            return w
+        return None
+
+    # ------------------------------------------------------------------ mouse events
+    def on_mouse_down(self, event) -> None:
+        w = getattr(event, "widget", None)
+        if isinstance(w, ReviewStrip):
+            z = w.slice_at(int(event.screen_x - w.content_region.x))
+            if z is not None:
+                self._go_slice(z)
+            return
+        iv = self._image_view(event)
+        if iv is None:
+            return
+        if event.button == 2 or (event.button == 1 and (event.shift or event.meta)):
+            self._drag = ("pan", iv, event.screen_x, event.screen_y, self.pan_center or self._view_center())
+            iv.capture_mouse()
+            return
+        got = self._voxel_at(iv, event)
+        if got is None:
+            self.set_status("Click on the image: that click was outside it (nothing changed)")
+            return
+        plane, zyx = got
+        if event.button == 3 or event.ctrl:
+            placed = self.s.toggle_background_seed(zyx)
+            z, y, x = zyx
+            self.set_status(f"Background seed {'placed' if placed else 'removed'} at x {x}, y {y}, slice {z} "
+                            f"({len(self.s.background_seeds)} in all)")
+            self.refresh_view()
+            return
+        if event.button != 1:
+            return
+        self._click(iv, plane, zyx)
+
+    def _click(self, iv: ImageView, plane: str, zyx) -> None:
+        s = self.s
+        s.plane = plane
+        s.z, s.y, s.x = zyx
+        s.clamp()
+        if s.box_corner is not None:
+            self._drag = ("box", iv, plane, s.zyx)
+        elif s.tool in ("brush", "eraser"):
+            if self._editable():
+                try:
+                    self.dab(s.tool)
+                except EDIT_ERRORS as exc:
+                    self.app.notify(str(exc), severity="error")
+                self.labels_changed()
+            self._drag = ("paint", iv, plane, s.zyx)
+        elif s.click_fills:
+            self.refresh_view()
+            self.action_fill()
+            return
+        else:
+            self._drag = ("cursor", iv, plane, s.zyx)
+        iv.capture_mouse()
+        self.refresh_view()
+
+    def on_mouse_move(self, event) -> None:
+        drag = self._drag
+        if drag is None:
+            return
+        if drag[0] == "pan":
+            self._pan_drag(event)
+            return
+        got = self._voxel_at(drag[1], event, inside=False)
+        if got is None:
+            return
+        _plane, zyx = got
+        s = self.s
+        if zyx == s.zyx:
+            return
+        before = s.zyx
+        s.z, s.y, s.x = zyx
+        s.clamp()
+        if drag[0] == "paint" and self._prop is None:
+            self.stroke(before, s.zyx)
+        elif drag[0] == "box":
+            pv = planes.plane_view(s.volume, drag[2])
+            s.roi_box = _corner_box(drag[3], s.zyx, pv.normal, s.shape, s.limits.slices)
+        self.refresh_view()
+
+    def _pan_drag(self, event) -> None:
+        _kind, iv, sx0, sy0, c0 = self._drag
+        vm = iv.view_map
+        if vm is None or self.s.zoom <= 1:
+            return
+        cw, ch = (1.0, 2.0) if iv.mode not in ("sixel", "kitty") else (1.0, 1.0)
+        dx = (event.screen_x - sx0) * cw / vm.sx
+        dy = (event.screen_y - sy0) * ch / vm.sy
+        self.pan_center = (c0[0] - dx, c0[1] - dy)
+        self.refresh_view()
+
+    def on_mouse_up(self, event) -> None:
+        drag, self._drag = self._drag, None
+        if drag is None:
+            return
+        drag[1].release_mouse()
+        if drag[0] == "box":
+            self._finish_box(drag[2], drag[3], self.s.zyx)
+        elif drag[0] == "paint":
+            self.set_status(f"Painted along the drag (brush {self.s.brush:g} mm); u undoes step by step")
+
+    def on_click(self, event) -> None:
+        """Clicks on views are handled on press (above); a click on the side panel selects an object."""
+        if self._image_view(event) is not None:
+            event.prevent_default()  # the press already moved the cursor (no second handler)
+            return
+        w = getattr(event, "widget", None)
+        if w is not None and w.id == "panel":
+            self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y))
+
+    def _panel_click(self, panel, row: int) -> None:
+        from ctui.screens.ws_keys import panel_text
+
+        lines = panel_text(self).plain.split("\n")
+        if not 0 <= row < len(lines) or "██" not in lines[row]:
+            return
+        s = self.s
+        vols = self._object_volumes()
+        ids = sorted(set(getattr(s.seg, "objects", {}) or {}) | set(vols) | {s.current})
+        k = sum(1 for line in lines[:row] if "██" in line)
+        if k < len(ids):
+            s.current = ids[k]
+            self.set_status(f"Object {s.current} selected")
+            self.update_panel()
+
+    def on_mouse_scroll_up(self, event) -> None:
+        self._wheel(event, 1)
+
+    def on_mouse_scroll_down(self, event) -> None:
+        self._wheel(event, -1)
+
+    def _wheel(self, event, d: int) -> None:
+        w = getattr(event, "widget", None)
+        if isinstance(w, ReviewStrip):
+            self.action_slice(d)
+            return
+        iv = self._image_view(event)
+        if iv is None:
+            return
+        if event.ctrl:
+            self.action_zoom(d)
+            return
+        plane = _plane_of(self, iv)
+        if plane != self.s.plane:
+            self.s.plane = plane
+        self.action_slice(d)
+
+    # ------------------------------------------------------------------ keys
+    def action_goto(self) -> None:
+        """g: "Z" goes to slice Z; "X,Y" moves the cursor on this slice; "X,Y,Z" both."""
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+        nz, ny, nx = s.shape
+
+        def done(val: str | None) -> None:
+            if not val or not val.strip():
+                return
+            try:
+                parts = [int(v) for v in val.replace(" ", ",").split(",") if v.strip()]
+                if len(parts) not in (1, 2, 3):
+                    raise ValueError
+            except ValueError:
+                self.app.notify(f"Go to: give a slice (40), x,y (120,88) or x,y,z (120,88,40); not {val!r}",
+                                severity="error")
+                return
+            x, y, z = (s.x, s.y, parts[0]) if len(parts) == 1 else (parts[0], parts[1], parts[2] if len(parts) == 3 else s.z)
+            if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+                self.app.notify(f"x 0..{nx - 1}, y 0..{ny - 1}, slices 0..{nz - 1}: moved to the nearest voxel",
+                                severity="warning", timeout=3)
+            s.z, s.y, s.x = z, y, x
+            s.clamp()
+            self.refresh_view()
+
+        self.app.push_screen(PromptScreen(f"Go to slice (0..{nz - 1}), x,y or x,y,z", str(s.z)), done)
+
+    def action_click_fills(self) -> None:
+        self.s.click_fills = not self.s.click_fills
+        self.set_status("A click on the image fills there (as Enter)" if self.s.click_fills
+                        else "A click on the image moves the cursor")
+        self.update_panel()
+
+    def action_background_seed(self) -> None:
+        s = self.s
+        placed = s.toggle_background_seed()
+        self.set_status(f"Background seed {'placed' if placed else 'removed'} at x {s.x}, y {s.y}, slice {s.z} "
+                        f"({len(s.background_seeds)} in all; the fill and grow keep out of them)")
+        self.refresh_view()
+
+    def action_box_corner(self) -> None:
+        """y: first press, a corner at the cursor (or drag the box with the mouse); second, the opposite corner."""
+        s = self.s
+        if s.box_corner is None:
+            s.box_corner = s.zyx
+            self.set_status("Box: first corner set. Move and press y again, or drag the box with the mouse (Y: no box)")
+            self.refresh_view()
+            return
+        self._finish_box(s.plane, s.box_corner, s.zyx)
+
+    def _finish_box(self, plane: str, a, b) -> None:
+        s = self.s
+        s.box_corner = None
+        pv = planes.plane_view(s.volume, plane)
+        old = s.roi_box if self._drag is None else None
+        if a[pv.rows] == b[pv.rows] or a[pv.cols] == b[pv.cols]:
+            s.roi_box = old if old != s.roi_box else s.roi_box
+            self.app.notify("The box has zero size (both corners on one row or column): box unchanged",
+                            severity="warning", timeout=4)
+            self.refresh_view()
+            return
+        s.roi_box = _corner_box(a, b, pv.normal, s.shape, s.limits.slices)
+        (z0, z1), (y0, y1), (x0, x1) = s.roi_box
+        self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}: fills, painting and edits stay "
+                        "inside (Y removes it)")
+        self.refresh_view()
+
+    def action_box_clear(self) -> None:
+        self.s.roi_box, self.s.box_corner = None, None
+        self.set_status("ROI box off")
+        self.refresh_view()
+
+    # ------------------------------------------------------------------ review of a proposal
+    def _seed_mask(self, p):
+        return self.s.seg.labels[p.start_slice] == p.object_id
+
+    def review_marks(self) -> list:
+        p = self.proposal
+        if p is None:
+            return []
+        cache = getattr(self, "_marks_cache", None)
+        if cache is not None and cache[0] is p:
+            return cache[1]
+        found = review.marks(p, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=self._seed_mask(p))
+        self._marks_cache = (p, found)
+        return found
+
+    def update_strip(self) -> None:
+        strips = self.query("#strip")
+        if not strips:
+            return
+        strip = strips.first(ReviewStrip)
+        p = self.proposal
+        if p is None:
+            strip.set_class(False, "on")
+            return
+        prof = review.profile(p, self.s.shape[0], seed_area=int(self._seed_mask(p).sum()))
+        strip.set_data(prof, [m.z for m in self.review_marks()], self.s.z, p.start_slice)
+        strip.set_class(True, "on")
+
+    def _go_slice(self, z: int) -> None:
+        s = self.s
+        s.z = int(z)
+        s.clamp()
+        sp = getattr(planes, "slice_plane", None)
+        if self.proposal is not None and s.plane != (sp(s.volume) if sp else "axial") and not self.ortho_mode:
+            s.plane = sp(s.volume) if sp else "axial"
+        self.refresh_view()
+        why = {m.z: m.why for m in self.review_marks()}.get(s.z)
+        if why:
+            self.set_status(f"Slice {s.z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks")
+
+    def action_mark(self, step: int) -> None:
+        if self.proposal is None:
+            self.app.notify("No proposal to review: p propagates", timeout=2)
+            return
+        z = review.next_mark(self.review_marks(), self.s.z, step)
+        if z is None:
+            self.app.notify(f"No marked slice {'after' if step > 0 else 'before'} slice {self.s.z}", timeout=2)
+            return
+        self._go_slice(z)
+
+    def action_cut_here(self) -> None:
+        p = self.proposal
+        if p is None or self._busy():
+            if p is None:
+                self.app.notify("No proposal to cut: p propagates", timeout=2)
+            return
+        cut = review.cut_at(p, self.s.z, seed_mask=self._seed_mask(p))
+        self.proposal = cut
+        rng = cut.slices
+        self.set_status(f"Cut at slice {self.s.z}: {cut.voxels} voxels (was {p.voxels}), "
+                        f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
+        self.refresh_view()
+
+    def action_accept_to_here(self) -> None:
+        from ctui.screens.propagation import accept
+
+        p = self.proposal
+        if p is None or self._busy():
+            if p is None:
+                self.app.notify("No pending proposal", timeout=2)
+            return
+        self.proposal = review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p))
+        accept(self)
+
+    # ------------------------------------------------------------------ 3D edit tools (t menu)
+    def _tool(self, fn, msg: str) -> None:
+        if not self._editable():
+            return
+        try:
+            r = fn()
+        except EDIT_ERRORS as exc:
+            self.app.notify(f"{exc} (nothing changed)", severity="warning")
+            return
+        self.labels_changed()
+        self.set_status(msg.format(**r, obj=self.s.current))
+        self.refresh_view()
+
+    def _island(self, keep: bool, in_slice: bool) -> None:
+        s = self.s
+        what = ("Kept the" if keep else "Removed the") + (" slice island" if in_slice else " island")
+        self._tool(lambda: et.island(s.seg, s.zyx, object_id=s.current, keep=keep, in_slice=in_slice, box=s.roi_box),
+                   what + " under the cursor of object {obj}: {removed} voxels removed, {voxels} left (u undoes)")
+
+    def action_keep_island(self) -> None:
+        self._island(True, False)
+
+    def action_keep_island_slice(self) -> None:
+        self._island(True, True)
+
+    def action_remove_island(self) -> None:
+        self._island(False, False)
+
+    def _scissors(self, inside: bool, where: str) -> None:
+        s = self.s
+        if s.roi_box is None:
+            self.app.notify("Scissors cut with the ROI box: set one first (y, or drag after y)", severity="warning")
+            return
+        slices = {"slice": (s.z, s.z), "box": None, "all": (0, s.shape[0] - 1)}[where]
+        self._tool(lambda: et.cut(s.seg, object_id=s.current, box=s.roi_box, inside=inside, slices=slices),
+                   f"Scissors ({'inside' if inside else 'outside'} the box, {where}): " + "{removed} voxels of object {obj} erased (u undoes)")
+
+    def action_scissors_in_slice(self) -> None:
+        self._scissors(True, "slice")
+
+    def action_scissors_in_box(self) -> None:
+        self._scissors(True, "box")
+
+    def action_scissors_in_all(self) -> None:
+        self._scissors(True, "all")
+
+    def action_scissors_out_box(self) -> None:
+        self._scissors(False, "box")
+
+    def action_scissors_out_all(self) -> None:
+        self._scissors(False, "all")
+
+    def action_smooth(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+
+        def done(val: str | None) -> None:
+            if not val or not val.strip():
+                return
+            words = val.replace(":", " ").split()
+            try:
+                method, size = words[0].lower(), float(words[1]) if len(words) > 1 else 3.0
+            except ValueError:
+                self.app.notify("Smooth: write a method and a size in mm, e.g. 'median 3'", severity="error")
+                return
+            self._tool(lambda: et.smooth(s.seg, object_id=s.current, method=method, size_mm=size,
+                                         spacing=tuple(s.volume.spacing), box=s.roi_box),
+                       f"Smoothed ({method} {size:g} mm) object " + "{obj}: {ml_before:.1f} -> {ml:.1f} ml "
+                       "(-{removed} +{added} voxels; u undoes)")
+
+        self.app.push_screen(PromptScreen(f"Smooth object {s.current}: median|opening|closing and a size in mm", "median 3"), done)

@@ -1,0 +1,187 @@
+"""The workspace's mouse with Textual's Pilot on a small synthetic volume with known
+answers: a click moves the cursor, right/Ctrl-click places and removes a background
+seed, a click outside the image changes nothing, click-fills fills, a drag paints and
+erases with the brush (radius in mm), the wheel steps slices and Ctrl+wheel zooms, a
+click on the side panel selects an object, "go to x,y,z", the ROI box dragged with the
+mouse confines painting, and the 3D tools' bad input leaves labels and undo intact."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine.core.volume import Volume
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.session import Session
+from ctui.screens.testing import answer_prompt, cell_of_voxel, choose, drag, wait_workspace, wheel
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+
+
+def _cylinder(nz: int = 30, n: int = 48, r: float = 10.0) -> Session:
+    yy, xx = np.mgrid[0:n, 0:n]
+    disk = (yy - n / 2) ** 2 + (xx - n / 2) ** 2 <= r**2
+    data = np.full((nz, n, n), -1000, np.int16)
+    data[:, disk] = 300
+    return Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=nz // 2,
+                   y=n // 2, x=n // 2)
+
+
+def _near(a, b, tol: int = 1) -> bool:
+    return all(abs(int(u) - int(v)) <= tol for u, v in zip(a, b))
+
+
+async def test_click_seed_outside_and_wheel():
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        z = s.z
+        # a click moves the cursor to the voxel under it
+        target = (z, 10, 35)
+        await pilot.click("#main", offset=cell_of_voxel(app, target))
+        assert s.z == z and _near(s.zyx, target), s.zyx
+        assert f"Cursor x {s.x}  y {s.y}" in str(app.workspace.query_one("#panel").render())
+        # right click: a background seed there; Ctrl+click on it removes it
+        at = (z, 30, 12)
+        await pilot.click("#main", offset=cell_of_voxel(app, at), button=3)
+        assert len(s.background_seeds) == 1
+        x, y, zz = s.background_seeds[0]
+        assert zz == z and _near((y, x), at[1:])
+        await pilot.click("#main", offset=cell_of_voxel(app, (z, y, x)), control=True)
+        assert s.background_seeds == []
+        await pilot.press("B")
+        assert s.background_seeds == [(s.x, s.y, s.z)]
+        # a click outside the image (the letterbox left of it): nothing changes
+        before = s.zyx
+        iv = app.workspace.main_view
+        assert iv.view_map.ox > 2
+        await pilot.click("#main", offset=(0, 5))
+        assert s.zyx == before
+        assert "outside" in str(app.workspace.query_one("#status").render())
+        # the wheel steps slices; Ctrl+wheel zooms
+        await wheel(pilot, "#main", up=True)
+        assert s.z == z + 1
+        await wheel(pilot, "#main", up=False)
+        await wheel(pilot, "#main", up=False)
+        assert s.z == z - 1
+        await wheel(pilot, "#main", up=True, control=True)
+        assert s.zoom == 2.0
+        assert not app.internal_errors
+
+
+async def test_click_fills_and_drag_paints_and_erases():
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        z = s.z
+        s.range_ = (200.0, 400.0)
+        await pilot.press("z")
+        assert s.click_fills
+        await pilot.click("#main", offset=cell_of_voxel(app, (z, 24, 20)))
+        area = int((s.volume.data[z] == 300).sum())
+        assert s.seg.voxels(1) == area
+        await pilot.press("z", "n")  # click moves again; a new object 2
+        assert s.current == 2
+        # brush down (radius 1 mm = 1 px here) then drag along row 5 from x 5 to x 30
+        s.brush = 1.0
+        s.tool = "brush"
+        cells = [cell_of_voxel(app, (z, 5, x)) for x in (5, 12, 20, 30)]
+        await drag(pilot, "#main", cells)
+        lab = s.seg.labels[z] == 2
+        ys, xs = np.nonzero(lab)
+        a, b = int(xs.min()) + 1, int(xs.max()) - 1  # the dab centres at the ends
+        assert set(np.unique(ys)) <= {4, 5, 6}
+        assert int(lab.sum()) == 3 * (b - a + 1) + 2  # a 3-px-wide band with a one-pixel cap at each end
+        assert (s.seg.labels[z] == 1).sum() == area  # the other object untouched
+        # eraser drag over the middle of the band
+        s.tool = "eraser"
+        await drag(pilot, "#main", [cell_of_voxel(app, (z, 5, x)) for x in (14, 18)])
+        assert (s.seg.labels[z] == 2).sum() < lab.sum()
+        assert not lab[5, 16] or not (s.seg.labels[z, 5, 16] == 2)
+        assert not app.internal_errors
+
+
+async def test_panel_click_goto_and_box_drag_confines_paint():
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        ws = app.workspace
+        await pilot.press("n", "n")
+        assert s.current == 2
+        from ctui.screens.ws_keys import panel_text
+
+        lines = panel_text(ws).plain.split("\n")
+        row = next(i for i, line in enumerate(lines) if "██" in line)  # object 1's line
+        await pilot.click("#panel", offset=(6, row))
+        assert s.current == 1
+        # go to x,y,z
+        await pilot.press("g")
+        await answer_prompt(pilot, "10,12,5")
+        assert s.zyx == (5, 12, 10)
+        # y then a drag: the ROI box (all slices: drawn in one axial slice)
+        await pilot.press("y")
+        await drag(pilot, "#main", [cell_of_voxel(app, (5, 10, 10)), cell_of_voxel(app, (5, 20, 20))])
+        assert s.roi_box is not None
+        (z0, z1), (y0, y1), (x0, x1) = s.roi_box
+        assert (z0, z1) == (0, s.shape[0] - 1) and _near((y0, x0, y1, x1), (10, 10, 20, 20))
+        # a big brush dab at the box corner paints only inside it
+        s.brush = 6.0
+        s.z, s.y, s.x = 5, y0, x0
+        await pilot.press("space")
+        lab = s.seg.labels == 1
+        zz, yy, xx = np.nonzero(lab)
+        assert lab.any() and yy.min() >= y0 and xx.min() >= x0
+        # a zero-size box (two corners at one voxel) is refused: box unchanged
+        box = s.roi_box
+        await pilot.press("y", "y")
+        assert s.roi_box == box
+        await pilot.press("Y")
+        assert s.roi_box is None
+        assert not app.internal_errors
+
+
+async def test_edit_tools_bad_input_keeps_labels_and_undo():
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s.range_ = (200.0, 400.0)
+        await pilot.press("enter")
+        before = s.seg.labels.copy()
+        undo = list(s.seg.undo_labels())
+        # scissors with no box, smoothing an empty object, keep-island off the object
+        await pilot.press("t")
+        await choose(pilot, "scissors_in_slice")
+        s.current = 3
+        await pilot.press("t")
+        await choose(pilot, "smooth")
+        await answer_prompt(pilot, "median 3")
+        s.current = 1
+        s.x, s.y = 2, 2
+        await pilot.press("t")
+        await choose(pilot, "keep_island")
+        # scissors with nothing inside the box
+        s.roi_box = ((0, 29), (0, 5), (0, 5))
+        await pilot.press("t")
+        await choose(pilot, "scissors_in_box")
+        assert np.array_equal(before, s.seg.labels) and list(s.seg.undo_labels()) == undo
+        # and a real cut: the box's slices, inside
+        s.roi_box = ((s.z, s.z), (0, 47), (0, 23))
+        await pilot.press("t")
+        await choose(pilot, "scissors_in_box")
+        assert s.seg.voxels(1) == int(before[s.z, :, 24:].astype(bool).sum())
+        await pilot.press("u")
+        assert np.array_equal(before, s.seg.labels)
+        assert not app.internal_errors
