@@ -160,3 +160,48 @@ def test_measure_bad_input_one_line_exit_2(argv, needle, label_file, tmp_path, c
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("ctui measure:"), err
     assert needle in lines[0]
+
+
+@pytest.fixture(scope="module")
+def aorta_crop(tmp_path_factory):
+    """The shared contrast CT and its aorta mask as NIfTI, cropped to 40 slices (contrast-filled)."""
+    from conftest import shared
+
+    nib = pytest.importorskip("nibabel")
+    d = shared("totalseg_example")
+    root = tmp_path_factory.mktemp("aorta_nifti")
+    for name in ("ct_aorta_1p5mm.nii.gz", "ct_aorta_1p5mm_aorta.nii.gz"):
+        img = nib.load(d / name)
+        nib.save(img.slicer[:, :, 85:125], root / name)  # NIfTI k = ctui z
+    return root / "ct_aorta_1p5mm.nii.gz", root / "ct_aorta_1p5mm_aorta.nii.gz"
+
+
+def test_labels_over_a_nifti_ct_with_partial_volume_and_path(capsys, aorta_crop, tmp_path):
+    """`ctui measure CT.nii.gz --labels aorta.nii.gz --partial-volume`: HU statistics, the
+    partial-volume volume and the centreline's points in --json and --path-csv."""
+    ct, seg = aorta_crop
+    rc, out, err = _run(capsys, ct, "--labels", seg, "--partial-volume", "--path", "auto", "--no-mesh", "--json",
+                        "--path-csv", tmp_path / "path.csv")
+    assert rc == 0, err
+    d = json.loads(out)
+    vox, pv = d["volume_ml"]["voxels"], d["volume_ml"]["partial_volume"]
+    assert vox > 10 and abs(pv / vox - 1) < 0.1  # sub-voxel volume: close to the voxel count, not equal
+    v = d["values"]
+    assert v["unit"] == "HU" and v["voxels"] == round(vox * 1000 / 1.5 ** 3)
+    assert 150 < v["median"] < 600  # contrast-enhanced blood
+    pts = np.array([[p["x_mm"], p["y_mm"], p["z_mm"]] for p in d["path"]])
+    assert len(pts) > 10 and abs(d["path"][-1]["s_mm"] - d["path_length_mm"]) < 0.5
+    rows = (tmp_path / "path.csv").read_text().splitlines()
+    assert rows[0] == "index,s_mm,x_mm,y_mm,z_mm" and len(rows) == len(pts) + 1
+    assert np.allclose([float(c) for c in rows[1].split(",")[2:]], pts[0], atol=1e-3)
+
+
+def test_labels_over_a_volume_that_does_not_match_is_refused(capsys, aorta_crop, tmp_path):
+    nib = pytest.importorskip("nibabel")
+    ct, seg = aorta_crop
+    img = nib.load(seg)
+    aff = img.affine.copy()
+    aff[:3, 3] += 0.5  # a third of a voxel off
+    nib.save(nib.Nifti1Image(np.asarray(img.dataobj), aff), tmp_path / "shifted.nii.gz")
+    rc, out, err = _run(capsys, ct, "--labels", tmp_path / "shifted.nii.gz")
+    assert rc == 2 and "fraction of a voxel" in err

@@ -41,13 +41,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", default=None, metavar="A1,A2,...",
                    help="reference areas (mm^2) drawn on the plot with a 2%% band")
     p.add_argument("--csv", metavar="OUT", help="write the section table as CSV")
+    p.add_argument("--path-csv", metavar="OUT",
+                   help="write the path's points (the centreline with --path auto) as CSV: index, s_mm, x_mm, y_mm, "
+                   "z_mm (patient mm; also under \"path\" in --json)")
     p.add_argument("--plot", metavar="PNG", help="write a PNG plot of section area against arc length")
     p.add_argument("--no-mesh", action="store_true", help="skip the mesh volume (faster)")
     p.add_argument("--partial-volume", action="store_true",
                    help="project input: measure sections, and a third volume, on the object's partial-volume "
                    "fraction from the series' grey levels (sub-voxel; for small vessels and rods)")
     p.add_argument("--labels", metavar="FILE", default=None,
-                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the volume INPUT (a DICOM "
+                   "series or a NIfTI/NRRD/MetaImage CT: its grey levels give HU statistics and --partial-volume); "
+                   "the two geometries must match (affines within 2%% of a voxel)")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     p.set_defaults(func=run)
 
@@ -74,11 +79,12 @@ def run(args: argparse.Namespace) -> int:
 
     if not os.path.exists(args.input):
         raise CtuiError(f"{args.input}: no such file")
-    check_outputs({"--csv": args.csv, "--plot": args.plot}, inputs=[args.input, args.labels])
+    check_outputs({"--csv": args.csv, "--plot": args.plot, "--path-csv": args.path_csv},
+                  inputs=[args.input, args.labels])
     between = _floats(args.between, 2, "--between") if args.between else None
     refs = _floats(args.reference, None, "--reference") if args.reference else None
-    if (between or args.csv or args.plot) and not args.path:
-        raise CtuiError("--between, --csv and --plot need --path (auto or points)")
+    if (between or args.csv or args.plot or args.path_csv) and not args.path:
+        raise CtuiError("--between, --csv, --path-csv and --plot need --path (auto or points)")
     source = args.input
     if args.labels:  # a label file over its series
         from ctui.engine.actions.opened import open_input
@@ -87,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     res = measure_object(source, object=args.object, path=args.path or None, path_voxels=args.path_voxels,
                          step_mm=args.step, between=between, mesh=not args.no_mesh, area=args.area,
                          average_mm=args.average, partial_volume=args.partial_volume)
-    written = save_sections(res, csv=args.csv, plot=args.plot, references=refs)
+    written = save_sections(res, csv=args.csv, plot=args.plot, references=refs, path_csv=args.path_csv)
     if args.json:
         print(dumps(res, indent=1))
         return 0
@@ -112,6 +118,10 @@ def _lines(res, between, written: list[str]) -> list[str]:
     if res.area_mm2 is not None:
         parts.append(f"area {res.area_mm2:.1f} mm2")
     lines = [head + ", ".join(parts)]
+    if res.values is not None:
+        v = res.values
+        lines.append(f"{v['unit']}: mean {v['mean']:.1f} sd {v['sd']:.1f}, median {v['median']:.1f} "
+                     f"(p5 {v['p5']:.1f}, p95 {v['p95']:.1f}), min {v['min']:.1f}, max {v['max']:.1f}")
     if res.path_length_mm is not None:
         a = np.array([r["area_mm2"] if r["area_mm2"] is not None else np.nan for r in res.sections], dtype=float)
         if np.isfinite(a).any():

@@ -15,7 +15,7 @@ from ctui.engine.actions.opened import Opened, input_kind, open_input
 from ctui.engine.core.atomic import check_outputs
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
-from ctui.engine.measure.report import plot_sections, write_sections_csv
+from ctui.engine.measure.report import path_table, plot_sections, write_path_csv, write_sections_csv
 
 
 @dataclass
@@ -26,7 +26,9 @@ class MeasureResult:
     path_length_mm, sections (list of {s_mm, area_mm2, eq_diameter_mm, min_diameter_mm,
     max_diameter_mm}: the cross-sections only), section_flags ({counts, ranges} of the
     sections left out: end caps, branches, outside), between ({volume_ml, area1_mm2,
-    area2_mm2}) when a path was given;
+    area2_mm2}) when a path was given; path ({index, s_mm, x_mm, y_mm, z_mm} per point: the
+    centreline or given path, patient mm); values ({unit, mean, sd, min, p5, median, p95,
+    max, voxels}: the object's grey levels, HU for CT) when the series is loaded;
     rows (full section dicts with contours) and path_mm (n, 3) for drawing, not in JSON.
     """
 
@@ -47,6 +49,7 @@ class MeasureResult:
     rows: list = field(default_factory=list, repr=False)
     path_mm: np.ndarray | None = field(default=None, repr=False)
     stats: dict | None = field(default=None, repr=False)
+    values: dict | None = None
 
     def to_dict(self) -> dict:
         d = {k: getattr(self, k) for k in ("input", "object", "volume_ml", "volume_difference_percent", "area_mm2",
@@ -58,7 +61,23 @@ class MeasureResult:
             d["partial_volume"] = self.partial_volume
         if self.section_flags is not None:
             d["section_flags"] = self.section_flags
+        if self.values is not None:
+            d["values"] = self.values
+        if self.path_mm is not None:
+            d["path"] = path_table(self.path_mm)
         return d
+
+
+def object_values(image: np.ndarray, mask: np.ndarray, *, modality: str = "") -> dict | None:
+    """Grey-level statistics of ``image`` (z, y, x) over the bool ``mask`` (same shape): {unit
+    ("HU" for CT), mean, sd, min, p5, median, p95, max, voxels}; None for an empty mask."""
+    v = np.asarray(image)[np.asarray(mask, dtype=bool)].astype(np.float64)
+    if not v.size:
+        return None
+    p5, med, p95 = np.percentile(v, [5, 50, 95])
+    return {"unit": "HU" if str(modality).upper() == "CT" else "value", "mean": float(v.mean()),
+            "sd": float(v.std()), "min": float(v.min()), "p5": float(p5), "median": float(med), "p95": float(p95),
+            "max": float(v.max()), "voxels": int(v.size)}
 
 
 def _mesh_input(opened: Opened) -> MeasureResult:
@@ -114,6 +133,10 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
                                  between=tuple(between) if between is not None else None, mesh=mesh, area=area,
                                  average_mm=average_mm, image=image)
     pv = res.get("partial_volume")
+    vol = opened.volume
+    values = None
+    if vol is not None and not (vol.meta or {}).get("labels_only") and tuple(vol.shape) == tuple(g.shape):
+        values = object_values(vol.data, opened.mask(oid), modality=vol.modality)
     return MeasureResult(
         os.path.basename(opened.path), object=res["object"], volume_ml=res["volume_ml"],
         volume_difference_percent=res["volume_difference_percent"], area_mm2=res["area_mm2"],
@@ -121,18 +144,25 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
         centroid_mm=res["centroid_mm"], principal_axes_mm=res["principal_axes_mm"],
         partial_volume=None if pv is None else {"object_value": pv["fg"], "surroundings_value": pv["bg"]},
         warnings=list(opened.notes) + list(res["warnings"]), step_mm=step_mm, rows=res["rows"],
-        path_mm=res["path_mm"], stats=res["stats"], section_flags=res.get("section_flags"))
+        path_mm=res["path_mm"], stats=res["stats"], section_flags=res.get("section_flags"), values=values)
 
 
 def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None,
                   plot: str | os.PathLike | None = None, references: Sequence[float] | None = None,
-                  inputs: Sequence[str | os.PathLike] = ()) -> list[str]:
-    """Write the section table (CSV) and/or the area plot (PNG); returns the paths written.
+                  inputs: Sequence[str | os.PathLike] = (), path_csv: str | os.PathLike | None = None) -> list[str]:
+    """Write the section table (CSV), the area plot (PNG) and/or the path's points (CSV:
+    index, s_mm, x_mm, y_mm, z_mm); returns the paths written.
 
     Refuses (CtuiError) an output that is the measured input (``result.input``) or one of
     ``inputs``, or two outputs that are the same file, before writing anything."""
-    check_outputs({"section table": csv, "section plot": plot}, inputs=[result.input, *inputs])
+    check_outputs({"section table": csv, "section plot": plot, "path table": path_csv},
+                  inputs=[result.input, *inputs])
+    if path_csv and result.path_mm is None:
+        raise CtuiError("no path to write: --path-csv needs --path (auto or points)")
     written = []
+    if path_csv:
+        write_path_csv(path_csv, result.path_mm)
+        written.append(os.fspath(path_csv))
     if csv:
         write_sections_csv(csv, result.rows)
         written.append(os.fspath(csv))

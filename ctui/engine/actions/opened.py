@@ -218,7 +218,10 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
                      **load_options: Any) -> Opened:
     """A series with a label file placed on its grid (``ctui open|measure|mesh|render SERIES --labels FILE``).
 
-    The label file's geometry must match the series' (a CtuiError says how it differs); its
+    ``series``: any volume input (a DICOM series, or a NIfTI / NRRD / MetaImage volume: a
+    .nii.gz given here is read as grey levels, not as labels). The label file's geometry
+    must match the series' (affines equal within 2% of a voxel; whole-voxel offsets and
+    axis flips are placed; a CtuiError says how they differ otherwise); its
     segments / ROIs / values become objects with their names and colours (``project.objects``).
     """
     from ctui.engine.io.series import load
@@ -227,8 +230,10 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     for q in (s, lp):
         if not q or not os.path.exists(q):
             raise CtuiError("no such file or folder", path=q or "(empty path)")
-    if input_kind(s) != "series":
-        raise CtuiError("--labels goes with a series (folder or DICOM file), not a project or label file", path=s)
+    kind = input_kind(s)
+    if kind not in ("series", "labels") or (kind == "labels" and not s.lower().endswith(defaults.LABEL_SUFFIXES)):
+        raise CtuiError("--labels goes with a volume (DICOM folder or file, NIfTI, NRRD, MetaImage...), not a "
+                        "project, mesh or DICOM-SEG/RTSTRUCT file", path=s)
     if spacing is not None:
         load_options["spacing"] = spacing
     volume = load(s, **load_options)

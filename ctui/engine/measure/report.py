@@ -77,6 +77,26 @@ def write_sections_csv(path, rows: Iterable[dict[str, Any]], *, keys: Sequence[s
     write_text(path, buf.getvalue())
 
 
+def path_table(path_mm: Any) -> list[dict[str, float]]:
+    """The centreline / path points as rows {index, s_mm (arc length from the first point), x_mm, y_mm, z_mm}."""
+    p = np.asarray(path_mm, dtype=np.float64).reshape(-1, 3)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]) if len(p) else np.zeros(0)
+    return [{"index": i, "s_mm": round(float(s[i]), 4), "x_mm": round(float(q[0]), 4), "y_mm": round(float(q[1]), 4),
+             "z_mm": round(float(q[2]), 4)} for i, q in enumerate(p)]
+
+
+def write_path_csv(path, path_mm: Any, *, inputs: Iterable = ()) -> None:
+    """Write the path's points (patient mm, with arc length) as CSV (atomic)."""
+    check_output(path, inputs=inputs, label="path table")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    keys = ("index", "s_mm", "x_mm", "y_mm", "z_mm")
+    w.writerow(keys)
+    for r in path_table(path_mm):
+        w.writerow([r[k] for k in keys])
+    write_text(path, buf.getvalue())
+
+
 def write_sections_json(path, rows: Iterable[dict[str, Any]], *, inputs: Iterable = (), **extra: Any) -> None:
     """Write ``{**extra, "sections": [...ok rows], "section_flags": ...}`` as JSON (atomic)."""
     check_output(path, inputs=inputs, label="section table")
