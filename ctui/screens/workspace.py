@@ -25,8 +25,6 @@ from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
-from ctui.screens.strip import ReviewStrip
-from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
 
 
 def label_counts(labels: np.ndarray) -> np.ndarray:
@@ -88,7 +86,6 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             with Vertical(id="main-box"):
                 yield Label("", id="main-caption", classes="cell-label")
                 yield ImageView(id="main")
-                yield ReviewStrip(id="strip")
                 yield ReviewStrip(id="strip")
             with Grid(id="grid"):
                 for v in VIEWS:
@@ -203,7 +200,6 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             cursor = planes.cursor_in(pv, s.zyx, s.shape)
             center = self._view_center(plane)
             iv.overlay = lambda grid, vm, _p=plane: draw_overlay(self, _p, grid, vm)
-            iv.overlay = lambda grid, vm, _p=plane: draw_overlay(self, _p, grid, vm)
             if view in ("intermediate", "final"):
                 need_stage = True
                 if iv.rgb is not None and iv.token is not None and iv.token[0] == s.z:
@@ -271,7 +267,6 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
 
     def update_panel(self) -> None:
         self.query_one("#panel", SidePanel).update(panel_text(self), layout=False)  # fixed size: no relayout
-        self.update_strip()
         self.update_strip()
 
     def set_status(self, msg: str) -> None:
