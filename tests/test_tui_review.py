@@ -1,0 +1,89 @@
+"""Review of a pending proposal in the workspace (Pilot): the strip under the slice shows
+the area per slice and the marks; } and { jump between marked slices, a click on the
+strip goes to a slice, C cuts the proposal at the slice keeping the part joined to the
+seed, A accepts from the seed to here."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine.core.volume import Volume
+from ctui.engine.segment.propagate import Proposal
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.session import Session
+from ctui.screens.strip import ReviewStrip, columns
+from ctui.screens.testing import wait_workspace
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+
+
+def test_strip_columns():
+    assert columns(10, 40) == [(c // 4, c // 4) for c in range(40)]
+    cols = columns(100, 30)  # 4 slices per column
+    assert cols[0] == (0, 3) and cols[-1] == (96, 99) and len(cols) == 25
+
+
+def _leaky_proposal(shape) -> Proposal:
+    """Seed slice 10 (square y, x 10..19 in the labels); slices 11..14 the square, 15 the
+    square plus a joined 10x20 block, 16..18 the block only."""
+    nz, ny, nx = shape
+    sq = np.zeros((ny, nx), bool)
+    sq[10:20, 10:20] = True
+    leak = np.zeros((ny, nx), bool)
+    leak[10:20, 20:40] = True
+    p = Proposal(object_id=1, start_slice=10, shape=shape)
+    for z in range(11, 15):
+        p.masks[z] = (0, 0, sq.copy())
+    p.masks[15] = (0, 0, sq | leak)
+    for z in (16, 17, 18):
+        p.masks[z] = (0, 0, leak.copy())
+    p.areas = {z: int(e[2].sum()) for z, e in p.masks.items()}
+    return p
+
+
+async def test_strip_jumps_cut_and_accept_to_here():
+    data = np.zeros((30, 48, 48), np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=10)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        sq = np.zeros((48, 48), bool)
+        sq[10:20, 10:20] = True
+        s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
+        strip = ws.query_one("#strip", ReviewStrip)
+        assert not strip.display or "on" not in strip.classes
+        ws.proposal = _leaky_proposal(s.shape)
+        ws.refresh_view()
+        await pilot.pause()
+        assert "on" in strip.classes and strip.profile[15] == 300 and strip.profile[10] == 100
+        await pilot.press("right_curly_bracket")
+        assert s.z == 15
+        await pilot.press("right_curly_bracket")
+        assert s.z == 16
+        await pilot.press("left_curly_bracket")
+        assert s.z == 15
+        # a click on the strip's column of slice 12 goes there
+        col = next(c for c, (a, b) in enumerate(columns(30, strip.size.width)) if a <= 12 <= b)
+        await pilot.click("#strip", offset=(col, 0))
+        assert s.z == 12
+        # C at slice 14: the leak is cut off
+        s.z = 14
+        await pilot.press("C")
+        assert ws.proposal.slices == (11, 14) and ws.proposal.voxels == 400
+        # A at slice 12: accept from the seed to here
+        s.z = 12
+        await pilot.press("A")
+        assert ws.proposal is None
+        assert s.seg.voxels(1) == 300 and s.seg.slice_range(1) == (10, 12)
+        assert "on" not in strip.classes
+        await pilot.press("u")
+        assert s.seg.voxels(1) == 100
+        assert not app.internal_errors
