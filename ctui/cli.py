@@ -127,7 +127,7 @@ _PATH_ARGS = ("path", "input", "manifest", "out", "outdir", "project", "mask", "
 def _naming_the_file(msg: str, exc: BaseException, args: argparse.Namespace) -> str:
     """``msg`` prefixed with the command's input when it names no file (an engine check
     deep down, e.g. of a geometry field, does not know which file it came from)."""
-    src = next((v for k in ("path", "input", "manifest") if (v := getattr(args, k, None))), None)
+    src = next((v for k in ("input", "path", "manifest") if (v := getattr(args, k, None))), None)
     if isinstance(src, list):
         src = src[0] if len(src) == 1 else None
     if not src or getattr(exc, "path", None) is not None or getattr(exc, "filename", None) or msg.startswith("-"):

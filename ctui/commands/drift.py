@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import number
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.segment import add_segmentation_args
@@ -22,11 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", "--mask", dest="labels", metavar="FILE",
                    help="label volume (.nii, .nii.gz, .nrrd, .seg.nrrd) on the series' grid")
     p.add_argument("--objects", metavar="IDS", default=None, help="object ids to check, e.g. 1,3 (default: all)")
-    p.add_argument("--threshold", type=float, default=None, metavar="MM",
+    p.add_argument("--threshold", type=number("--threshold", 0, 1e4, above=True), default=None, metavar="MM",
                    help="flag slices whose centroid deviates more than MM (default: max(1 mm, 0.75 pixel))")
     p.add_argument("--fit", choices=("median", "poly"), default="median",
                    help="smooth fit along the slices: running median (default) or robust polynomial")
-    p.add_argument("--fit-window", type=int, default=9, metavar="N", help="running-median window in slices (default 9)")
+    p.add_argument("--fit-window", type=number("--fit-window", 1, 10001, integer=True), default=9, metavar="N", help="running-median window in slices (default 9)")
     p.add_argument("--estimate", choices=("centroid", "phase"), default="centroid",
                    help="correction shift from centroid alignment (default) or phase correlation")
     p.add_argument("--project", metavar="OUT.ctui",

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import number
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.engine.actions.formats import FORMATS  # the registry: plain data, cheap to import
@@ -29,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the DICOM series the labels were drawn on (default: the project's source)")
     p.add_argument("--series-uid", default=None, metavar="UID",
                    help="SeriesInstanceUID (or index) when SERIES holds several")
-    p.add_argument("--object", type=int, action="append", default=None, metavar="N",
+    p.add_argument("--object", type=number("--object", 0, 65535, integer=True), action="append", default=None, metavar="N",
                    help="export only object N (repeatable; default all)")
     p.add_argument("--keep-identifiers", action="store_true",
                    help="DICOM exports: keep the patient name, ID and birth date of the source series")

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import math
+
+from ctui.commands._args import HUGE, number
 
 
 
@@ -24,18 +27,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="a .ctui project, a label volume (.nii/.nii.gz/.nrrd) or a mesh (.stl/.ply/.obj)")
-    p.add_argument("--object", type=int, default=None, metavar="N",
+    p.add_argument("--object", type=number("--object", 0, 65535, integer=True), default=None, metavar="N",
                    help="object id to measure (default: the only/first object)")
     p.add_argument("--path", default=None, metavar='auto|"x,y,z;x,y,z;..."',
                    help="sections along the automatic centreline ('auto') or a path through points in mm")
     p.add_argument("--path-voxels", action="store_true", help="--path points are voxel indices (z,y,x), not mm")
-    p.add_argument("--step", type=float, default=defaults.SECTION_STEP_MM, metavar="MM",
+    p.add_argument("--step", type=number("--step", 0.01, 1000), default=defaults.SECTION_STEP_MM, metavar="MM",
                    help=f"distance between sections (default {defaults.SECTION_STEP_MM:g} mm, as the TUI's M screen)")
     p.add_argument("--between", default=None, metavar="S1,S2",
                    help="volume between the planes normal to the path at arc lengths S1 and S2 mm")
     p.add_argument("--area", choices=("pv", "contour"), default="pv",
                    help="section area estimate: partial-volume integral (default) or shoelace of the contour")
-    p.add_argument("--average", type=float, default=0.0, metavar="MM",
+    p.add_argument("--average", type=number("--average", 0, 1000), default=0.0, metavar="MM",
                    help="average each section over MM of path (thin slab; halves the scatter of small binary "
                    "tubes, blurs changes over MM; default 0 = single planes)")
     p.add_argument("--reference", default=None, metavar="A1,A2,...",
@@ -64,6 +67,8 @@ def _floats(text: str, n: int | None, what: str) -> list[float]:
         vals = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise CtuiError(f"{what} {text!r}: expected numbers separated by commas") from None
+    if not all(math.isfinite(v) and abs(v) <= HUGE for v in vals):
+        raise CtuiError(f"{what} {text!r}: expected finite numbers within +-{HUGE:g}")
     if n is not None and len(vals) != n:
         raise CtuiError(f"{what} {text!r}: expected {n} numbers")
     return vals

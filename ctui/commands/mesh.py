@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import number
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.info import add_load_options
@@ -31,10 +33,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="FILE", help="output mesh: .stl, .ply or .obj")
     p.add_argument("--method", choices=("marching-cubes", "contours"), default=None,
                    help="marching-cubes (default for series and projects) or contours (default for .mric)")
-    p.add_argument("--iso", type=float, metavar="VALUE", help="iso value for a series (HU for CT)")
-    p.add_argument("--object", type=int, metavar="N", help="object id in a project / label file (default: all)")
-    p.add_argument("--smooth", type=int, default=0, metavar="ITER", help="Taubin smoothing iterations (volume-preserving)")
-    p.add_argument("--decimate", type=int, metavar="N", help="reduce to about N triangles")
+    p.add_argument("--iso", type=number("--iso"), metavar="VALUE", help="iso value for a series (HU for CT)")
+    p.add_argument("--object", type=number("--object", 0, 65535, integer=True), metavar="N", help="object id in a project / label file (default: all)")
+    p.add_argument("--smooth", type=number("--smooth", 0, 1000, integer=True), default=0, metavar="ITER", help="Taubin smoothing iterations (volume-preserving)")
+    p.add_argument("--decimate", type=number("--decimate", 4, 1e9, integer=True), metavar="N", help="reduce to about N triangles")
     p.add_argument("--tiling", choices=("dp", "greedy"), default="dp", help="contour tiling: minimum-area DP or greedy")
     p.add_argument("--terraced", action="store_true",
                    help="project / label file: plain marching cubes of the label map, every object in one pass "

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import math
+
+from ctui.commands._args import number
 
 
 
@@ -26,20 +29,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", default=None,
                    help="DVR transfer function: ct-bone, ct-soft-tissue, ct-vessels, mr-default "
                         "(default: ct-bone for CT, mr-default otherwise)")
-    p.add_argument("--azimuth", type=float, default=defaults.RENDER_AZIMUTH, help="degrees about the patient's z axis (0 = from the front)")
-    p.add_argument("--elevation", type=float, default=defaults.RENDER_ELEVATION, help="degrees above the horizontal (90 = from above)")
-    p.add_argument("--roll", type=float, default=0.0, help="degrees about the view axis")
-    p.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1 = fit)")
+    p.add_argument("--azimuth", type=number("--azimuth", -36000, 36000), default=defaults.RENDER_AZIMUTH, help="degrees about the patient's z axis (0 = from the front)")
+    p.add_argument("--elevation", type=number("--elevation", -36000, 36000), default=defaults.RENDER_ELEVATION, help="degrees above the horizontal (90 = from above)")
+    p.add_argument("--roll", type=number("--roll", -36000, 36000), default=0.0, help="degrees about the view axis")
+    p.add_argument("--zoom", type=number("--zoom", 0, 1000, above=True), default=1.0, help="magnification (default 1 = fit)")
     p.add_argument("--size", default="{}x{}".format(*defaults.RENDER_SIZE),
                    help="WxH pixels (default {}x{})".format(*defaults.RENDER_SIZE))
     p.add_argument("--light", default=None, help="AZ,EL of the movable light relative to the camera (default 35,35)")
     p.add_argument("--shadows", action="store_true", help="shadow mapping from the light")
-    p.add_argument("--turntable", type=int, default=None, metavar="N", help="N frames around the object (GIF/APNG)")
-    p.add_argument("--fps", type=float, default=defaults.ANIMATION_FPS, help="turntable frames per second")
-    p.add_argument("--iso", type=float, default=None, help="iso value (HU) for surface modes on a series")
-    p.add_argument("--object", type=int, action="append", default=None, metavar="ID",
+    p.add_argument("--turntable", type=number("--turntable", 1, 720, integer=True), default=None, metavar="N", help="N frames around the object (GIF/APNG)")
+    p.add_argument("--fps", type=number("--fps", 0.1, 100), default=defaults.ANIMATION_FPS, help="turntable frames per second")
+    p.add_argument("--iso", type=number("--iso"), default=None, help="iso value (HU) for surface modes on a series")
+    p.add_argument("--object", type=number("--object", 0, 65535, integer=True), action="append", default=None, metavar="ID",
                    help="project: render only this object id (repeatable)")
-    p.add_argument("--opacity", type=float, default=None, help="opacity of all surfaces (0..1)")
+    p.add_argument("--opacity", type=number("--opacity", 0, 1), default=None, help="opacity of all surfaces (0..1)")
     p.add_argument("--perspective", action="store_true", help="perspective instead of orthographic projection")
     p.add_argument("--aa", choices=("fxaa", "msaa", "none"), default="fxaa", help="anti-aliasing (default fxaa)")
     p.add_argument("--wire-overlay", action="store_true", help="draw triangle edges over the surfaces")
@@ -53,9 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--flythrough", default=None, metavar="auto|X,Y,Z;X,Y,Z;...",
                    help="endoscopic fly-through along a path in patient mm, or 'auto': the centreline of "
                         "the project object given with --object; --out a .gif/.apng or a folder for PNG frames")
-    p.add_argument("--frames", type=int, default=defaults.FLY_FRAMES,
+    p.add_argument("--frames", type=number("--frames", 2, 2000, integer=True), default=defaults.FLY_FRAMES,
                    help=f"fly-through frames (default {defaults.FLY_FRAMES})")
-    p.add_argument("--fov", type=float, default=defaults.FLY_FOV_DEG,
+    p.add_argument("--fov", type=number("--fov", 1, 170), default=defaults.FLY_FOV_DEG,
                    help=f"fly-through view angle in degrees (default {defaults.FLY_FOV_DEG:g})")
     p.add_argument("--labels", metavar="FILE", default=None,
                    help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
@@ -71,7 +74,7 @@ def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:
         vals = tuple(float(v) for v in text.split(sep))
     except ValueError:
         vals = ()
-    if len(vals) != n:
+    if len(vals) != n or not all(math.isfinite(v) and abs(v) <= 1e6 for v in vals):
         raise CtuiError(f"bad {what} {text!r}")
     return vals
 
@@ -93,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
         raise CtuiError("output folder does not exist", path=out)
     check_output(out, inputs=[src, args.labels], label="--out")
     w, h = (int(v) for v in _pair(args.size, "--size (want WxH)"))
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise CtuiError(f"--size {args.size!r}: width and height from 1 to 8192 pixels")
     if args.labels:  # a label file over its series
         from ctui.engine.actions.opened import open_input
 

@@ -6,6 +6,9 @@ Parses arguments and calls :func:`ctui.engine.actions.segment.segment` (the TUI 
 from __future__ import annotations
 
 import argparse
+import math
+
+from ctui.commands._args import HUGE, finite_list, number
 
 FILTER_HELP = (
     "filter step NAME[:key=value,...], repeatable, run in order (stage 1 steps, then stage 2). "
@@ -53,19 +56,19 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
                    help="slice-by-slice propagation (default) or one 3D flood fill; both cut necks (--neck)")
     p.add_argument("--slices", metavar="A:B", default=None,
                    help="propagate (and grow) only within slices A..B inclusive, numbered from 0")
-    p.add_argument("--neck", type=float, default=5.0, metavar="MM",
+    p.add_argument("--neck", type=number("--neck", 0, 1000), default=5.0, metavar="MM",
                    help="leak guard: follow the object only through necks at least MM wide (default 5; 0 = off)")
-    p.add_argument("--leak-factor", type=float, default=2.5,
+    p.add_argument("--leak-factor", type=number("--leak-factor", 1, 1000, above=True), default=2.5,
                    help="second leak guard, slice mode: stop when the area grows more than this factor from one "
                         "slice to the next (default 2.5; used in 3D mode only with --neck 0)")
-    p.add_argument("--neighbourhood", type=int, default=2,
+    p.add_argument("--neighbourhood", type=number("--neighbourhood", 0, 100, integer=True), default=2,
                    help="pixels the previous slice's object is grown by to seed the next slice (default 2; 0 = overlap only)")
-    p.add_argument("--min-area", type=int, default=5, help="smallest accepted fill / object slice in pixels (default 5)")
-    p.add_argument("--curvature", type=float, default=0.5, metavar="MM",
+    p.add_argument("--min-area", type=number("--min-area", 1, 1e9, integer=True), default=5, help="smallest accepted fill / object slice in pixels (default 5)")
+    p.add_argument("--curvature", type=number("--curvature", 0, 100), default=0.5, metavar="MM",
                    help="levelset: weight of the curvature term in mm (default 0.5): smooths corners sharper than "
                         "MM; the front does not enter necks narrower than about 2 x MM")
     p.add_argument("--keep-largest", action="store_true", help="keep only each object's largest 3D island")
-    p.add_argument("--min-island", type=int, default=0, metavar="N", help="remove each object's islands under N voxels")
+    p.add_argument("--min-island", type=number("--min-island", 0, 1e12, integer=True), default=0, metavar="N", help="remove each object's islands under N voxels")
     p.add_argument("--interpolate", action="store_true",
                    help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
@@ -121,6 +124,8 @@ def parse_range(text: str) -> tuple[float, float]:
         lo, hi = float(lo_s), float(hi_s)
     except ValueError:
         raise _err(f"--range {text!r}: expected LO:HI (numbers), e.g. 115:445") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and max(abs(lo), abs(hi)) <= HUGE):
+        raise _err(f"--range {text!r}: LO and HI must be finite numbers within +-{HUGE:g}")
     if lo > hi:
         raise _err(f"--range {text!r}: LO is above HI")
     return lo, hi
@@ -132,9 +137,9 @@ def build_pipeline(args: argparse.Namespace):
     window = None
     if args.window:
         try:
-            c, w = (float(v) for v in args.window.split(","))
+            c, w = finite_list(args.window, "--window", n=2)
         except ValueError:
-            raise _err(f"--window {args.window!r}: expected CENTRE,WIDTH") from None
+            raise _err(f"--window {args.window!r}: expected CENTRE,WIDTH (finite numbers)") from None
         if w <= 0:
             raise _err(f"--window {args.window!r}: width must be > 0")
         window = (c, w)
@@ -189,9 +194,11 @@ def _thresholds(args: argparse.Namespace) -> list:
             out.append(parse_range(value))
         else:
             try:
-                out.append(float(value))
+                out.append(finite_list(value, "--tolerance", n=1)[0])
             except ValueError:
-                raise _err(f"--tolerance {value!r}: expected a number") from None
+                raise _err(f"--tolerance {value!r}: expected a finite number") from None
+            if out[-1] < 0:
+                raise _err(f"--tolerance {value!r}: expected a number >= 0")
     return out
 
 

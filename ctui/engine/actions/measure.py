@@ -99,10 +99,12 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     the planes normal to the path there. ``partial_volume``: sections and a third volume
     on the object's partial-volume fraction from the source series' grey levels.
     """
-    if step_mm <= 0:
-        raise CtuiError(f"--step must be positive, got {step_mm}")
-    if average_mm < 0:
-        raise CtuiError(f"--average must be >= 0, got {average_mm}")
+    if not 0.01 <= step_mm <= 1000:  # also NaN: bounded work (sections = path length / step)
+        raise CtuiError(f"--step must be from 0.01 to 1000 mm, got {step_mm}")
+    if not 0 <= average_mm <= 1000:
+        raise CtuiError(f"--average must be from 0 to 1000 mm, got {average_mm}")
+    if between is not None and not all(np.isfinite(v) and abs(v) <= 1e9 for v in between):
+        raise CtuiError(f"--between {between}: want finite arc lengths in mm")
     if isinstance(source, Opened):
         opened = source
     else:

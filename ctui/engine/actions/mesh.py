@@ -20,6 +20,7 @@ from ctui.engine.io.mric import read_mric, require_spacing
 from ctui.engine.mesh import meshtools
 from ctui.engine.mesh.contour_connect import connect_contours
 from ctui.engine.mesh.surface import isosurface, label_surfaces
+from ctui.engine.mesh.warm import warm_up  # re-exported: the TUI compiles the mesh kernels while the user looks
 
 
 @dataclass
@@ -110,6 +111,8 @@ def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str,
     assert vol is not None
     if iso is None:
         raise CtuiError("a series needs --iso VALUE (e.g. --iso 300 for bone in CT)", path=opened.path)
+    if not np.isfinite(iso) or abs(iso) > 1e9:
+        raise CtuiError(f"--iso {iso!r}: want a finite value within +-1e9", path=opened.path)
     if method == "contours":
         mask = (vol.data > iso).astype(np.uint8)
         mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,

@@ -135,7 +135,11 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
         ax, _, idx = slice_plane.partition(":")
         if ax.lower() not in ("x", "y", "z", "axial", "coronal", "sagittal"):
             raise CtuiError(f"--slice {slice_plane}: axis must be z, y or x")
-        o.slice_plane = SlicePlane(axis=ax.lower(), index=int(idx) if idx else None)
+        try:
+            index = int(idx) if idx else None
+        except ValueError:
+            raise CtuiError(f"--slice {slice_plane}: INDEX must be a whole number") from None
+        o.slice_plane = SlicePlane(axis=ax.lower(), index=index)
         if kind == "series" and mode in VOLUME_MODES:
             o.slice_plane = None
     if preset:
@@ -163,9 +167,29 @@ def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = N
         pts = np.array([[float(v) for v in p.split(",")] for p in spec.split(";") if p.strip()])
     except ValueError:
         pts = np.zeros((0, 0))
-    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.isfinite(pts).all():
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.isfinite(pts).all() or np.abs(pts).max() > 1e6:
         raise CtuiError(f"bad --flythrough {spec!r} (want 'auto' or 'x,y,z;x,y,z;...' in mm)")
     return pts
+
+
+_NUMBER_BOUNDS = {"turntable": (1, 720), "frames": (2, 2000), "fps": (0.1, 100.0), "fov": (1.0, 170.0),
+                  "azimuth": (-36000.0, 36000.0), "elevation": (-36000.0, 36000.0), "roll": (-36000.0, 36000.0),
+                  "zoom": (1e-6, 1000.0), "iso": (-1e9, 1e9)}
+
+
+def _check_numbers(**values: Any) -> None:
+    """Every numeric option finite and in range (bounded work: at most 720 turntable or
+    2000 fly-through frames); a one-line CtuiError naming the option otherwise."""
+    for key, (lo, hi) in _NUMBER_BOUNDS.items():
+        v = values.get(key)
+        if v is None:
+            continue
+        try:
+            ok = lo <= float(v) <= hi
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise CtuiError(f"--{key} {v!r}: want a finite number from {lo:g} to {hi:g}")
 
 
 def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
@@ -184,6 +208,7 @@ def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
         raise CtuiError(f"--size {w}x{h}: width and height must be 1..{defaults.MAX_RENDER_SIDE}")
     if turntable is not None and turntable < 1:
         raise CtuiError("--turntable needs N >= 1")
+    _check_numbers(turntable=turntable, frames=frames, fps=fps, fov=fov, **scene_options)
     op = scene_options.get("opacity")
     if op is not None and not 0.0 <= op <= 1.0:
         raise CtuiError("--opacity must be between 0 and 1")

@@ -146,6 +146,8 @@ def parse_points(text: str) -> np.ndarray:
             raise CtuiError(f"bad path point {chunk!r}: expected x,y,z numbers") from None
         if len(vals) != 3:
             raise CtuiError(f"bad path point {chunk!r}: expected 3 numbers, got {len(vals)}")
+        if not all(np.isfinite(v) and abs(v) <= 1e6 for v in vals):
+            raise CtuiError(f"bad path point {chunk!r}: expected finite coordinates within +-1e6 mm")
         pts.append(vals)
     if len(pts) < 2:
         raise CtuiError(f"a path needs at least 2 points 'x,y,z;x,y,z', got {text!r}")
