@@ -41,19 +41,25 @@ from ctui.engine.segment import grow as _grow
 from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_3d
 from ctui.engine.segment.pipeline import Pipeline
+from ctui.engine.core.geometry import Geometry
+from ctui.engine.segment.autoneck import NeckChoice, cut_2d
 from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+from ctui.engine.segment.seeding import RangeChoice, auto_width, seed_range, seed_voxels
 from ctui.engine.segment.selection import (
     Segmentation,
     fill_range,
     in_range,
     label_counts,
     neck_fill,
+    seeded_components,
 )
 
 METHODS = ("fill", "grow", "levelset")
 Seed = tuple[int, int, int]
-#: A range (low, high) or a tolerance (seed value +- t).
-Threshold = tuple[float, float] | float
+#: A range (low, high), a tolerance (seed value +- t), or None: from the seed's neighbourhood.
+Threshold = tuple[float, float] | float | None
+#: A box of inclusive voxel ranges ((z0, z1), (y0, y1), (x0, x1)).
+Box = tuple[tuple[int, int], tuple[int, int], tuple[int, int]]
 
 
 @dataclass
@@ -67,7 +73,9 @@ class SegmentOptions:
     neighbourhood: int = 2
     min_area: int = 5
     leak_factor: float | None = 2.5
-    neck_mm: float = DEFAULT_NECK_MM
+    neck_mm: float | None = None  # None: chosen from the data (autoneck); a number forces it; 0: off
+    fill_holes: bool = True  # holes enclosed in each slice of the object are part of it (renal sinus, vessels)
+    box: Box | None = None  # fills, propagation and growing stay inside this box
     slices: tuple[int, int] | None = None
     keep_largest: bool = False
     min_island: int = 0
@@ -82,8 +90,12 @@ class SegmentOptions:
             raise CtuiError("the leak factor must be > 1")
         if self.neighbourhood < 0 or self.min_area < 1:
             raise CtuiError("the neighbourhood must be >= 0 and the minimum area >= 1")
-        if self.neck_mm < 0:
-            raise CtuiError("the neck width must be >= 0 mm")
+        if self.neck_mm is not None and (not np.isfinite(self.neck_mm) or not 0 <= self.neck_mm <= 1000):
+            raise CtuiError("the neck width must be a number of mm between 0 and 1000, or automatic")
+        if self.box is not None:
+            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+            if any(a > b for a, b in self.box):
+                raise CtuiError("the box is empty: each of its ranges needs first <= last")
         if self.min_island < 0:
             raise CtuiError("the minimum island size must be >= 0")
         if self.curvature < 0:
@@ -103,12 +115,29 @@ class ObjectResult:
     stops: dict[str, str] = field(default_factory=dict)
     necks: list[int] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    neck: dict[str, Any] = field(default_factory=dict)  # {"mode": "auto" | "fixed" | "off", "width_mm", "reason", ...}
+    auto_range: dict[str, Any] | None = None  # the seed's neighbourhood statistics when the range was automatic
+    cuts: list[dict[str, Any]] = field(default_factory=list)  # {"slice", "voxels", "mm": [x, y, z] patient LPS}
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "voxels": self.voxels, "volume_ml": round(self.volume_ml, 4),
                 "slices": None if self.slices is None else list(self.slices), "warnings": list(self.warnings),
-                "seed": list(self.seed), "range": list(self.range), "stops": dict(self.stops),
+                "seed": list(self.seed), "range": [round(float(v), 3) for v in self.range],
+                "range_source": "auto" if self.auto_range is not None else "given", "auto_range": self.auto_range,
+                "stops": dict(self.stops), "neck": dict(self.neck), "cuts": list(self.cuts),
                 "neck_cut_slices": list(self.necks)}
+
+    def message(self) -> str:
+        """One line for the TUI's message bar and the CLI: what was made and how the leak guard chose."""
+        rng = f"{self.range[0]:g}..{self.range[1]:g}" + (" (auto)" if self.auto_range is not None else "")
+        sl = "" if self.slices is None else f", slices {self.slices[0]}..{self.slices[1]}"
+        neck = self.neck.get("mode", "off")
+        guard = (f"neck {self.neck.get('width_mm', 0):g} mm ({neck})" if self.neck.get("width_mm") else f"no neck cut ({neck})")
+        where = ""
+        if self.cuts:
+            zs = sorted({c["slice"] for c in self.cuts})
+            where = f", cut at slice{'s' if len(zs) > 1 else ''} " + ",".join(map(str, zs[:6])) + ("..." if len(zs) > 6 else "")
+        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, range {rng}, {guard}{where}"
 
 
 @dataclass
@@ -138,7 +167,7 @@ def _check_seed(seed: Sequence[int], shape: tuple[int, ...], what: str) -> Seed:
 def _ranges(thresholds: Sequence[Threshold], n: int) -> list[Threshold]:
     th = list(thresholds)
     if not th:
-        raise CtuiError("give a range LO:HI or a tolerance T")
+        th = [None]
     if len(th) == 1:
         th = th * n
     if len(th) != n:
@@ -146,22 +175,84 @@ def _ranges(thresholds: Sequence[Threshold], n: int) -> list[Threshold]:
     return th
 
 
-def _seed_fill(final: np.ndarray, seed: Seed, th: Threshold, opts: SegmentOptions,
-               spacing_yx: tuple[float, float]) -> tuple[np.ndarray, tuple[float, float]]:
-    """The seed slice's neck-cut fill (bool (ny, nx)) and the range; raises CtuiError when the seed fails."""
+@dataclass
+class _Start:
+    """The seed slice's object and what was chosen for it before anything is written."""
+
+    mask: np.ndarray  # bool (ny, nx)
+    rng: tuple[float, float]
+    auto_range: RangeChoice | None
+    neck: NeckChoice | None  # the automatic choice; None when the width was given
+    width: float  # mm; 0: no neck cut
+
+
+def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
+    if opts.box is None:
+        return None
+    return tuple(slice(max(a, 0), min(b, n - 1) + 1) for (a, b), n in zip(opts.box, shape))  # type: ignore[return-value]
+
+
+def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, th: Threshold,
+               opts: SegmentOptions) -> _Start:
+    """The seed slice's object, the range and the neck width; raises CtuiError when the seed fails."""
     x, y, z = seed
-    if isinstance(th, tuple):
+    spacing_yx = (float(volume.spacing[1]), float(volume.spacing[2]))
+    final = pipe.final_slice(volume, z)
+    box = _limit(opts, volume.data.shape)
+    if box is not None and not all(b.start <= c < b.stop for b, c in zip(box, (z, y, x))):
+        raise CtuiError(f"seed {x},{y},{z} is outside the box {_box_text(opts.box)}")
+    auto = None
+    if th is None:
+        auto = seed_range(volume, pipe, seed)
+        lo, hi = auto.low, auto.high
+    elif isinstance(th, tuple):
         lo, hi = fill_range(0.0, low=th[0], high=th[1])
     else:
         lo, hi = fill_range(float(final[y, x]), tolerance=float(th))
-    mask = neck_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity, neck_mm=opts.neck_mm,
-                     spacing_yx=spacing_yx)
+    value = float(final[y, x])
+    if not lo <= value <= hi:
+        raise CtuiError(f"seed {x},{y},{z}: its value {value:g} (the value fills use{', after the filters' if pipe.active_steps() else ''}) "
+                        f"is outside the range [{lo:g}, {hi:g}]")
+    labels = None if opts.overwrite else seg.labels
+    if opts.neck_mm is None:
+        choice = auto_width(volume, pipe, seed, lo, hi, labels=labels, object_id=oid, limit=box)
+        width = choice.width_mm
+        inr = in_range(final, lo, hi).view(bool)
+        if labels is not None:
+            inr &= (labels[z] == 0) | (labels[z] == oid)
+        if box is not None:
+            inr = inr & _box_mask2d(box, inr.shape)
+        pts = seed_voxels(inr[None], (0, y, x))[:, 1:]
+        start = np.zeros(inr.shape, bool)
+        start[tuple(pts.T)] = True
+        comp = seeded_components(inr, start, connectivity=opts.connectivity)
+        mask, _st = cut_2d(comp, start, width_mm=width, spacing_yx=spacing_yx, fill_holes=opts.fill_holes,
+                           connectivity=opts.connectivity)
+    else:
+        choice, width = None, float(opts.neck_mm)
+        mask = neck_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity, neck_mm=width,
+                         spacing_yx=spacing_yx)
+        if box is not None:
+            mask &= _box_mask2d(box, mask.shape)
     if not mask.any():
-        raise CtuiError(f"seed {x},{y},{z}: its value {float(final[y, x]):g} is outside the range [{lo:g}, {hi:g}]")
+        raise CtuiError(f"seed {x},{y},{z}: nothing to fill in the range [{lo:g}, {hi:g}]")
     if int(mask.sum()) < opts.min_area:
         raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
                         f"{opts.min_area} px")
-    return mask, (lo, hi)
+    return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width)
+
+
+def _box_mask2d(box: tuple[slice, slice, slice], shape: tuple[int, ...]) -> np.ndarray:
+    m = np.zeros(shape, bool)
+    m[box[1], box[2]] = True
+    return m
+
+
+def _box_text(box: Box | None) -> str:
+    if box is None:
+        return "(none)"
+    (z0, z1), (y0, y1), (x0, x1) = box
+    return f"x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}"
 
 
 def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Threshold], *,
@@ -199,31 +290,35 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         raise CtuiError(f"at most 10 objects: {len(fg)} seeds but {len(free)} free object ids")
     spacing = tuple(float(v) for v in volume.spacing)
     fills = []
-    for seed, th in zip(fg, ths):  # validate everything before the first change
-        fills.append(_seed_fill(pipe.final_slice(volume, seed[2]), seed, th, opts, spacing[1:]))  # type: ignore[arg-type]
-    check = opts if opts.neck_mm > 0 else SegmentOptions(**{**opts.__dict__, "neck_mm": DEFAULT_NECK_MM})
-    for seed, th in zip(fg, ths):  # a background seed in the seed's own region (no neck between) splits the organ
-        same = [b for b in bg if b[2] == seed[2]]
-        mask = _seed_fill(pipe.final_slice(volume, seed[2]), seed, th, check, spacing[1:])[0] if same else None  # type: ignore[arg-type]
-        for b in same:
-            if mask is not None and mask[b[1], b[0]]:
-                raise CtuiError(f"background seed {b[0]},{b[1]},{b[2]} lies inside the region of seed "
-                                f"{seed[0]},{seed[1]},{seed[2]} on its slice (same range, no neck between): "
-                                "move it outside the object")
+    for i, (seed, th) in enumerate(zip(fg, ths)):  # validate everything before the first change
+        report(progress, 0, 1, f"seed {i + 1}: range and leak guard")
+        fills.append(_seed_fill(volume, pipe, seg, free[i], seed, th, opts))
+    notes = _check_background(volume, pipe, fg, bg, fills)
     results, settings = [], []
-    for i, (seed, (mask, rng)) in enumerate(zip(fg, fills)):
+    for i, (seed, start) in enumerate(zip(fg, fills)):
         oid = free[i]
         sub = _scaled(progress, i, len(fg))
         seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
-        res, st = _one(volume, pipe, seg, oid, seed, mask, rng, bg, opts, sub)
+        res, st = _one(volume, pipe, seg, oid, seed, start, bg, opts, sub)
+        res.warnings[:0] = notes
         results.append(res)
         settings.append(st)
     counts = label_counts(seg.labels)
     vox_ml = float(np.prod(spacing)) / 1000.0
-    for r in results:
+    geo = Geometry.of(volume)
+    for r, start in zip(results, fills):
         r.voxels = int(counts[r.id])
         r.volume_ml = r.voxels * vox_ml
         r.slices = seg.slice_range(r.id)
+        r.cuts = [{"slice": c["slice"], "voxels": c["voxels"],
+                   "mm": [round(float(v), 1) for v in geo.index_to_mm((c["slice"], c["y"], c["x"]))]} for c in r.cuts]
+        r.warnings.extend(_sanity(r, start, spacing, opts))
+    empty = [r for r in results if r.voxels == 0]
+    if empty:
+        for r in empty:
+            seg.remove_object(r.id)
+        raise CtuiError(f"seed {','.join(map(str, empty[0].seed))}: the result is empty "
+                        f"({'; '.join(empty[0].warnings) or 'nothing in range joins the seed'})")
     report(progress, 1, 1, "")
     return SegmentResult(segmentation=seg, pipeline=pipe, settings=settings, objects=results, method=opts.method)
 
@@ -239,29 +334,47 @@ def _scaled(progress: Progress | None, i: int, n: int) -> Progress | None:
     return sub
 
 
-def _settings(opts: SegmentOptions, rng: tuple[float, float]) -> PropagationSettings:
-    return PropagationSettings(low=rng[0], high=rng[1], direction=opts.direction, connectivity=opts.connectivity,
-                               neighbourhood=opts.neighbourhood, min_area=opts.min_area, leak_factor=opts.leak_factor,
-                               mode=opts.mode, neck_mm=opts.neck_mm, slices=opts.slices, overwrite=opts.overwrite)
+def _settings(opts: SegmentOptions, start: _Start, shape: tuple[int, ...]) -> PropagationSettings:
+    slices = opts.slices
+    if opts.box is not None:
+        z0, z1 = opts.box[0]
+        slices = (max(z0, slices[0]), min(z1, slices[1])) if slices is not None else (z0, z1)
+        if slices[0] > slices[1]:
+            raise CtuiError("the slice limits and the box's slices do not overlap")
+    return PropagationSettings(low=start.rng[0], high=start.rng[1], direction=opts.direction,
+                               connectivity=opts.connectivity, neighbourhood=opts.neighbourhood,
+                               min_area=opts.min_area, leak_factor=opts.leak_factor, mode=opts.mode,
+                               neck_mm=start.width, slices=slices, overwrite=opts.overwrite,
+                               neck_rule="sweep" if opts.neck_mm is None else "opening", fill_holes=opts.fill_holes,
+                               box=opts.box)
 
 
-def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, mask: np.ndarray,
-         rng: tuple[float, float], bg: list[Seed], opts: SegmentOptions,
-         progress: Progress | None) -> tuple[ObjectResult, dict[str, Any]]:
+def _neck_report(opts: SegmentOptions, start: _Start) -> dict[str, Any]:
+    if opts.neck_mm is None and start.neck is not None:
+        return {"mode": "auto", "width_mm": round(start.width, 3), "reason": start.neck.reason,
+                "sweep": start.neck.to_dict()}
+    return {"mode": "fixed" if start.width > 0 else "off", "width_mm": round(start.width, 3)}
+
+
+def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, start: _Start,
+         bg: list[Seed], opts: SegmentOptions, progress: Progress | None) -> tuple[ObjectResult, dict[str, Any]]:
     x, y, z = seed
-    res = ObjectResult(id=oid, seed=seed, range=rng)
-    s = _settings(opts, rng)
+    res = ObjectResult(id=oid, seed=seed, range=start.rng, neck=_neck_report(opts, start),
+                       auto_range=None if start.auto_range is None else start.auto_range.to_dict())
+    s = _settings(opts, start, volume.data.shape)
     spacing = tuple(float(v) for v in volume.spacing)
     info = seg.objects[oid]
     info.seeds.append(seed)
-    info.settings.update({"low": rng[0], "high": rng[1], "connectivity": opts.connectivity, "method": opts.method})
+    info.settings.update({"low": start.rng[0], "high": start.rng[1], "connectivity": opts.connectivity,
+                          "method": opts.method, "neck": res.neck, "fill_holes": opts.fill_holes})
     if bg:
         info.settings["background"] = [list(b) for b in bg]
     if opts.method == "grow":
         _grow_object(volume, pipe, seg, oid, seed, bg, s, spacing, progress)  # type: ignore[arg-type]
-        res.stops = {"grow": "competition with the background seeds" if bg else "in-range region"}
+        res.stops = {"grow": "competition with the background seeds at the edges" if bg else "in-range region"}
     else:
-        seg.apply_mask(mask, oid, offset=(z, 0, 0), overwrite=opts.overwrite, label=f"fill object {oid} at ({x}, {y}, {z})")
+        seg.apply_mask(start.mask, oid, offset=(z, 0, 0), overwrite=opts.overwrite,
+                       label=f"fill object {oid} at ({x}, {y}, {z})")
 
         def cb(ev: Any) -> bool:
             try:
@@ -271,13 +384,18 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, m
                 return False
             return True
 
-        prop = propagate_object(seg, volume, pipe, oid, z, s, progress=cb if progress is not None else None)
+        region = start.neck.region if start.neck is not None else None
+        prop = propagate_object(seg, volume, pipe, oid, z, s, progress=cb if progress is not None else None,
+                                region=region)
         if prop.cancelled:
             seg.undo()
             raise Cancelled()
         prop.accept(seg)
-        res.stops, res.necks = dict(prop.stops), list(prop.necks)
+        res.stops, res.necks, res.cuts = dict(prop.stops), list(prop.necks), list(prop.cuts)
         res.warnings.extend(prop.warnings())
+        if prop.settings.get("neck_status") == "thin" and start.width > 0:
+            res.warnings.append(f"the neck width {start.width:g} mm is wider than the object around the seed, so "
+                                "the leak guard cut nothing: use the automatic width or a smaller one")
         if bg:
             _split_background(seg, oid, seed, bg, spacing, opts.connectivity)  # type: ignore[arg-type]
         if opts.method == "levelset":
@@ -286,6 +404,42 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, m
     _clean(seg, oid, opts, spacing)  # type: ignore[arg-type]
     info.settings["propagation"] = res.stops
     return res, s.to_dict()
+
+
+def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed], fills: list[_Start]) -> list[str]:
+    """Refuse a background seed inside a seed's own slice object; warn about one that cannot act."""
+    notes = []
+    for seed, start in zip(fg, fills):
+        for b in bg:
+            if b[2] == seed[2] and start.mask[b[1], b[0]]:
+                raise CtuiError(f"background seed {b[0]},{b[1]},{b[2]} lies inside the region of seed "
+                                f"{seed[0]},{seed[1]},{seed[2]} on its slice (same range, no neck between): "
+                                "move it outside the object")
+    lo = min(f.rng[0] for f in fills)
+    hi = max(f.rng[1] for f in fills)
+    for b in bg:
+        v = float(pipe.final_slice(volume, b[2])[b[1], b[0]])
+        if not lo <= v <= hi:
+            notes.append(f"background seed {b[0]},{b[1]},{b[2]} (value {v:g}) is outside the range "
+                         f"[{lo:g}, {hi:g}], so it cannot stop anything: place it in the neighbour the object leaks into")
+    return notes
+
+
+def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: SegmentOptions) -> list[str]:
+    """Warnings for results that are probably wrong: collapsed, or many times what the seed suggests."""
+    out = []
+    seed_px = int(start.mask.sum())
+    if 0 < r.voxels < max(27, seed_px // 4):
+        out.append(f"the object collapsed to {r.voxels} voxels (its seed slice had {seed_px} px): widen the range, "
+                   "move the seed deeper into the object, or check the background seeds")
+    depth = start.neck.depth_mm if start.neck is not None else 0.0
+    if depth > 0:
+        ball_ml = 4.0 / 3.0 * np.pi * depth ** 3 / 1000.0
+        if r.volume_ml > 25 * ball_ml:
+            out.append(f"the object ({r.volume_ml:.0f} mL) is {r.volume_ml / ball_ml:.0f}x the ball that fits at the "
+                       f"seed ({ball_ml:.1f} mL): it probably leaked into a neighbour; add background seeds there, "
+                       "narrow the range, or draw a box")
+    return out
 
 
 def _clean(seg: Segmentation, oid: int, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:

@@ -38,13 +38,13 @@ _KERNELS: dict[tuple[int, int], np.ndarray] = {}
 
 
 def disc(ry: float, rx: float) -> np.ndarray:
-    """uint8 elliptic kernel of semi-axes ``ry``, ``rx`` pixels (rounded; at least 1x1)."""
-    key = (max(0, int(round(ry))), max(0, int(round(rx))))
+    """uint8 elliptic kernel of semi-axes ``ry``, ``rx`` pixels (pixels whose centres lie inside; at least 1x1)."""
+    key = (round(max(float(ry), 0.0), 4), round(max(float(rx), 0.0), 4))
     k = _KERNELS.get(key)
     if k is None:
-        a, b = key
+        a, b = int(math.floor(key[0] + 1e-6)), int(math.floor(key[1] + 1e-6))
         yy, xx = np.mgrid[-a:a + 1, -b:b + 1]
-        k = (((yy / max(ry, 0.5)) ** 2 + (xx / max(rx, 0.5)) ** 2) <= 1.0 + 1e-9).astype(np.uint8)
+        k = (((yy / max(key[0], 0.5)) ** 2 + (xx / max(key[1], 0.5)) ** 2) <= 1.0 + 1e-6).astype(np.uint8)
         _KERNELS[key] = k
     return k
 
@@ -109,6 +109,28 @@ def morph_ball(mask: np.ndarray, radius_mm: float, spacing: tuple[float, float, 
     return out.view(bool)
 
 
+def fill_holes_2d(mask: np.ndarray) -> np.ndarray:
+    """bool (nz, ny, nx) (or (ny, nx)): ``mask`` with the holes of every slice filled (4-connected background)."""
+    m = np.asarray(mask, bool)
+    if m.ndim == 2:
+        return _fill2d(m)
+    out = np.empty(m.shape, bool)
+    for z in range(m.shape[0]):
+        out[z] = _fill2d(m[z]) if m[z].any() else False
+    return out
+
+
+def _fill2d(m: np.ndarray) -> np.ndarray:
+    """Holes of one slice filled: the background reachable from the border stays background.
+    OpenCV's flood fill from a one-pixel frame (about 10x scipy's binary_fill_holes on 512x512)."""
+    h, w = m.shape
+    pad = np.zeros((h + 2, w + 2), np.uint8)
+    pad[1:-1, 1:-1] = m
+    mask = np.zeros((h + 4, w + 4), np.uint8)
+    cv2.floodFill(pad, mask, (0, 0), 2, flags=4)
+    return pad[1:-1, 1:-1] != 2
+
+
 def seeded_components(inrange: np.ndarray, seeds: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
     """Connected components of ``inrange`` (2D) holding any ``seeds`` pixel; bool, same shape."""
     m = np.ascontiguousarray(inrange, dtype=np.uint8)
@@ -122,7 +144,7 @@ def seeded_components(inrange: np.ndarray, seeds: np.ndarray, *, connectivity: i
 
 
 def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float, spacing_yx: tuple[float, float],
-                 connectivity: int = 8) -> tuple[np.ndarray, str]:
+                 connectivity: int = 8, fill_holes: bool | None = None) -> tuple[np.ndarray, str]:
     """The part of ``candidate`` joined to ``reference`` through necks at least ``neck_mm`` wide.
 
     Parameters
@@ -131,6 +153,9 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
     reference : bool (ny, nx), the previous slice's object (or the seed's fill)
     neck_mm : the narrowest neck followed (mm); 0 disables the cut
     spacing_yx : pixel size (dy, dx) mm
+    fill_holes : None: the candidate as it is; False: its holes (noise, fat, vessels) are filled
+        for the opening, so they do not eat the object, and the result keeps only candidate pixels;
+        True: the result keeps the filled holes too
 
     Returns
     -------
@@ -138,15 +163,16 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
     "thin" (the whole candidate is thinner than the neck: returned unchanged, the caller
     decides), or "lost" (no wide part touches the reference: empty mask).
     """
-    cand = np.ascontiguousarray(candidate, dtype=np.uint8)
-    if neck_mm <= 0 or not cand.any():
-        return cand.astype(bool), "ok"
+    raw = np.ascontiguousarray(candidate, dtype=np.uint8)
+    if neck_mm <= 0 or not raw.any():
+        return _holes(raw.view(bool), fill_holes), "ok"
+    cand = raw if fill_holes is None else np.ascontiguousarray(fill_holes_2d(raw.view(bool)), dtype=np.uint8)
     r = neck_mm / 2.0
     kern = disc(r / spacing_yx[0], r / spacing_yx[1])
     core = cv2.dilate(cv2.erode(cand, kern, borderType=cv2.BORDER_REPLICATE), kern)
     core &= cand
     if not core.any():
-        return cand.astype(bool), "thin"
+        return _holes(raw.view(bool), fill_holes), "thin"
     ref = np.asarray(reference, bool)
     kept = seeded_components(core, ref & (core > 0), connectivity=connectivity)
     if not kept.any():
@@ -155,18 +181,25 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
         if not kept.any():
             return np.zeros(cand.shape, bool), "lost"
     out = (cv2.dilate(kept.view(np.uint8), kern) & cand).view(bool)  # every piece lies within r of ``kept``
-    return out, ("cut" if np.count_nonzero(out) < np.count_nonzero(cand) else "ok")
+    status = "cut" if np.count_nonzero(out) < np.count_nonzero(cand) else "ok"
+    if fill_holes is False:
+        out &= raw.view(bool)
+    return out, status
+
+
+def _holes(mask: np.ndarray, fill_holes: bool | None) -> np.ndarray:
+    return fill_holes_2d(mask) if fill_holes else mask.astype(bool)
 
 
 def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float,
                  spacing: tuple[float, float, float], connectivity: int = 8,
-                 inplace: bool = False) -> tuple[np.ndarray, str]:
+                 inplace: bool = False, fill_holes: bool | None = None) -> tuple[np.ndarray, str]:
     """The part of ``candidate`` (bool (nz, ny, nx)) joined to the seeds through necks >= ``neck_mm``.
 
     ``seeds_zyx``: int (n, 3) voxels of the object known to be right (the seed, or the
     seed slice's object). Works on the candidate's bounding box only, with at most three
     box-sized uint8 arrays alive at once; ``inplace=True`` writes the result into
-    ``candidate`` (no full-size copy). Returns (bool mask of the candidate's shape,
+    ``candidate`` (no full-size copy). ``fill_holes``: as in :func:`cut_necks_2d`, per slice. Returns (bool mask of the candidate's shape,
     status as in :func:`cut_necks_2d`).
     """
     cand = np.asarray(candidate, bool)
@@ -177,7 +210,8 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     ys = np.flatnonzero(cand.any(axis=(0, 2)))
     xs = np.flatnonzero(cand.any(axis=(0, 1)))
     box = (slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1))
-    sub = np.ascontiguousarray(cand[box])
+    raw = np.ascontiguousarray(cand[box])
+    sub = raw if fill_holes is None else fill_holes_2d(raw)
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3) - np.array([zs[0], ys[0], xs[0]])
     seeds = seeds[np.all((seeds >= 0) & (seeds < np.array(sub.shape)), axis=1)]
     er = morph_ball(sub, r, spacing, erode=True)
@@ -186,6 +220,9 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     core &= sub
     hit = seeds[core[tuple(seeds.T)]] if len(seeds) else seeds
     if not len(hit):
+        if fill_holes:
+            cand = cand if inplace else cand.copy()
+            cand[box] = sub
         return cand, "thin"
     kept = fill3d_seeds(core, hit, connectivity=connectivity)
     del core
@@ -195,6 +232,8 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     got = fill3d_seeds(back, hit, connectivity=connectivity)
     del back
     status = "cut" if np.count_nonzero(got) < np.count_nonzero(sub) else "ok"
+    if fill_holes is False:
+        got &= raw
     out = cand if inplace else np.zeros(cand.shape, bool)
     out[box] = got
     return out, status

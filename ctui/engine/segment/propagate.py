@@ -47,6 +47,7 @@ an optional callback and ``threading.Event`` for cancel.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable, Generator
@@ -56,6 +57,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ctui.engine.segment.autoneck import cut_2d, cut_3d, cut_faces
 from ctui.engine.segment.fill3d import fill3d
 from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
 from ctui.engine.segment.selection import Segmentation, in_range, seeded_components
@@ -82,6 +84,9 @@ class PropagationSettings:
     max_slices: int | None = None  # per direction
     neck_mm: float = DEFAULT_NECK_MM  # follow the object only through necks at least this wide (0: off)
     slices: tuple[int, int] | None = None  # propagate only within slices A..B (inclusive, numbered from 0)
+    neck_rule: str = "opening"  # "sweep": the automatic width's rule (autoneck.cut_2d/cut_3d); "opening": necks.cut_necks_*
+    fill_holes: bool = False  # "sweep" rule: keep the holes enclosed in each slice of the object
+    box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None  # stay inside ((z0, z1), (y0, y1), (x0, x1))
 
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
@@ -90,6 +95,12 @@ class PropagationSettings:
             raise ValueError(f"connectivity must be 4 or 8, got {self.connectivity}")
         if self.mode not in ("slice", "3d"):
             raise ValueError(f"mode must be 'slice' or '3d', got {self.mode!r}")
+        if self.box is not None:
+            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+        if self.neck_rule not in ("opening", "sweep"):
+            raise ValueError(f"neck_rule must be 'opening' or 'sweep', got {self.neck_rule!r}")
+        if not math.isfinite(float(self.neck_mm)) or not (math.isfinite(float(self.low)) and math.isfinite(float(self.high))):
+            raise ValueError("the neck width and the range must be finite numbers")
         if self.on_leak not in ("stop", "confine"):
             raise ValueError(f"on_leak must be 'stop' or 'confine', got {self.on_leak!r}")
         if self.low > self.high:
@@ -149,6 +160,7 @@ class Proposal:
     timings: dict[str, float] = field(default_factory=dict)
     accepted: bool = False
     necks: list[int] = field(default_factory=list)  # slices where the neck cut removed something
+    cuts: list[dict[str, Any]] = field(default_factory=list)  # where: {"slice", "y", "x", "voxels"} (the cut faces)
 
     @property
     def voxels(self) -> int:
@@ -244,7 +256,8 @@ class _SliceFiller:
     """Fills one slice from the previous slice's object, on a crop that grows as needed."""
 
     def __init__(self, volume: Any, pipeline: Any, settings: PropagationSettings, labels: np.ndarray | None,
-                 object_id: int, timings: dict[str, float]) -> None:
+                 object_id: int, timings: dict[str, float], region: Any = None) -> None:
+        self.region = region  # autoneck.Region: where the object may go (the automatic leak guard's sweep)
         self.volume = volume
         self.pipeline = pipeline
         self.s = settings
@@ -257,6 +270,7 @@ class _SliceFiller:
         sp = tuple(float(v) for v in getattr(volume, "spacing", (1.0, 1.0, 1.0)))
         self.spacing_yx = (sp[1], sp[2])
         self.cut = ""  # neck-cut status of the last fill: "", "cut", "thin", "lost"
+        self.face: list[tuple[float, float, int]] = []  # the last cut's faces (y, x, pixels) in the crop
 
     def _cut_necks(self, comp: np.ndarray, prev: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Keep what joins the previous object through necks >= neck_mm, plus what lies on the previous
@@ -267,9 +281,14 @@ class _SliceFiller:
         if self.s.neck_mm <= 0 or not comp.any():
             return comp
         t0 = time.perf_counter()
-        out, _status = cut_necks_2d(comp, prev, neck_mm=self.s.neck_mm, spacing_yx=self.spacing_yx,
-                                    connectivity=self.s.connectivity)
+        if self.s.neck_rule == "sweep":
+            out, _status = cut_2d(comp, prev, width_mm=self.s.neck_mm, spacing_yx=self.spacing_yx,
+                                  fill_holes=self.s.fill_holes, connectivity=self.s.connectivity)
+        else:
+            out, _status = cut_necks_2d(comp, prev, neck_mm=self.s.neck_mm, spacing_yx=self.spacing_yx,
+                                        connectivity=self.s.connectivity)
         out |= comp & prev
+        self.face = cut_faces(comp & ~out, out)
         self.cut = "cut" if np.count_nonzero(out) < np.count_nonzero(comp) else ""
         self.t["necks"] = self.t.get("necks", 0.0) + (time.perf_counter() - t0)
         return out
@@ -288,6 +307,10 @@ class _SliceFiller:
             if self.labels is not None and not s.overwrite:
                 lab = self.labels[z, y0:y1, x0:x1]
                 inr[(lab != 0) & (lab != self.object_id)] = 0
+            if s.box is not None:
+                _outside_box(inr, s.box, y0, x0)
+            if self.region is not None:
+                inr &= self.region.crop(z, y0, y1, x0, x1)
             prevc = np.zeros(inr.shape, np.uint8)
             prevc[py0 - y0:py0 - y0 + pm.shape[0], px0 - x0:px0 - x0 + pm.shape[1]] = pm
             near = _grow(prevc, s.neighbourhood)
@@ -304,6 +327,7 @@ class _SliceFiller:
                 break
             margin = max(margin * 4, max(self.ny, self.nx))  # region leaves the crop: take the whole slice
         comp = self._cut_necks(comp, prevc.astype(bool), near)
+        self.face = [(fy + y0, fx + x0, n) for fy, fx, n in self.face]
         bb = _bbox(comp)
         if bb is None:
             return y0, x0, np.zeros((0, 0), bool)
@@ -313,7 +337,7 @@ class _SliceFiller:
 
 def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settings: PropagationSettings, *,
                      object_id: int = 1, labels: np.ndarray | None = None,
-                     cancel: threading.Event | None = None) -> Generator[Progress, None, Proposal]:
+                     cancel: threading.Event | None = None, region: Any = None) -> Generator[Progress, None, Proposal]:
     """Propagate from ``start_mask`` (bool (ny, nx)) on slice ``z``; yields Progress, returns a Proposal.
 
     Parameters
@@ -326,6 +350,7 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
     object_id : id written by :meth:`Proposal.accept`
     labels : current label volume (voxels of other objects are not claimed)
     cancel : a threading.Event; when set, propagation stops after the current slice.
+    region : an autoneck.Region confining slice mode (the automatic leak guard's opened region)
     """
     nz = volume.data.shape[0]
     if not 0 <= z < nz:
@@ -345,10 +370,11 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
     lo, hi = slice_limits(s, z, nz)
     total = sum((hi - z) if d == "forward" else (z - lo) for d in dirs)
     if s.mode == "3d":
-        result = yield from _iter_3d(volume, pipeline, start_mask, z, s, prop, dirs, labels, object_id, cancel, total)
+        result = yield from _iter_3d(volume, pipeline, start_mask, z, s, prop, dirs, labels, object_id, cancel, total,
+                                     region)
         prop.timings["total"] = time.perf_counter() - t_start
         return result
-    filler = _SliceFiller(volume, pipeline, s, labels, object_id, prop.timings)
+    filler = _SliceFiller(volume, pipeline, s, labels, object_id, prop.timings, region)
     done = 0
     for d in dirs:
         step = 1 if d == "forward" else -1
@@ -365,6 +391,7 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
             cur = filler.fill(zz, prev, confine=s.confine)
             if filler.cut:
                 prop.necks.append(int(zz))
+                prop.cuts.extend({"slice": int(zz), "y": fy, "x": fx, "voxels": n} for fy, fx, n in filler.face)
             tb = time.perf_counter()
             cur, status = _area_guard(filler, s, prop, zz, d, prev, cur)
             area = int(cur[2].sum())
@@ -383,6 +410,21 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
             zz += step
     prop.timings["total"] = time.perf_counter() - t_start
     return prop
+
+
+def _outside_box(inr: np.ndarray, box: tuple[tuple[int, int], ...], y0: int, x0: int) -> None:
+    """Clear the pixels of a crop (origin y0, x0) outside the box's rows and columns, in place."""
+    (_, _), (by0, by1), (bx0, bx1) = box
+    h, w = inr.shape
+    a, b = max(by0 - y0, 0), min(by1 + 1 - y0, h)
+    c, d = max(bx0 - x0, 0), min(bx1 + 1 - x0, w)
+    if a >= b or c >= d:
+        inr[:] = 0
+        return
+    inr[:a] = 0
+    inr[b:] = 0
+    inr[:, :c] = 0
+    inr[:, d:] = 0
 
 
 def slice_limits(s: PropagationSettings, z: int, nz: int) -> tuple[int, int]:
@@ -431,7 +473,7 @@ def _area_guard(filler: _SliceFiller, s: PropagationSettings, prop: Proposal, zz
 
 def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: PropagationSettings, prop: Proposal,
              dirs: list[str], labels: np.ndarray | None, object_id: int, cancel: threading.Event | None,
-             total: int) -> Generator[Progress, None, Proposal]:
+             total: int, region: Any = None) -> Generator[Progress, None, Proposal]:
     nz = volume.data.shape[0]
     lo, hi = slice_limits(s, z, nz)
     z0 = lo if "backward" in dirs else z
@@ -454,6 +496,10 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
             lab = labels[zz]
             if lab.any():
                 inr[zz - z0] &= (lab == 0) | (lab == object_id)
+        if s.box is not None:
+            _outside_box(inr[zz - z0], s.box, 0, 0)
+        if region is not None:
+            inr[zz - z0] &= region.crop(zz, 0, volume.data.shape[1], 0, volume.data.shape[2])
         if zz != z:
             done += 1
             yield Progress(z=zz, area=-1, direction="3d-threshold", done=done, total=total)
@@ -466,9 +512,18 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
     if s.neck_mm > 0:
         yx = np.argwhere(start)
         seeds = np.column_stack([np.full(len(yx), z - z0), yx])
-        comp, status = cut_necks_3d(comp, seeds, neck_mm=s.neck_mm, spacing=tuple(volume.spacing),
-                                    connectivity=s.connectivity, inplace=True)
-        comp[z - z0] = start  # the seed slice stays as drawn
+        if s.neck_rule == "sweep":
+            before = comp
+            comp, status = cut_3d(before, seeds, width_mm=s.neck_mm, spacing=tuple(volume.spacing),
+                                  fill_holes=s.fill_holes, connectivity=s.connectivity)
+            comp[z - z0] |= start  # the seed slice keeps what was drawn
+            _record_cuts_3d(prop, before & ~comp, comp, z0)
+            del before
+        else:
+            comp, status = cut_necks_3d(comp, seeds, neck_mm=s.neck_mm, spacing=tuple(volume.spacing),
+                                        connectivity=s.connectivity, inplace=True)
+            comp[z - z0] = start  # the seed slice stays as drawn
+        prop.settings["neck_status"] = status
         if status == "cut":
             prop.necks.append(int(z))
     t3 = time.perf_counter()
@@ -478,6 +533,16 @@ def _iter_3d(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, s: Prop
         _collect_3d(prop, comp, areas, s, z, z0, z1, d)
     prop.timings["bookkeeping"] = time.perf_counter() - t3
     return prop
+
+
+def _record_cuts_3d(prop: Proposal, removed: np.ndarray, kept: np.ndarray, z0: int) -> None:
+    """The 3D cut's faces (removed voxels touching the object), per slice, into ``prop.cuts``/``prop.necks``."""
+    zs = np.flatnonzero(removed.any(axis=(1, 2)))
+    for k in zs:
+        for fy, fx, n in cut_faces(removed[k], kept[k] | (kept[k - 1] if k > 0 else False)
+                                   | (kept[k + 1] if k + 1 < kept.shape[0] else False)):
+            prop.cuts.append({"slice": int(k + z0), "y": fy, "x": fx, "voxels": n})
+    prop.necks.extend(sorted({c["slice"] for c in prop.cuts} - set(prop.necks)))
 
 
 def _collect_3d(prop: Proposal, comp: np.ndarray, areas: np.ndarray, s: PropagationSettings, z: int, z0: int,
@@ -510,13 +575,14 @@ def _collect_3d(prop: Proposal, comp: np.ndarray, areas: np.ndarray, s: Propagat
 def propagate(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settings: PropagationSettings, *,
               object_id: int = 1, labels: np.ndarray | None = None,
               progress: Callable[[Progress], bool | None] | None = None,
-              cancel: threading.Event | None = None) -> Proposal:
+              cancel: threading.Event | None = None, region: Any = None) -> Proposal:
     """Run :func:`iter_propagation` to the end; ``progress(event)`` returning False cancels.
 
     Returns the :class:`Proposal` (pending; call ``proposal.accept(segmentation)``).
     """
     own = _Either(cancel)
-    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own)  # type: ignore[arg-type]
+    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own,  # type: ignore[arg-type]
+                           region=region)
     try:
         while True:
             ev = next(gen)

@@ -1,0 +1,140 @@
+"""What one seed tells before anything is filled: the value range of its neighbourhood and the leak guard's width.
+
+* :func:`seed_range`: the range from the seed's neighbourhood (a ball of ``RANGE_BALL_MM``,
+  at least two voxels across): median +- ``RANGE_K`` robust standard deviations, the
+  deviation being the larger of the ball's MAD (x 1.4826) and the image noise (the MAD of
+  neighbour differences / sqrt 2), so one flat patch does not give a range narrower than
+  the noise. With k = 2 this spans about the 2.5-97.5th percentiles of a uniform organ
+  (InVesalius' "confidence" growing uses the same idea). A small histogram of the ball
+  goes with it, for the TUI.
+* :func:`auto_width`: the in-range region joined to the seed inside a box around it, and
+  :func:`ctui.engine.segment.autoneck.choose_width` on it.
+* :func:`seed_voxels`: the seed and its in-range neighbours (one voxel around it): a seed
+  on a noise voxel still starts the object.
+
+Values are in the pipeline's domain (HU by default). Seeds are (x, y, z) = (column, row,
+slice), as on the command line; internal arrays are (z, y, x).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ctui.engine.core.limits import check_allocation
+from ctui.engine.segment.autoneck import NeckChoice, choose_width, sweep_box
+from ctui.engine.segment.fill3d import fill3d_seeds
+from ctui.engine.segment.selection import in_range
+
+RANGE_BALL_MM = 10.0
+RANGE_K = 2.0
+HIST_BINS = 16
+
+
+@dataclass
+class RangeChoice:
+    """A range suggested by the seed's neighbourhood: ``low``..``high`` (inclusive), the median and robust sd,
+    and a histogram (``hist`` counts over ``edges``, HIST_BINS bins over median +- 4 sd)."""
+
+    low: float
+    high: float
+    median: float
+    sd: float
+    voxels: int
+    hist: list[int] = field(default_factory=list)
+    edges: list[float] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"low": round(self.low, 3), "high": round(self.high, 3), "median": round(self.median, 3),
+                "sd": round(self.sd, 3), "voxels": self.voxels, "hist": list(self.hist),
+                "edges": [round(e, 3) for e in self.edges]}
+
+
+def _ball_values(volume: Any, pipe: Any, seed: tuple[int, int, int]) -> tuple[np.ndarray, float]:
+    """The pipeline's values in a ball around the seed (x, y, z), and the noise sd from neighbour differences."""
+    x, y, z = seed
+    nz, ny, nx = volume.data.shape
+    sp = tuple(float(s) for s in volume.spacing)
+    r = [max(1, int(math.ceil(RANGE_BALL_MM / s))) for s in sp]
+    r = [max(v, 2) if s <= RANGE_BALL_MM / 2 else v for v, s in zip(r, sp)]
+    z0, z1 = max(z - r[0], 0), min(z + r[0] + 1, nz)
+    y0, y1 = max(y - r[1], 0), min(y + r[1] + 1, ny)
+    x0, x1 = max(x - r[2], 0), min(x + r[2] + 1, nx)
+    window = pipe.window_for(volume)
+    sub = np.stack([np.asarray(pipe.final_region(volume, zz, y0, y1, x0, x1, window=window), np.float32)
+                    for zz in range(z0, z1)])
+    zz, yy, xx = np.mgrid[z0:z1, y0:y1, x0:x1]
+    ball = ((zz - z) * sp[0]) ** 2 + ((yy - y) * sp[1]) ** 2 + ((xx - x) * sp[2]) ** 2 <= max(RANGE_BALL_MM, max(sp)) ** 2
+    diffs = np.diff(sub, axis=2).ravel() if sub.shape[2] > 1 else np.zeros(1, np.float32)
+    noise = 1.4826 * float(np.median(np.abs(diffs - np.median(diffs)))) / math.sqrt(2.0)
+    return sub[ball], noise
+
+
+def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float = RANGE_K) -> RangeChoice:
+    """The range of the seed's neighbourhood (see the module docstring); always holds the seed's own value."""
+    vals, noise = _ball_values(volume, pipe, seed)
+    med = float(np.median(vals))
+    mad = 1.4826 * float(np.median(np.abs(vals - med)))
+    sd = max(mad, noise, 1e-6)
+    lo, hi = med - k * sd, med + k * sd
+    x, y, z = seed
+    own = float(pipe.final_region(volume, z, y, y + 1, x, x + 1, window=pipe.window_for(volume))[0, 0])
+    lo, hi = min(lo, own), max(hi, own)
+    edges = np.linspace(med - 4 * sd, med + 4 * sd, HIST_BINS + 1)
+    hist = np.histogram(np.clip(vals, edges[0], edges[-1]), bins=edges)[0]
+    return RangeChoice(low=lo, high=hi, median=med, sd=sd, voxels=int(vals.size), hist=[int(h) for h in hist],
+                       edges=[float(e) for e in edges])
+
+
+def seed_voxels(inrange: np.ndarray, seed_zyx: tuple[int, int, int]) -> np.ndarray:
+    """int (n, 3) z, y, x: the seed and its in-range 26-neighbours in ``inrange`` (bool (nz, ny, nx))."""
+    z, y, x = seed_zyx
+    nz, ny, nx = inrange.shape
+    box = (slice(max(z - 1, 0), z + 2), slice(max(y - 1, 0), y + 2), slice(max(x - 1, 0), x + 2))
+    pts = np.argwhere(inrange[box]) + np.array([b.start for b in box])
+    seed = np.array([[z, y, x]])
+    return np.unique(np.concatenate([seed, pts]), axis=0) if len(pts) else seed
+
+
+def box_inrange(volume: Any, pipe: Any, low: float, high: float, box: tuple[slice, slice, slice], *,
+                labels: np.ndarray | None = None, object_id: int = 0) -> np.ndarray:
+    """bool (box shape): the pipeline's final view in [low, high] inside ``box``; other objects' voxels False."""
+    shape = tuple(b.stop - b.start for b in box)
+    check_allocation(int(np.prod(shape)), what="the in-range box around the seed")
+    out = np.zeros(shape, bool)
+    window = pipe.window_for(volume)
+    for k, z in enumerate(range(box[0].start, box[0].stop)):
+        img = pipe.final_region(volume, z, box[1].start, box[1].stop, box[2].start, box[2].stop, window=window)
+        out[k] = in_range(img, low, high).view(bool)
+        if labels is not None:
+            lab = labels[z, box[1], box[2]]
+            if lab.any():
+                out[k] &= (lab == 0) | (lab == object_id)
+    return out
+
+
+def auto_width(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, high: float, *,
+               labels: np.ndarray | None = None, object_id: int = 0,
+               limit: tuple[slice, slice, slice] | None = None) -> NeckChoice:
+    """The leak guard's width for a seed (x, y, z) and range: the sweep on a box of about 2 x 90 mm around it
+    (clipped to ``limit``, a (z, y, x) box of slices, when given)."""
+    x, y, z = seed
+    sp = tuple(float(s) for s in volume.spacing)
+    box = sweep_box(tuple(volume.data.shape), (z, y, x), sp)  # type: ignore[arg-type]
+    if limit is not None:
+        box = tuple(slice(max(b.start, lb.start), min(b.stop, lb.stop)) for b, lb in zip(box, limit))  # type: ignore[assignment]
+    inr = box_inrange(volume, pipe, low, high, box, labels=labels, object_id=object_id)
+    org = np.array([b.start for b in box])
+    local = (z - org[0], y - org[1], x - org[2])
+    if not inr[local]:
+        return NeckChoice(0.0, reason="the seed is outside the range")
+    seeds = seed_voxels(inr, local)  # type: ignore[arg-type]
+    cand = fill3d_seeds(inr, seeds, connectivity=8)
+    del inr
+    choice = choose_width(cand, seeds, sp)  # type: ignore[arg-type]
+    if choice.region is not None:
+        choice.region.origin = tuple(int(v) for v in org)  # type: ignore[assignment]
+    return choice
