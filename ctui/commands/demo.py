@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ctui.engine.core.errors import CtuiError
-    from ctui.engine.io.phantom import load_truth, write_demo
+    from ctui.engine.actions.series import load_truth, write_demo
 
     out = Path(args.outdir)
     if out.exists() and not out.is_dir():

@@ -19,9 +19,9 @@ from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.opened import check_source, labels_only_volume, series_available
 from ctui.engine.actions.project import save_project
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.io import project
-from ctui.engine.io.project import source_load_options
-from ctui.engine.mesh.warm import warm_up
+from ctui.engine.actions import project
+from ctui.engine.actions.mesh import warm_up
+from ctui.engine.actions.project import source_load_options
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.graphics import colour_advice
 from ctui.screens.loading import LoadingScreen

@@ -10,9 +10,9 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, Static
 
+from ctui.engine.actions import drift
 from ctui.engine.actions.drift import drift_check
 from ctui.engine.core.colors import object_color
-from ctui.engine.segment import drift
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import Call

@@ -17,7 +17,7 @@ from textual.widgets import DirectoryTree, Footer, Input, Label, OptionList
 from textual.widgets.option_list import Option
 
 from ctui.engine.core.progress import Cancelled
-from ctui.engine.io import series as loaders
+from ctui.engine.actions import series as loaders
 from ctui.screens.guard import GuardMixin
 from ctui.screens.messages import Call
 

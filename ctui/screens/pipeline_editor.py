@@ -220,7 +220,7 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
 
     # ------------------------------------------------------------ actions
     def action_add(self) -> None:
-        from ctui.engine.segment.filters import FILTERS, PARAMS
+        from ctui.engine.actions.series import FILTERS, PARAMS
         from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 
         def chose(name: str | None) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.project import new_project, propagation_record
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.segment import pipeline, selection
+from ctui.engine.actions.series import Pipeline, Segmentation
 from ctui.engine.actions import edit as edittools
 from ctui.screens.planes import PLANES
 from ctui.screens.session import Session
@@ -56,15 +56,14 @@ def project_from_session(s: Session):
 
 def session_from_project(proj, volume, path: str) -> Session:
     """Rebuild a Session from a loaded Project and its source volume."""
-    pipeline_mod = pipeline
     labels = proj.labels
     if labels is not None and tuple(labels.shape) != tuple(volume.shape):
         raise CtuiError(f"labels {labels.shape} do not match the series {volume.shape}", path=path)
-    seg = selection.Segmentation(volume.shape, labels=labels, objects=proj.objects or [])
+    seg = Segmentation(volume.shape, labels=labels, objects=proj.objects or [])
     prop = proj.propagation or {}
     meta = proj.meta or {}
     s = Session(volume, source_path=proj.source_path, source_options=dict(proj.source_options or {}),
-                pipeline=pipeline_mod.Pipeline.from_dict(proj.pipeline or {}), seg=seg,
+                pipeline=Pipeline.from_dict(proj.pipeline or {}), seg=seg,
                 z=meta.get("z"), x=meta.get("x"), y=meta.get("y"))
     if proj.window:
         s.window = (float(proj.window[0]), float(proj.window[1]))

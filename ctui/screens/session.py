@@ -17,10 +17,9 @@ import numpy as np
 
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import CT_PRESETS, apply_window
-from ctui.engine.io import phantom
-from ctui.engine.io import series as loaders
-from ctui.engine.segment import pipeline, selection
+from ctui.engine.actions import series as loaders
 from ctui.engine.actions.edit import EditLimits
+from ctui.engine.actions.series import Pipeline, Segmentation
 
 VIEWS = ("original", "overlay", "intermediate", "final")
 
@@ -35,7 +34,7 @@ def safe_cwd() -> Path:
 
 def sample_source() -> str:
     """Path of the bundled sample series."""
-    return str(phantom.sample_path())
+    return str(loaders.sample_path())
 
 
 def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
@@ -94,9 +93,9 @@ class Session:
         if self.volume.window:
             self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
         if self.pipeline is None:
-            self.pipeline = pipeline.Pipeline()
+            self.pipeline = Pipeline()
         if self.seg is None:
-            self.seg = selection.Segmentation(self.volume.shape)
+            self.seg = Segmentation(self.volume.shape)
 
     # ------------------------------------------------------------ geometry
     @property

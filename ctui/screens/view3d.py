@@ -22,7 +22,7 @@ from ctui.engine.actions.mesh import label_meshes
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
-from ctui.engine.measure import centreline
+from ctui.engine.actions.render import centreline  # the function the fly-through of ctui render uses
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import JobDone, JobFailed, Status
@@ -350,7 +350,7 @@ class View3DScreen(GuardMixin, Screen):
         if labels is None or not (labels == oid).any():
             raise CtuiError(f"object {oid} is empty: fill and propagate it first")
         v = self.s.volume
-        path = centreline.centreline(labels == oid, spacing=v.spacing, origin=v.origin,
+        path = centreline(labels == oid, spacing=v.spacing, origin=v.origin,
                                                direction=v.direction)
         if path is None or len(path) < 2:
             raise CtuiError(f"no centreline through object {oid}")

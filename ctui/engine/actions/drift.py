@@ -10,7 +10,12 @@ from typing import Any, Sequence
 from ctui.engine.actions import defaults
 from ctui.engine.actions.opened import Opened, open_input
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.segment.drift import DriftReport, analyze_drift, corrections_from_report, plot_drift
+from ctui.engine.segment.drift import (DriftReport, analyze_drift, apply_corrections, corrections_from_report,
+                                      invert_corrections, plot_drift)
+
+# apply/undo a correction and its plot: re-exported for the TUI's drift screen
+__all__ = ["DriftResult", "apply_corrections", "corrections_from_report", "drift_check", "invert_corrections",
+           "plot_drift"]
 
 
 @dataclass

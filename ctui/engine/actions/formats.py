@@ -17,10 +17,11 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from ctui.engine.actions.export import ExportJob
+#: A writer's argument: an :class:`ctui.engine.actions.export.ExportJob` (not imported here:
+#: export.py imports this registry).
+ExportJob = Any
 
 #: What a format may need from the input: nothing, or the DICOM series the labels were drawn on.
 NEEDS = ("", "dicom")
@@ -36,7 +37,7 @@ class ExportFormat:
     name: str
     label: str
     suffixes: tuple[str, ...]
-    write: Callable[["ExportJob"], list[dict] | None]
+    write: Callable[[ExportJob], list[dict] | None]
     tag: str = ""
     needs: str = ""
     #: the writer checks that the file name ends in one of ``suffixes``
@@ -133,7 +134,7 @@ def output_name(source: str | os.PathLike | None, suffix: str, *, tag: str = "")
 
 
 # =========================================================================== writers
-def _dicom_sources(job: "ExportJob", what: str) -> list[Any]:
+def _dicom_sources(job: ExportJob, what: str) -> list[Any]:
     from ctui.engine.core.errors import CtuiError
     from ctui.engine.io.dicomseg import source_datasets  # pydicom: loaded only for DICOM exports
 
@@ -149,7 +150,7 @@ def _dicom_sources(job: "ExportJob", what: str) -> list[Any]:
     return sources
 
 
-def write_dicom_seg(job: "ExportJob") -> None:
+def write_dicom_seg(job: ExportJob) -> None:
     from ctui.engine.io.dicomseg import write_seg  # highdicom: seconds to import
 
     write_seg(job.path, job.labels, _dicom_sources(job, "DICOM-SEG"), objects=job.objs,
@@ -157,20 +158,20 @@ def write_dicom_seg(job: "ExportJob") -> None:
               masks=job.masks(), progress=job.progress)  # overlapping segments stay overlapping
 
 
-def write_rtstruct(job: "ExportJob") -> None:
+def write_rtstruct(job: ExportJob) -> None:
     from ctui.engine.io.rtstruct import write_rtstruct as write  # pydicom: loaded only for DICOM exports
 
     write(job.path, job.labels, job.src.geometry, _dicom_sources(job, "RTSTRUCT"), objects=job.objs,
           keep_identifiers=job.keep_identifiers, masks=job.masks(), progress=job.progress)
 
 
-def write_label_map(job: "ExportJob") -> None:
+def write_label_map(job: ExportJob) -> None:
     from ctui.engine.io.labels import save_labels  # numpy, nibabel/pynrrd
 
     save_labels(job.path, job.labels, job.grid(), names={o["id"]: o["name"] for o in job.objs})
 
 
-def write_mesh(job: "ExportJob") -> None:
+def write_mesh(job: ExportJob) -> None:
     """The objects' surfaces (each closed on its own) merged in one file, in patient mm."""
     from ctui.engine.actions import defaults
     from ctui.engine.actions.mesh import label_meshes  # the mesh stack: numpy, scipy, numba
@@ -189,7 +190,7 @@ def write_mesh(job: "ExportJob") -> None:
     save_mesh(job.path, mesh)
 
 
-def write_mric(job: "ExportJob") -> None:
+def write_mric(job: ExportJob) -> None:
     """Contours of every slice over the middle slice of the series (in its display window);
     the sidecar ``<name>.mric.json`` keeps the true voxel size."""
     from ctui.engine.core.borders import borders_for_mric  # numpy, OpenCV
@@ -206,7 +207,7 @@ def write_mric(job: "ExportJob") -> None:
           spacing=g.spacing, origin=g.origin, direction=g.direction)
 
 
-def write_csv(job: "ExportJob") -> list[dict]:
+def write_csv(job: ExportJob) -> list[dict]:
     """One row of measurements per object (:data:`CSV_KEYS`); returns the rows."""
     import csv
     import io

@@ -12,7 +12,12 @@ from typing import Any, Sequence
 from ctui.engine.core.atomic import check_output
 from ctui.engine.core.volume import Volume
 from ctui.engine.io import project as projectio
-from ctui.engine.io.project import Project
+from ctui.engine.io.project import (Project, autosave, find_autosave, load_project, remove_autosave,
+                                    source_load_options)
+
+# the project file's own functions, re-exported for the TUI's open and autosave path
+__all__ = ["Project", "autosave", "find_autosave", "load_project", "new_project", "propagation_record",
+           "remove_autosave", "save_project", "source_load_options"]
 
 
 def propagation_record(settings: Sequence[dict] = (), **state: Any) -> dict:
