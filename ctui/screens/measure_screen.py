@@ -15,7 +15,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Label, Static
+from textual.widgets import DataTable, Footer, Static
 
 from ctui.engine.actions.measure import measure_object, save_sections
 from ctui.engine.core.colors import object_color
@@ -35,13 +35,39 @@ def is_tubular(stats: dict) -> bool:
     return len(ax) >= 2 and ax[1] > 0 and ax[0] / ax[1] >= 3.0
 
 
+def no_sections_reason(res, stats: dict | None = None) -> str:
+    """Why an object got no cross-sections along its automatic centreline (``res`` a
+    :class:`~ctui.engine.actions.measure.MeasureResult`), and what to do instead."""
+    length = float(res.path_length_mm or 0.0)
+    hint = "give a path through it: ctui measure FILE --object N --path 'x,y,z;x,y,z' (mm)"
+    axes = sorted((float(a) for a in (res.principal_axes_mm or (stats or {}).get("principal_axes_mm") or [])),
+                  reverse=True)
+    shape = ""
+    if len(axes) >= 2 and axes[1] > 0:
+        ratio = axes[0] / axes[1]
+        if ratio < 3.0:
+            shape = f"it has no elongated axis (longest/second axis {axes[0]:.0f}/{axes[1]:.0f} mm = {ratio:.1f} < 3)"
+    flags = (res.section_flags or {}).get("counts") or {}
+    if length <= 0:
+        why = "no centreline could be traced" + (f": {shape}" if shape else " through the object")
+    elif flags:
+        left = ", ".join(f"{n} {k}" for k, n in sorted(flags.items()))
+        why = (f"every section along its {length:.0f} mm centreline is an end cap, a branch or outside ({left}): "
+               f"the object is too short for its width" + (f"; {shape}" if shape else ""))
+    else:
+        why = f"its {length:.0f} mm centreline is too short for a section every {res.step_mm:g} mm"
+    return f"No cross-sections: {why}. Sections suit tubes (vessels, ureters, bowel); {hint}"
+
+
 class MeasureScreen(GuardMixin, Screen):
     DEFAULT_CSS = """
+    MeasureScreen #ms-head { height: auto; }
     MeasureScreen #ms-table { height: auto; max-height: 14; }
     MeasureScreen #ms-body { height: 1fr; }
     MeasureScreen #ms-plot { width: 1fr; }
     MeasureScreen #ms-info { width: 42; padding: 0 1; background: $panel; }
-    MeasureScreen #ms-status { height: 1; background: $boost; padding: 0 1; }
+    MeasureScreen.narrow #ms-info { width: 30; }
+    MeasureScreen #ms-status { height: auto; max-height: 3; background: $boost; padding: 0 1; }
     """
     BINDINGS = [
         Binding("c", "sections", "Sections of selected"),
@@ -58,10 +84,13 @@ class MeasureScreen(GuardMixin, Screen):
         self.sections_obj: int | None = None
         self.grey = False  # sections on the partial-volume fraction from the grey levels
         self.result = None  # MeasureResult of the sections shown
+        self.sections_pending: int | None = None  # object whose sections are being computed
 
     def compose(self) -> ComposeResult:
         with Vertical():
-            yield Label("[b]Measurements[/b] (mesh volume by the Gauss theorem on a smoothed surface)")
+            yield Static("[b]Measurements[/b]: vol = voxels x voxel size; PV = partial-volume estimate from the grey "
+                         "levels (PV-vox: how far the drawn edge is from it); the surface keeps the voxel volume",
+                         id="ms-head")
             yield DataTable(id="ms-table", cursor_type="row")
             with Horizontal(id="ms-body"):
                 yield ImageView(id="ms-plot")
@@ -71,7 +100,8 @@ class MeasureScreen(GuardMixin, Screen):
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)
-        t.add_columns("obj", "name", "voxels", "vol vox ml", "vol mesh ml", "vol PV ml", "diff %", "area mm²", "closed", "axes mm", "slices")
+        t.add_columns("obj", "name", "voxels", "vol ml", "PV ml", "PV-vox %", "area mm²", "closed", "axes mm", "slices")
+        self.set_class(self.app.size.width < 100, "narrow")
         t.focus()
         self.measure()
 
@@ -84,6 +114,8 @@ class MeasureScreen(GuardMixin, Screen):
 
     @on(JobFailed)
     def _failed(self, msg: JobFailed) -> None:
+        if msg.what.startswith("Sections"):
+            self.sections_pending = None
         self.app.notify(f"{msg.what}: {msg.reason}", severity="error")
 
     @on(JobDone)
@@ -137,11 +169,15 @@ class MeasureScreen(GuardMixin, Screen):
             val = st.get(key)
             return "-" if val is None or (isinstance(val, float) and math.isnan(val)) else fmt.format(val)
 
+        vox, pv = st.get("volume_voxels_ml"), st.get("volume_pv_ml")
+        # the voxel count against the grey levels' estimate: a comparison that can differ
+        # (the mesh volume is kept equal to the voxel volume by construction)
+        pv_diff = f"{100.0 * (pv - vox) / vox:+.1f}" if vox and pv is not None and math.isfinite(pv) else "-"
         c = object_color(oid)
         self.query_one(DataTable).add_row(
-            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"), f("volume_mesh_ml"), f("volume_pv_ml"),
-            f("volume_difference_percent", "{:+.2f}"), f("area_mm2", "{:.0f}"), str(st.get("mesh_closed", "-")), axes,
-            f"{rng[0]}..{rng[1]}" if rng else "-", key=str(oid))
+            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"),
+            f("volume_pv_ml"), pv_diff, f("area_mm2", "{:.0f}"), {True: "yes", False: "no"}.get(st.get("mesh_closed"), "-"),
+            axes, f"{rng[0]}..{rng[1]}" if rng else "-", key=str(oid))
         warn = list(st.get("warnings") or [])
         if warn:
             self.app.notify(f"Object {oid}: {'; '.join(warn)}", severity="warning", timeout=6)
@@ -169,6 +205,7 @@ class MeasureScreen(GuardMixin, Screen):
 
     def _sections_of(self, oid: int) -> None:
         """Centreline and sections of object ``oid`` (in the worker), as ``ctui measure --path auto``."""
+        self.sections_pending = oid
         self.post_message(Status(f"Centreline and sections of object {oid} ..."))
         try:
             res = measure_object(opened_of(self.s), object=oid, path="auto", partial_volume=self.grey)
@@ -183,7 +220,14 @@ class MeasureScreen(GuardMixin, Screen):
         rows = [r for r in res.rows if r.get("status", "ok") == "ok"]
         left_out = len(res.rows) - len(rows)
         self.sections, self.sections_obj, self.result = rows, oid, res
+        self.sections_pending = None
         iv = self.query_one("#ms-plot", ImageView)
+        if not rows:
+            iv.set_image(None, token=("sections", oid, 0))
+            why = no_sections_reason(res, self.stats.get(oid))
+            self.query_one("#ms-info", Static).update(f"[b]Sections of object {oid}[/b]\n\n{why}")
+            self._status(why)
+            return
         sm = [r["s_mm"] for r in rows]
         area = [r["area_mm2"] for r in rows]
         img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": len(sm) <= 60}])
@@ -213,7 +257,14 @@ class MeasureScreen(GuardMixin, Screen):
         from ctui.screens.dialogs import PromptScreen
 
         if not self.sections:
-            self.app.notify("No sections computed yet (c)", timeout=3)
+            if self.sections_pending is not None:
+                msg = f"Sections of object {self.sections_pending} are still being computed: s once they show"
+            elif self.result is not None:
+                msg = f"Nothing to save for object {self.sections_obj}: " + no_sections_reason(self.result).split(": ", 1)[1]
+            else:
+                msg = "No sections yet: select an object's row and press c"
+            self.app.notify(msg, timeout=6)
+            self._status(msg)
             return
 
         def done(path: str | None) -> None:

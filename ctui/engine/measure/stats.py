@@ -75,8 +75,9 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
     dict with ``volume_mm3`` (sum over components of their signed volumes, made
     positive when the whole mesh is oriented inwards), ``volume_ml``, ``area_mm2``,
     ``closed`` (all components closed), ``components`` (list of ``{volume_mm3,
-    area_mm2, faces, closed, boundary_edges}``) and ``warnings`` (not closed,
-    inward-oriented components).
+    area_mm2, faces, closed, boundary_edges}``), ``n_cavities`` (inward-facing
+    components inside another one: holes in the object, not faults) and ``warnings``
+    (not closed, inward-oriented components outside the others: flipped faces).
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     f = np.asarray(mesh.faces, dtype=np.int64)
@@ -85,10 +86,13 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
     comps = []
     warnings = []
     total = 0.0
+    boxes = []
     for k in range(n):
         fk = f[flab == k]
         vol = signed_volume_mm3(v, fk)
         b, nm = edge_counts(fk)
+        pk = v[np.unique(fk)]
+        boxes.append((pk.min(axis=0), pk.max(axis=0)))
         comps.append({
             "volume_mm3": vol,
             "area_mm2": float(areas[flab == k].sum()),
@@ -108,9 +112,14 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
         warnings.append(
             f"mesh not closed: {len(open_)} of {n} component(s) have {nb} boundary edge(s); their Gauss volume is approximate"
         )
+    # a component enclosing negative volume inside another one is a cavity (a hole in
+    # the object, its surface rightly facing inwards): counted, not a fault; one that
+    # lies outside every positive component is turned inside out (flipped faces)
+    pos = [boxes[i] for i, c in enumerate(comps) if c["volume_mm3"] > 0]
     neg = [i for i, c in enumerate(comps) if c["volume_mm3"] < 0]
-    if neg and n > 1:
-        warnings.append(f"{len(neg)} component(s) enclose negative volume (cavities or flipped faces)")
+    flipped = [i for i in neg if not any(np.all(lo <= boxes[i][0]) and np.all(boxes[i][1] <= hi) for lo, hi in pos)]
+    if flipped and n > 1:
+        warnings.append(f"{len(flipped)} component(s) outside the others enclose negative volume (flipped faces)")
     comps.sort(key=lambda c: -abs(c["volume_mm3"]))
     return {
         "volume_mm3": float(total),
@@ -118,6 +127,7 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
         "area_mm2": float(areas.sum()),
         "closed": not open_,
         "n_components": n,
+        "n_cavities": len(neg) - len(flipped),
         "components": comps,
         "warnings": warnings,
     }
