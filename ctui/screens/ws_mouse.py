@@ -124,16 +124,22 @@ class MouseMixin:
         pv = planes.plane_view(self.s.volume, plane)
         return plane, planes.voxel_of(pv, pos[0], pos[1], self.s.zyx, self.s.shape)
 
-    @staticmethod
-    def _image_view(event) -> ImageView | None:
-        w = getattr(event, "widget", None)
+    def _under(self, event):
+        """The widget under the mouse (a terminal's events reach the screen without one)."""
+        try:
+            return self.get_widget_at(int(event.screen_x), int(event.screen_y))[0]
+        except Exception:  # off the screen
+            return getattr(event, "widget", None)
+
+    def _image_view(self, event) -> ImageView | None:
+        w = self._under(event)
         if isinstance(w, ImageView) and w.id not in (None, "o-3d"):
             return w
         return None
 
     # ------------------------------------------------------------------ mouse events
     def on_mouse_down(self, event) -> None:
-        w = getattr(event, "widget", None)
+        w = self._under(event)
         if isinstance(w, ReviewStrip):
             z = w.slice_at(int(event.screen_x - w.content_region.x))
             if z is not None:
@@ -236,7 +242,7 @@ class MouseMixin:
         if self._image_view(event) is not None:
             event.prevent_default()  # the press already moved the cursor (no second handler)
             return
-        w = getattr(event, "widget", None)
+        w = self._under(event)
         if w is not None and w.id == "panel":
             self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y))
 
@@ -262,7 +268,7 @@ class MouseMixin:
         self._wheel(event, -1)
 
     def _wheel(self, event, d: int) -> None:
-        w = getattr(event, "widget", None)
+        w = self._under(event)
         if isinstance(w, ReviewStrip):
             self.action_slice(d)
             return
