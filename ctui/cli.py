@@ -30,8 +30,18 @@ def _command_modules() -> tuple:
     return tuple(mods[name] for name in COMMANDS)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as ONE line ``ctui CMD: <fault> (see ctui CMD --help)``, exit 2
+    (the usage block is in --help); subcommand parsers are of this class too."""
+
+    def error(self, message: str):  # type: ignore[override]
+        from ctui.engine.core.safetext import printable
+
+        self.exit(2, f"{self.prog}: {printable(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="ctui",
         description="Turn CT and MRI slice series into measured 3D models, from the terminal.",
         epilog="With no command, opens the TUI on the bundled sample series; `ctui PATH` opens PATH.",

@@ -58,6 +58,7 @@ import numpy as np
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import Plan, check_memory, make_plan, rel, run_parallel, scrub_obj, to_grey
+from ctui.engine.io.series._common import _safe
 from ctui.engine.io.series.dicom_geometry import GridPlan, _dominant, _geometry, apply_grid, plan_grid
 from ctui.engine.io.series.dicom_headers import (
     MAX_COMPRESSION,
@@ -336,8 +337,10 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
                  what=f"{len(picks)} sample slices of {ny}x{nx}")
     sample = np.empty((len(picks), ny, nx), prep.dtype)
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
-    ok = [k for k, zi in enumerate(picks)
-          if _decode_frame(prep.frames[zi], sample[k], plan.y, plan.x, full_plane, False, [], k) is None]
+    # the same error mapping as load_series (run_parallel's _safe): undecodable pixels skip the sample
+    why = [_safe(lambda k_, zi_: _decode_frame(prep.frames[zi_], sample[k_], plan.y, plan.x, full_plane, False, [], k_),
+                 k, zi) for k, zi in enumerate(picks)]
+    ok = [k for k, r in enumerate(why) if r is None]
     sampled = [picks[k] for k in ok]
     sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)  # for the window only; no value range
     grid = prep.grid
@@ -346,6 +349,9 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     vol = _volume(placeholder, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series,
                   sample=sample)
     vol.meta["headers_only"] = True
+    if len(ok) < len(picks):
+        first = next(r for r in why if r is not None)
+        vol.warnings.append(f"{len(picks) - len(ok)} of {len(picks)} sampled slices could not be decoded ({first})")
     # the range of the sampled slices only (None when none decoded): ctui info says so
     vol.meta["value_range"] = [float(sample.min()), float(sample.max())] if ok else None
     vol.meta["sampled_slices"] = [zsel.index(zi) for zi in sampled]
