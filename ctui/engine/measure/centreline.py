@@ -85,10 +85,49 @@ def _component_and_ends(sub: np.ndarray, sp: np.ndarray, endpoints, endpoints_vo
     return lab == lab[ends[0]], ends
 
 
-def _voxel_route(sub: np.ndarray, dist: np.ndarray, ends, sp: np.ndarray, power: float, eps: float) -> np.ndarray:
-    """Minimal path (k, 3) crop indices between the ends (the extremities when None)."""
+def _open_ends(sub: np.ndarray, dist: np.ndarray, lo: np.ndarray, full_shape, sp: np.ndarray) -> list[tuple]:
+    """Crop indices of the object's open ends: where it is cut by the volume's boundary.
+
+    Each patch of object on a face of the volume (8-connected in the face) at least as
+    deep as 1.5 voxels and 0.3 times the object's deepest point is a cut through the
+    tube; its voxel nearest the patch centroid is the end. The two largest, by area."""
+    from scipy import ndimage as ndi
+
+    hi = lo + np.asarray(sub.shape)
+    floor = max(1.5 * float(sp.max()), 0.3 * float(dist.max()))  # a sheet of mask one slice thick is no cut
+    found = []
+    for ax in range(3):
+        for at_start in (True, False):
+            if (lo[ax] != 0) if at_start else (hi[ax] != full_shape[ax]):
+                continue
+            k = 0 if at_start else sub.shape[ax] - 1
+            face = np.take(sub, k, axis=ax)
+            if not face.any():
+                continue
+            depth = np.take(dist, k, axis=ax)
+            lab, n = ndi.label(face, structure=np.ones((3, 3)))
+            for j in range(1, n + 1):
+                pts = np.argwhere(lab == j)
+                if float(depth[lab == j].max()) < floor:
+                    continue
+                c = pts[int(np.argmin(((pts - pts.mean(axis=0)) ** 2).sum(axis=1)))]
+                found.append((len(pts) * float(np.prod(np.delete(sp, ax))), tuple(int(v) for v in np.insert(c, ax, k))))
+    found.sort(key=lambda f: -f[0])
+    return [f[1] for f in found[:2]]
+
+
+def _voxel_route(sub: np.ndarray, dist: np.ndarray, ends, sp: np.ndarray, power: float, eps: float,
+                 open_ends: list | None = None) -> np.ndarray:
+    """Minimal path (k, 3) crop indices between the ends (the extremities when None; an
+    open end, where the object is cut by the volume's boundary, is one of them)."""
     from skimage.graph import MCP_Geometric
 
+    if ends is None and open_ends:
+        unit = np.where(sub, 1.0, np.inf)
+        core = dist > float(sp.max())
+        if core.sum() < max(8, 0.05 * sub.sum()):
+            core = sub
+        ends = list(open_ends) if len(open_ends) == 2 else [open_ends[0], _farthest(unit, open_ends[0], sp, core)]
     if ends is None:
         # the extremities among the core voxels (deeper than the largest voxel side), so
         # the route does not end in a sheet of mask one slice thick stuck to the object
@@ -173,7 +212,9 @@ def centreline(
     sl, lo = _crop(m, 1)
     sub, ends = _component_and_ends(m[sl], sp, endpoints, endpoints_voxel, lo, origin, direction)
     dist = ndi.distance_transform_edt(sub, sampling=sp)
-    route = _voxel_route(sub, dist, ends, sp, power, eps)
+    opened = _open_ends(sub, dist, lo, m.shape, sp) if endpoints is None else []
+    route = _voxel_route(sub, dist, ends, sp, power, eps, opened)
+    open_at = (len(opened) >= 1, len(opened) == 2)  # the path starts (and ends) at a cut by the boundary
     pts = index_to_mm(route + lo, spacing=sp, origin=origin, direction=direction)
     if smooth_mm is None:
         # the voxel route wanders inside the flat top of the distance map: smooth
@@ -185,13 +226,14 @@ def centreline(
     inside = _Inside(sub, lo, None, spacing=sp, origin=origin, direction=direction)
     path = _inside_part(path, inside(path))
     if ends_free:  # before recentring, so bent ends do not tilt the end sections
-        path = _end_at_caps(path, dist, inside, step_mm)
+        path = _end_at_caps(path, dist, inside, step_mm, open_at=open_at)
     if (recentre and path_length(path) > 4 * step_mm) or ends_free:
         inside.field = object_field(m, spacing=sp, origin=origin, direction=direction)
     if recentre and path_length(path) > 4 * step_mm:
-        path = recentre_path(path, field=inside.field, step_mm=step_mm, iterations=recentre)
+        path = recentre_path(path, field=inside.field, step_mm=step_mm, iterations=recentre,
+                             bounds=m.shape if any(open_at) else None)
     if ends_free:
-        path = _end_at_caps(path, dist, inside, step_mm)
+        path = _end_at_caps(path, dist, inside, step_mm, open_at=open_at)
     return path
 
 
@@ -273,11 +315,13 @@ def _tube_part(s: np.ndarray, r: np.ndarray) -> tuple[int, int]:
     return int(np.argmax(good)), n - 1 - int(np.argmax(good[::-1]))
 
 
-def _end_at_caps(path: np.ndarray, dist: np.ndarray, inside: _Inside, step_mm: float) -> np.ndarray:
+def _end_at_caps(path: np.ndarray, dist: np.ndarray, inside: _Inside, step_mm: float,
+                 open_at: tuple[bool, bool] = (False, False)) -> np.ndarray:
     """Replace each end of a centred path, where it bends towards the extremity voxel on
     the object's border (:func:`_tube_part`), by the straight continuation of the path's
     axis part until it leaves the object through the end cap; the path ends there,
-    inside the object."""
+    inside the object. An open end (``open_at``: the start / the end is where the volume's
+    boundary cuts the object) keeps its centred points and runs on to the boundary."""
     from scipy import ndimage as ndi
 
     p = _inside_part(np.asarray(path, dtype=np.float64), inside(path))
@@ -285,20 +329,35 @@ def _end_at_caps(path: np.ndarray, dist: np.ndarray, inside: _Inside, step_mm: f
         return p
     r = ndi.map_coordinates(dist, inside.index(p).T, order=1, mode="constant", cval=0.0)
     i0, i1 = _tube_part(arc_length(p), r)
+    i0, i1 = (0 if open_at[0] else i0), (len(p) - 1 if open_at[1] else i1)
     if i1 - i0 < 4:
         return p
     fine = 0.25 * float(min(inside.geo["spacing"]))
+    voxels = _Inside(inside.sub, inside.lo, None, **inside.geo)  # the boundary, not the smoothed border
     parts = []
     s = arc_length(p)
-    for i, j in ((i0, int(np.searchsorted(s, s[i0] + r[i0]))), (i1, int(np.searchsorted(s, s[i1] - r[i1])))):
+    span = np.maximum(r, 2 * step_mm)
+    for i, j, is_open in ((i0, int(np.searchsorted(s, s[i0] + span[i0])), open_at[0]),
+                          (i1, int(np.searchsorted(s, s[i1] - span[i1])), open_at[1])):
         t = p[i] - p[min(max(j, 0), len(p) - 1)]  # the axis' direction over one radius inwards
         t /= np.linalg.norm(t)
-        parts.append(_extend(p[i], t, inside, 4 * r[i] + 8 * fine, fine))
+        parts.append(_extend(p[i], t, voxels if is_open else inside, (2 * float(max(inside.geo["spacing"])) if is_open
+                                                                      else 4 * r[i]) + 8 * fine, fine))
     return resample_path(np.concatenate([parts[0][::-1], p[i0 : i1 + 1], parts[1]]), step_mm)
 
 
+def _clipped(row: dict, field: ObjectField, bounds) -> bool:
+    """True when the section's contour runs along the volume's boundary (``bounds``: the
+    grid's (z, y, x) shape): the boundary cuts the section, its centroid is off the axis."""
+    c = row.get("contour_mm")
+    if bounds is None or c is None or not len(c):
+        return False
+    k = mm_to_index(np.asarray(c), spacing=field.spacing, origin=field.origin, direction=field.direction)
+    return bool(np.any(k < 0.75) or np.any(k > np.asarray(bounds) - 1.75))
+
+
 def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = DEFAULT_SECTION_STEP_MM,
-                  iterations: int = 2, smooth_mm: float | None = None) -> np.ndarray:
+                  iterations: int = 2, smooth_mm: float | None = None, bounds=None) -> np.ndarray:
     """Move each path point to the centroid of its cross-section, then re-fit a spline.
 
     Sections normal to a path that is off-centre or tilted are themselves off; a
@@ -307,8 +366,9 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = D
     ("cap", "branch", "outside", "open": :mod:`ctui.engine.measure.flags`) do not pull
     the path towards the cap or the branch: their points move as their neighbours do.
 
-    Sections are taken every max(step_mm, 1 mm). Returns the new path (n, 3) mm at a
-    uniform ``step_mm`` arc-length step.
+    Sections are taken every max(step_mm, 1 mm). ``bounds``: the grid's (z, y, x) shape
+    when the object is cut by the volume's boundary; sections the boundary cuts do not
+    pull either. Returns the new path (n, 3) mm at a uniform ``step_mm`` arc-length step.
     """
     p = np.asarray(path_mm, dtype=np.float64)
     if smooth_mm is None:
@@ -321,7 +381,7 @@ def recentre_path(path_mm: np.ndarray, *, field: ObjectField, step_mm: float = D
         move = np.zeros_like(pts)
         good = np.zeros(len(rows), bool)
         for i, r in enumerate(rows):
-            if r.get("status") != OK:
+            if r.get("status") != OK or _clipped(r, field, bounds):
                 continue
             mv = r["centroid_mm"] - r["point_mm"]
             lim = 0.25 * r["eq_diameter_mm"]  # half the equivalent radius per iteration
