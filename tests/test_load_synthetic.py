@@ -153,7 +153,7 @@ def test_big_endian(tmp_path):
     np.testing.assert_array_equal(vol.data, vol0.data)
 
 
-def test_monochrome1_inverted(tmp_path):
+def test_monochrome1_values_kept(tmp_path):
     vol0 = _small_volume(nz=2)
     vol0.data[:] = np.abs(vol0.data) % 4000
     write_series(tmp_path / "m", vol0)
@@ -165,7 +165,8 @@ def test_monochrome1_inverted(tmp_path):
         ds.save_as(p)
     vol = load(tmp_path / "m")
     assert any("MONOCHROME1" in w for w in vol.warnings)
-    np.testing.assert_array_equal(vol.data, vol0.data.astype(np.int32) + 1024)
+    # display polarity only (issue 26): the stored values are the values
+    np.testing.assert_array_equal(vol.data, 4095 - (vol0.data.astype(np.int32) + 1024))  # stored, intercept 0
 
 
 def test_compressed_rle_and_missing_codec(tmp_path, monkeypatch, ref):

@@ -222,9 +222,8 @@ def _decode_frame(f: Frame, dst: np.ndarray, ysl: slice, xsl: slice, full_plane:
         return f"decoded size {raw.shape[:2]} differs from the header's {f.rows}x{f.cols}"
     if raw.ndim == 3:
         raw = to_grey(raw)
-    if f.photometric == "MONOCHROME1" and not raw.dtype.kind == "f":
-        # inverted grey: white is the minimum; flip so that higher = brighter
-        raw = (-raw.astype(np.int32) - 1) if f.signed else (2**f.bits_stored - 1) - raw.astype(np.int32)
+    # MONOCHROME1 is display polarity only (white = the minimum): the stored values, rescaled,
+    # are the HU / modality values, so they are kept as they are (a warning says so)
     sub = raw[ysl, xsl]
     if dst.dtype.kind == "f":
         v = sub.astype(np.float32)
@@ -392,7 +391,8 @@ def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *,
 
         window = auto_window(out if sample is None else sample, modality=f0.modality)
     if f0.photometric == "MONOCHROME1":
-        warnings.append("MONOCHROME1 (inverted grey) image: values inverted so that higher is brighter")
+        warnings.append("MONOCHROME1 image (displayed inverted by its modality: white = low values): the values "
+                        "are kept as stored and rescaled, shown with ctui's usual polarity")
     if not plan.is_full(prep.full_shape):
         meta["crop_downsample"] = {"start_zyx": list(plan.starts(prep.full_shape)), "step_zyx": list(plan.steps()),
                                    "full_shape_zyx": list(prep.full_shape)}
