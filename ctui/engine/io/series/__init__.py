@@ -224,8 +224,35 @@ def load(
     if kind != "dicom":
         return _with_series(_load_files(kind, files, single=single, base=base, path_label=path_label, shape=shape,
                                         dtype=dtype, spacing=spacing, offset=offset, skipped=skipped, common=common))
-    return _load_dicom(files, base=base, path_label=path_label, skipped=skipped, series=series, spacing=spacing,
-                       resample=resample, headers_only=headers_only, progress=progress, common=common)
+    return _finite(_load_dicom(files, base=base, path_label=path_label, skipped=skipped, series=series,
+                               spacing=spacing, resample=resample, headers_only=headers_only, progress=progress,
+                               common=common))
+
+
+def _finite(vol: Volume) -> Volume:
+    """NaN and infinite voxels (float pixel data, raw float16/32, NIfTI) set to the lowest
+    finite value, with a warning: a NaN reaches meshes as NaN vertices, volumes as null.
+    Slice by slice (one slice of temporaries)."""
+    d = vol.data
+    if d.dtype.kind != "f" or d.size == 0 or vol.meta.get("headers_only") or d.ndim != 3:
+        return vol
+    bad, lo = 0, np.inf
+    for z in range(d.shape[0]):
+        fin = np.isfinite(d[z])
+        n = int(fin.size - np.count_nonzero(fin))
+        bad += n
+        if fin.any():
+            lo = min(lo, float(d[z][fin].min()) if n else float(d[z].min()))
+    if not bad:
+        return vol
+    lo = lo if np.isfinite(lo) else 0.0
+    if not d.flags.writeable:
+        vol.data = d = np.array(d)
+    for z in range(d.shape[0]):
+        sl = d[z]
+        sl[~np.isfinite(sl)] = lo
+    vol.warnings.append(f"{bad} voxels are NaN or infinite: set to the lowest finite value {lo:g}")
+    return vol
 
 
 def _load_files(kind: str, files: list[Path], *, single: Path | None, base: Path | None, path_label: Any,
@@ -348,8 +375,10 @@ def _recognise_ct(vol: Volume) -> None:
 
 
 def _with_series(vol: Volume) -> Volume:
-    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it), and CT
-    is recognised by its header's text or its values (:func:`_recognise_ct`)."""
+    """Non-DICOM inputs: ``series`` gets their one entry (as ``scan`` gives it), NaN/inf
+    voxels are replaced (:func:`_finite`), and CT is recognised by its header's text or its
+    values (:func:`_recognise_ct`)."""
+    vol = _finite(vol)
     if not vol.meta.get("headers_only"):
         _recognise_ct(vol)
     if not vol.series:
