@@ -27,7 +27,7 @@ from ctui.engine.segment.edit import MODES, SMOOTHING, Roi, in_roi, roi_slices
 from ctui.engine.segment.necks import DEFAULT_NECK_MM
 from ctui.engine.segment.selection import Segmentation, fill_range, neck_fill
 
-__all__ = ["MODES", "SMOOTHING", "EditLimits", "box_of_corners", "cut", "dab", "fill_slice", "island",
+__all__ = ["MODES", "SMOOTHING", "EditLimits", "Segmentation", "box_of_corners", "cut", "dab", "fill_slice", "island",
            "parse_box", "parse_limits", "smooth"]
 
 
