@@ -109,7 +109,7 @@ def test_drift_from_project_and_seeds(capsys, truth, sample, tmp_path):
     (["--seed", "10,10,10", "--range", "a:b"], "expected LO:HI"),
     (["--seed", "10,10,10", "--range", "0:100", "--filter", "blur"], "unknown filter"),
     (["--seed", "10,10,10", "--seed", "20,20,20", "--range", "0:1", "--range", "0:1", "--range", "0:1"], "one per seed"),
-    (["--seed", "10,10,10"], "--range"),
+    (["--seed", "10,10,10", "--range", "auto", "--box", "1,2,3"], "--box"),
     (["--seed", "10,10,40", "--range", "115:445"], "outside the range"),
 ])
 def test_segment_bad_arguments_exit_2(capsys, truth, sample, extra, message):

@@ -40,9 +40,10 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
                    help="fill: threshold fill + propagation with the neck-cutting leak guard (default); "
                         "grow: competitive region growing from --seed and --background inside the range; "
                         "levelset: the fill refined by a threshold level set with a curvature term")
-    p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI",
+    p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI|auto",
                    help="in-range values LO..HI inclusive (HU for CT in the default hu domain); "
-                        "one per --seed, or one for all")
+                        "one per --seed, or one for all; auto (or no --range/--tolerance): from the seed's "
+                        "neighbourhood (median +- 2 robust sd), reported")
     p.add_argument("--tolerance", dest="thresholds", action=_ThresholdAction, const="tolerance", metavar="T",
                    help="in-range values: seed value +- T (in the seed slice's final view)")
     p.add_argument("--filter", action="append", default=[], metavar="SPEC", help=FILTER_HELP)
@@ -56,8 +57,16 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
                    help="slice-by-slice propagation (default) or one 3D flood fill; both cut necks (--neck)")
     p.add_argument("--slices", metavar="A:B", default=None,
                    help="propagate (and grow) only within slices A..B inclusive, numbered from 0")
-    p.add_argument("--neck", type=number("--neck", 0, 1000), default=5.0, metavar="MM",
-                   help="leak guard: follow the object only through necks at least MM wide (default 5; 0 = off)")
+    p.add_argument("--neck", type=_neck, default=None, metavar="auto|MM",
+                   help="leak guard: follow the object only through necks at least MM wide; auto (default) "
+                        "chooses the width from the data (the widest result before the volume jumps) and "
+                        "reports it; 0 = off")
+    p.add_argument("--fill-holes", action=argparse.BooleanOptionalAction, default=True,
+                   help="holes enclosed in each slice of an object (renal sinus, vessels in the liver, noise) "
+                        "are part of it (default; --no-fill-holes keeps only in-range voxels)")
+    p.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1", default=None,
+                   help="two opposite corners (column, row, slice from 0, inclusive): fills, propagation and "
+                        "growing stay inside this box")
     p.add_argument("--leak-factor", type=number("--leak-factor", 1, 1000, above=True), default=2.5,
                    help="second leak guard, slice mode: stop when the area grows more than this factor from one "
                         "slice to the next (default 2.5; used in 3D mode only with --neck 0)")
@@ -72,6 +81,27 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--interpolate", action="store_true",
                    help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
+
+
+def _neck(text: str) -> float | None:
+    """--neck: ``auto`` (None) or a width in mm."""
+    if text.strip().lower() == "auto":
+        return None
+    return number("--neck", 0, 1000)(text)
+
+
+def parse_box(text: str | None):
+    """--box X0,Y0,Z0,X1,Y1,Z1 -> ((z0, z1), (y0, y1), (x0, x1)) inclusive, corners in any order."""
+    if not text:
+        return None
+    try:
+        v = [int(t) for t in text.replace(" ", "").split(",")]
+        if len(v) != 6:
+            raise ValueError
+    except ValueError:
+        raise _err(f"--box {text!r}: expected X0,Y0,Z0,X1,Y1,Z1 (two corners: column, row, slice)") from None
+    x0, y0, z0, x1, y1, z1 = v
+    return ((min(z0, z1), max(z0, z1)), (min(y0, y1), max(y0, y1)), (min(x0, x1), max(x0, x1)))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -181,7 +211,8 @@ def _options(args: argparse.Namespace):
 
     return SegmentOptions(method=getattr(args, "method", "fill"), mode=args.mode, direction=args.direction,
                           connectivity=args.connectivity, neighbourhood=args.neighbourhood, min_area=args.min_area,
-                          leak_factor=args.leak_factor, neck_mm=getattr(args, "neck", 5.0),
+                          leak_factor=args.leak_factor, neck_mm=getattr(args, "neck", None),
+                          fill_holes=getattr(args, "fill_holes", True), box=parse_box(getattr(args, "box", None)),
                           slices=parse_slices(getattr(args, "slices", None)),
                           keep_largest=getattr(args, "keep_largest", False), min_island=getattr(args, "min_island", 0),
                           interpolate=getattr(args, "interpolate", False), curvature=getattr(args, "curvature", 0.5))
@@ -190,7 +221,9 @@ def _options(args: argparse.Namespace):
 def _thresholds(args: argparse.Namespace) -> list:
     out = []
     for kind, value in args.thresholds or []:
-        if kind == "range":
+        if kind == "range" and value.strip().lower() == "auto":
+            out.append(None)
+        elif kind == "range":
             out.append(parse_range(value))
         else:
             try:
@@ -212,14 +245,11 @@ def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=
     seeds = [parse_seed(s) for s in args.seed]
     if not seeds:
         raise _err("give at least one --seed X,Y,Z")
-    if not args.thresholds:
-        raise _err("give --range LO:HI or --tolerance T")
     background = [parse_seed(s) for s in getattr(args, "background", [])]
     pipeline = pipeline or build_pipeline(args)
     res = segment(volume, seeds, _thresholds(args), background=background, options=_options(args), pipeline=pipeline,
                   progress=progress)
-    results = [{"id": o.id, "seed": list(o.seed), "range": list(o.range), "stops": o.stops, "warnings": o.warnings,
-                "neck_cut_slices": o.necks} for o in res.objects]
+    results = [o.to_dict() | {"message": o.message()} for o in res.objects]
     return res.segmentation, res.pipeline, res.settings, results
 
 
@@ -233,9 +263,8 @@ def objects_report(seg, volume, results) -> list[dict]:
         oid = r["id"]
         rng = seg.slice_range(oid)
         n = int(counts[oid])
-        out.append({"id": oid, "voxels": n, "volume_ml": round(n * vox_ml, 4),
-                    "slices": None if rng is None else [int(rng[0]), int(rng[1])], "warnings": r["warnings"],
-                    "seed": r["seed"], "range": r["range"], "stops": r.get("stops", {})})
+        out.append({**r, "id": oid, "voxels": n, "volume_ml": round(n * vox_ml, 4),
+                    "slices": None if rng is None else [int(rng[0]), int(rng[1])]})
     return out
 
 
@@ -301,6 +330,10 @@ def run(args: argparse.Namespace) -> int:
         for o in objs:
             sl = "-" if o["slices"] is None else f"{o['slices'][0]}..{o['slices'][1]}"
             print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl} (numbered from 0)")
+            if o.get("message"):
+                print(f"  {o['message']}")
+            if o.get("neck", {}).get("reason"):
+                print(f"  leak guard: {o['neck']['reason']}")
             for w in o["warnings"]:
                 print(f"  warning: {w}")
         for w in written:

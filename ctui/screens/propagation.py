@@ -1,7 +1,10 @@
-"""Propagation from the workspace: a thread worker driving
-``ctui.engine.segment.propagate.propagate_object`` with a progress bar and cancel (Escape),
-then a pending proposal shown (hatched, outlined in yellow) on every plane until accepted
-(``a``) or rejected (``x``). The worker talks to the workspace through messages."""
+"""Segmentation from the workspace: a thread worker calling ``ctui.engine.actions.segment.segment``
+(the function ``ctui segment`` calls, with the panel's options: :mod:`ctui.screens.segpanel`)
+from the cursor (``S``) or from the object's seed (``p``, ``<``, ``>``), with a progress bar and
+cancel (Escape), then a pending proposal shown (hatched, outlined in yellow) on every plane
+until accepted (``a``: the object becomes the proposal, one undo step) or rejected (``x``).
+An object drawn by hand (no seed) is propagated from its drawn slice instead. The worker
+talks to the workspace through messages."""
 
 from __future__ import annotations
 
@@ -10,9 +13,13 @@ import time
 
 from textual.worker import get_current_worker
 
+from ctui.engine.actions.segment import segment as segment_action
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.progress import Cancelled
 from ctui.engine.segment import propagate
+from ctui.engine.segment.selection import Segmentation
 from ctui.screens.messages import JobDone, JobFailed, JobProgress
+from ctui.screens.segpanel import describe, options_for
 
 
 class PropagationRun:
@@ -58,7 +65,86 @@ def clip_to_slices(proposal, limits: tuple[int, int] | None) -> None:
         proposal.areas.pop(z, None)
 
 
+def object_seed(session) -> tuple[int, int, int] | None:
+    """The current object's last seed (x, y, z) (set by Enter, S or ctui segment), or None."""
+    info = session.seg.objects.get(session.current) if session.seg is not None else None
+    seeds = list(getattr(info, "seeds", []) or [])
+    return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]
+
+
+def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | None = None) -> None:
+    """Segment the current object from ``seed`` (default: the cursor) through ``actions.segment``."""
+    app = ws.app
+    s = ws.s
+    if ws._prop is not None:
+        app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
+        return
+    if getattr(ws, "proposal", None) is not None:
+        app.notify("Accept (a) or reject (x) the pending proposal first", severity="warning")
+        return
+    seed = seed or (int(s.x), int(s.y), int(s.z))
+    try:
+        opts, th = options_for(s, direction)
+    except (CtuiError, ValueError) as exc:
+        app.notify(str(exc), severity="error")
+        return
+    run = PropagationRun(ws, direction)
+    ws._prop = run
+    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})", 0, 100)
+    ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
+                  name="segment")
+
+
+def _segment_work(run: PropagationRun, seed, opts, th) -> None:
+    ws = run.ws
+    s = ws.s
+    worker = get_current_worker()
+    last = [0.0]
+
+    def progress(done: float, total: float, message: str = "") -> bool:
+        if worker.is_cancelled or run.event.is_set() or not ws.is_attached:
+            return False
+        now = time.perf_counter()
+        if now - last[0] > 0.05:
+            last[0] = now
+            ws.post_message(JobProgress(f"Segmenting: {message}", int(100 * done / max(total, 1e-9)), 100))
+        return True
+
+    oid = s.current
+    try:
+        with s._lock:
+            labels = s.seg.labels.copy()
+            labels[labels == oid] = 0
+            scratch = Segmentation(s.seg.shape, labels=labels)
+            res = segment_action(s.volume, [seed], th, background=list(getattr(s, "background_seeds", []) or []),
+                                 options=opts, pipeline=s.pipeline, segmentation=scratch, progress=progress,
+                                 object_ids=[oid])
+        obj = res.objects[0]
+        mask = scratch.labels == oid
+        del scratch, labels
+        proposal = propagate.Proposal.of_mask(oid, seed[2], mask, stops=dict(obj.stops), necks=list(obj.necks),
+                                              settings=dict(res.settings[0]))
+        proposal.cuts = list(obj.cuts)
+        proposal.report = obj  # type: ignore[attr-defined]
+        proposal.seed = tuple(seed)  # type: ignore[attr-defined]
+        proposal.object_settings = dict(res.segmentation.objects[oid].settings)  # type: ignore[attr-defined]
+    except Cancelled:
+        ws.post_message(JobFailed("Segmentation", "cancelled"))
+        return
+    except Exception as exc:
+        ws.post_message(JobFailed("Segmentation", str(exc)))
+        return
+    run.proposal = proposal
+    ws.post_message(JobDone("propagation", run))
+
+
 def start_propagation(ws, direction: str) -> None:
+    """``p``/``<``/``>``: segment the current object from its seed (actions.segment); an object drawn by
+    hand (no seed) is propagated from its drawn slice."""
+    seed = object_seed(ws.s)
+    if seed is not None:
+        start_segment(ws, direction, seed=seed)
+        return
     app = ws.app
     s = ws.s
     if ws._prop is not None:
@@ -117,6 +203,14 @@ def finished(ws, run: PropagationRun) -> None:
     secs = time.perf_counter() - run.started
     extra = "; ".join(p.warnings())
     where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
+    rep = getattr(p, "report", None)
+    if rep is not None:
+        extra = "; ".join(rep.warnings)
+        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s. a accepts, x rejects")
+        if rep.warnings:
+            ws.app.notify(extra, severity="warning", timeout=10)
+        ws.refresh_view()
+        return
     ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
     if p.warnings():
         ws.app.notify(extra, severity="warning", timeout=8)
@@ -129,6 +223,11 @@ def accept(ws) -> None:
         ws.app.notify("No pending propagation", timeout=2)
         return
     n = p.accept(ws.s.seg)
+    info = ws.s.seg.objects.get(p.object_id)
+    if info is not None and getattr(p, "seed", None) is not None:
+        if tuple(p.seed) not in [tuple(v) for v in info.seeds]:
+            info.seeds.append(tuple(p.seed))
+        info.settings.update(getattr(p, "object_settings", {}))
     ws.proposal = None
     ws.labels_changed()
     ws.set_status(f"Accepted: {n} voxels added to object {p.object_id} (u undoes)")

@@ -74,6 +74,9 @@ class Session:
     click_fills: bool = False  # a left click on a view fills there (as Enter) instead of only moving the cursor
     # voxel indices (x, y, z) on the file's grid: the other side of a fill / grow (actions.segment)
     background_seeds: list[tuple[int, int, int]] = field(default_factory=list)
+    # the segmentation panel's options (G): method, neck (None = auto), range ("auto" | "given" | (lo, hi)),
+    # fill_holes, keep_largest, min_island, interpolate; see ctui.screens.segpanel.options_for
+    segment_options: dict = field(default_factory=dict)
     # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
     roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
     box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set

@@ -295,7 +295,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
 
     @on(JobFailed)
     def _job_failed(self, msg: JobFailed) -> None:
-        if msg.what == "Propagation":
+        if msg.what in ("Propagation", "Segmentation"):
             self._prop = None
         else:
             self._job = None

@@ -67,6 +67,8 @@ BINDINGS = [
     Binding("U", "undo(True)", "Redo", show=False),
     Binding("less_than_sign", "propagate('backward')", "Propagate back", show=False),
     Binding("greater_than_sign", "propagate('forward')", "Propagate fwd", show=False),
+    Binding("S", "segment_here", "Segment from cursor"),
+    Binding("G", "segment_panel", "Segmentation options"),
     Binding("p", "propagate('both')", "Propagate"),
     Binding("a", "accept", "Accept proposal", show=False),
     Binding("x", "reject", "Reject proposal", show=False),
@@ -253,6 +255,23 @@ class NavMixin:
 
         if self._need_seg():
             start_propagation(self, direction)
+
+    def action_segment_here(self) -> None:
+        """S: the current object from the cursor, with the segmentation panel's options (actions.segment)."""
+        from ctui.screens.propagation import start_segment
+
+        if self._need_seg():
+            start_segment(self, "both")
+
+    def action_segment_panel(self) -> None:
+        from ctui.screens.segpanel import SegmentPanel, describe
+
+        def done(ok: bool | None) -> None:
+            if ok:
+                self.set_status(f"Segmentation: {describe(self.s)}. S segments from the cursor")
+                self.update_panel()
+
+        self.app.push_screen(SegmentPanel(self.s), done)
 
     def action_accept(self) -> None:
         from ctui.screens.propagation import accept

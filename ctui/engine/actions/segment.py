@@ -129,7 +129,7 @@ class ObjectResult:
 
     def message(self) -> str:
         """One line for the TUI's message bar and the CLI: what was made and how the leak guard chose."""
-        rng = f"{self.range[0]:g}..{self.range[1]:g}" + (" (auto)" if self.auto_range is not None else "")
+        rng = f"{self.range[0]:.0f}..{self.range[1]:.0f}" + (" (auto)" if self.auto_range is not None else "")
         sl = "" if self.slices is None else f", slices {self.slices[0]}..{self.slices[1]}"
         neck = self.neck.get("mode", "off")
         guard = (f"neck {self.neck.get('width_mm', 0):g} mm ({neck})" if self.neck.get("width_mm") else f"no neck cut ({neck})")
@@ -258,7 +258,8 @@ def _box_text(box: Box | None) -> str:
 def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Threshold], *,
             background: Sequence[Sequence[int]] = (), options: SegmentOptions | None = None,
             pipeline: Pipeline | None = None, segmentation: Segmentation | None = None,
-            names: Sequence[str] | None = None, progress: Progress | None = None) -> SegmentResult:
+            names: Sequence[str] | None = None, progress: Progress | None = None,
+            object_ids: Sequence[int] | None = None) -> SegmentResult:
     """Segment one object per seed; see the module docstring.
 
     Parameters
@@ -273,6 +274,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     segmentation : add to this Segmentation (the TUI's); default: a new one
     progress : ``progress(done, total, message)``; returning False cancels (raises Cancelled;
         the segmentation is left as it was before the cancelled object)
+    object_ids : the ids to write (the TUI's current object); default the next free ids
 
     Returns :class:`SegmentResult`. Raises CtuiError on bad input, before any change.
     """
@@ -285,7 +287,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     bg = [_check_seed(s, shape, "background seed") for s in background]
     ths = _ranges(thresholds, len(fg))
     seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
-    free = [i for i in range(1, 11) if i not in seg.objects]
+    free = [i for i in range(1, 11) if i not in seg.objects] if object_ids is None else [int(i) for i in object_ids]
     if len(fg) > len(free):
         raise CtuiError(f"at most 10 objects: {len(fg)} seeds but {len(free)} free object ids")
     spacing = tuple(float(v) for v in volume.spacing)
@@ -298,7 +300,8 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     for i, (seed, start) in enumerate(zip(fg, fills)):
         oid = free[i]
         sub = _scaled(progress, i, len(fg))
-        seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
+        if oid not in seg.objects:
+            seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
         res, st = _one(volume, pipe, seg, oid, seed, start, bg, opts, sub)
         res.warnings[:0] = notes
         results.append(res)

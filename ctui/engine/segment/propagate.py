@@ -160,6 +160,7 @@ class Proposal:
     timings: dict[str, float] = field(default_factory=dict)
     accepted: bool = False
     necks: list[int] = field(default_factory=list)  # slices where the neck cut removed something
+    replace: bool = False  # accept() makes the object exactly this (a whole segmentation), not adds to it
     cuts: list[dict[str, Any]] = field(default_factory=list)  # where: {"slice", "y", "x", "voxels"} (the cut faces)
 
     @property
@@ -215,8 +216,37 @@ class Proposal:
         if got is None:
             return 0
         offset, m = got
+        if self.replace:
+            return _replace_object(segmentation, self.object_id, offset, m, bool(self.settings.get("overwrite")))
         return segmentation.paint(m, self.object_id, offset=offset, overwrite=bool(self.settings.get("overwrite")),
                                   label=f"propagate object {self.object_id}")
+
+    @classmethod
+    def of_mask(cls, object_id: int, start_slice: int, mask: np.ndarray, **kw: Any) -> Proposal:
+        """A proposal holding the whole object ``mask`` (bool (nz, ny, nx)); accepting it replaces the object."""
+        prop = cls(object_id=object_id, start_slice=int(start_slice), shape=tuple(mask.shape), replace=True, **kw)
+        for z in np.flatnonzero(mask.any(axis=(1, 2))):
+            bb = _bbox(mask[z])
+            assert bb is not None
+            prop.masks[int(z)] = (bb[0], bb[2], mask[z, bb[0]:bb[1], bb[2]:bb[3]].copy())
+            prop.areas[int(z)] = int(np.count_nonzero(prop.masks[int(z)][2]))
+        return prop
+
+
+def _replace_object(seg: Segmentation, oid: int, offset: tuple[int, int, int], m: np.ndarray, overwrite: bool) -> int:
+    """One undo step: the object's voxels become exactly ``m`` (at ``offset``); returns voxels changed."""
+    old = seg.object_bbox(oid)
+    new = tuple(slice(o, o + n) for o, n in zip(offset, m.shape))
+    box = new if old is None else tuple(slice(min(a.start, b.start), max(a.stop, b.stop)) for a, b in zip(old, new))
+    cur = seg.labels[box]
+    vals = cur.copy()
+    vals[vals == oid] = 0
+    full = np.zeros(vals.shape, bool)
+    full[tuple(slice(n.start - b.start, n.stop - b.start) for n, b in zip(new, box))] = m
+    vals[full & ((vals == 0) | overwrite)] = oid
+    changed = int(np.count_nonzero(vals != cur))
+    seg.apply_region(box, vals, label=f"segment object {oid}")  # type: ignore[arg-type]
+    return changed
 
     def summary(self) -> dict[str, Any]:
         rng = self.slices
