@@ -15,6 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.limits import MIN_SPACING_MM
 
 
 #: largest coordinate or voxel size accepted (mm): 1000 km, far beyond any scanner
@@ -30,8 +31,8 @@ def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, floa
         raise CtuiError(f"{name}: expected three numbers, got {len(vals)}")
     if not all(math.isfinite(v) for v in vals):
         raise CtuiError(f"{name}: not a finite number in {list(vals)}")
-    if positive and min(vals) <= 0:
-        raise CtuiError(f"{name}: every value must be > 0, got {list(vals)}")
+    if positive and min(vals) < MIN_SPACING_MM:  # 1e-300 mm passes "> 0" and divides by zero later
+        raise CtuiError(f"{name}: every value must be at least {MIN_SPACING_MM:g} mm, got {list(vals)}")
     if max(abs(v) for v in vals) > MAX_MM:  # 1e308 mm is finite but overflows every product (fuzz finding)
         raise CtuiError(f"{name}: values beyond {MAX_MM:g} mm in {list(vals)}")
     return vals  # type: ignore[return-value]

@@ -16,6 +16,12 @@ from ctui.engine.core.errors import CtuiError
 
 _UNLIMITED = 1 << 62
 
+#: the smallest and largest voxel size (mm) any input may declare: 1 micrometre (micro-CT)
+#: to 100 m. Beyond, volumes round to 0 mL or products overflow; loaders replace such a
+#: size by 1 mm with a warning, projects and options are refused.
+MIN_SPACING_MM = 1e-3
+MAX_SPACING_MM = 1e5
+
 
 def fmt_bytes(n: float) -> str:
     for unit in ("B", "KB", "MB", "GB", "TB"):

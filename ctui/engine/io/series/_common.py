@@ -14,6 +14,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from ctui.engine.core import limits as _limits
+from ctui.engine.core.limits import MAX_SPACING_MM, MIN_SPACING_MM
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.privacy import scrub_text, scrub_text_obj
 from ctui.engine.core.limits import fmt_bytes
@@ -293,7 +294,7 @@ def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
     warnings: list[str] = []
     with np.errstate(all="ignore"):
         norms = np.sqrt((m * m).sum(axis=0))
-    bad = [a for a in range(3) if not (np.all(np.isfinite(m[:, a])) and 1e-6 < norms[a] < 1e5)]
+    bad = [a for a in range(3) if not (np.all(np.isfinite(m[:, a])) and MIN_SPACING_MM <= norms[a] <= MAX_SPACING_MM)]
     for a in bad:
         m[:, a] = np.eye(3)[:, a]
     if bad and not spacing_given:

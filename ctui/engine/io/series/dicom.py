@@ -187,10 +187,14 @@ def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     else:
         optimistic = False
     warnings = list(geo["warnings"])
+    odd = sorted({f.ignored_scaling for f in sorted_frames if f.ignored_scaling})
+    if odd:
+        warnings.append(f"implausible header values: {odd[0]}" + (f" (and {len(odd) - 1} other kinds)" if len(odd) > 1 else ""))
     dy, dx = f0.pixel_spacing or (None, None)
     if dy is None:
         dy = dx = 1.0
-        warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
+        if not any("PixelSpacing" in w for w in warnings):
+            warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
     zs, ys, xs = plan.steps()
     dz_user = None
     if spacing is not None:

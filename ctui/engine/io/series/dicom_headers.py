@@ -80,6 +80,7 @@ class Frame:
     modality: str = "OT"
     window: tuple[float, float] | None = None
     sop_class: str = ""
+    ignored_scaling: str = ""  # an implausible RescaleSlope/Intercept or PixelSpacing replaced (said in a warning)
 
     @property
     def frame_bytes(self) -> int:
@@ -117,9 +118,24 @@ def _num(v: Any, default: float | None = None) -> float | None:
 
 
 def _slope(v: Any, default: float = 1.0) -> float:
-    """RescaleSlope, or ``default`` when missing or implausible (0, non-finite, > 1e6)."""
+    """RescaleSlope, or ``default`` when missing or implausible (non-finite, |slope| under
+    1e-6, which zeroes every voxel, or over 1e6)."""
     f = _num(v)
-    return f if f is not None and f != 0 and abs(f) <= 1e6 else default
+    return f if f is not None and 1e-6 <= abs(f) <= 1e6 else default
+
+
+def _implausible(ds: Any) -> str:
+    """What of the header's scaling :func:`_slope`, :func:`_intercept` or the PixelSpacing
+    bounds replace ("" when nothing)."""
+    out = []
+    for key, fn, default in (("RescaleSlope", _slope, 1.0), ("RescaleIntercept", _intercept, 0.0)):
+        v = ds.get(key)
+        if v not in (None, "") and fn(v) == default and _num(v) != default:
+            out.append(f"{key} {str(v)[:24]} (ignored: {default:g} used)")
+    ps = _vec(ds.get("PixelSpacing"), 2)
+    if ps is not None and not (np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5)):
+        out.append(f"PixelSpacing {[float(v) for v in ps]} (outside 0.001..1e5 mm: 1 mm used)")
+    return "; ".join(out)
 
 
 def _intercept(v: Any, default: float = 0.0) -> float:
@@ -479,6 +495,7 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
         signed=signed,
         photometric=str(ds.get("PhotometricInterpretation") or "MONOCHROME2").strip(),
         slope=_slope(ds.get("RescaleSlope")),
+        ignored_scaling=_implausible(ds),
         intercept=_intercept(ds.get("RescaleIntercept")),
         ipp=_vec(ds.get("ImagePositionPatient"), 3),
         iop=_vec(ds.get("ImageOrientationPatient"), 6),
@@ -496,7 +513,7 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
     ps = _vec(ds.get("PixelSpacing"), 2)
     if ps is None:
         ps = _vec(ds.get("ImagerPixelSpacing"), 2)
-    if ps is not None and np.all(ps > 0):
+    if ps is not None and np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5):  # core.limits bounds
         base.pixel_spacing = (float(ps[0]), float(ps[1]))
     if nframes == 1:
         return [base]
@@ -535,7 +552,7 @@ def _multiframe(ds: Any, base: Frame, nframes: int) -> list[Frame]:
         pm = lookup(own, "PixelMeasuresSequence")
         if pm is not None:
             ps = _vec(pm.get("PixelSpacing"), 2)
-            if ps is not None and np.all(ps > 0):
+            if ps is not None and np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5):
                 f.pixel_spacing = (float(ps[0]), float(ps[1]))
             st = _num(pm.get("SliceThickness"))
             if st is not None:

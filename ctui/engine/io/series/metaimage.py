@@ -109,7 +109,7 @@ def mhd_spacing(hdr: dict[str, str]) -> tuple[list[float], list[str]]:
         if np.isfinite(v) and -1e5 < v < 0:
             negative.append(f"{'xyz'[a]} ({v:g})")
             v = -v
-        if not (np.isfinite(v) and 1e-6 < v < 1e5):
+        if not (np.isfinite(v) and 1e-3 <= v <= 1e5):  # core.limits MIN/MAX_SPACING_MM
             invalid.append(f"{'xyz'[a]} ({v:g})")
             v = 1.0
         out.append(float(v))

@@ -34,8 +34,9 @@ def parse_spacing(spacing: Any, path: Any) -> tuple[float, float, float] | None:
             raise CtuiError(f"spacing must be numbers (dz, dy, dx) in mm, got {spacing!r}", path=path) from None
         if len(vals) == 1:
             vals = vals * 3
-    if len(vals) != 3 or not all(np.isfinite(vals)) or min(vals) <= 0:
-        raise CtuiError(f"spacing must be three positive numbers (dz, dy, dx) in mm, got {spacing!r}", path=path)
+    if len(vals) != 3 or not all(np.isfinite(vals)) or min(vals) < 1e-3 or max(vals) > 1e5:
+        raise CtuiError(f"spacing must be three numbers from 0.001 to 1e5 (dz, dy, dx) in mm, got {spacing!r}",
+                        path=path)
     return tuple(vals)  # type: ignore[return-value]
 
 
