@@ -1,0 +1,237 @@
+"""A scripted TUI session, as a person with a mouse would do it: open
+``../shared/data/totalseg_example/ct_abdomen_3mm.nii.gz``, segment the left kidney (label 3)
+and the spleen (label 1) with the TUI's default segmentation, save the project, and print
+Dice against ``ct_abdomen_3mm_labels.nii.gz``, the input events per organ and the wall time,
+at 160x50 and 80x24 (issue 22; goal <= 25 events per organ, Dice >= 0.90 kidney, >= 0.88
+spleen; the keyboard-only kidney of the issue took 433 keys and 8.4 minutes).
+
+The app is the real one (``CtuiApp(path)``) driven by Textual's Pilot with the events a
+person sends: keys, mouse clicks, wheel notches (a drag would count as one press). Per
+organ, from the workspace at the middle slice:
+
+1. (second organ) ``n``: a new object;
+2. to the seed (the organ's deepest voxel, as issue 21's benchmark seeds): the cheaper of
+   wheel notches over the view to the seed's slice + a click on it, or ``g`` + typed
+   ``x,y,z`` + Enter (then Enter fills); with ``z`` (click fills, pressed once for the
+   session) the click fills as Enter does;
+3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
+4. with ``--review``: ``}`` to each marked slice of the review strip and ``C`` where the
+   proposal leaves the reference there (the person's eye, played by the reference);
+5. ``a``: accept.
+
+Then Ctrl+S and Enter (the default name). Events are counted as the Pilot sends them.
+The seeds come from the reference labels (the deepest point); the seed positions and the
+mouse cells go through ``ctui.screens.planes`` (the display is in the patient's frame).
+
+    python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("TEXTUAL_COLOR_SYSTEM", "truecolor")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "totalseg_example"
+ORGANS = (("kidney_left", 3), ("spleen", 1))
+
+
+def seeds_and_truth(labels_path: Path, spacing) -> tuple[np.ndarray, dict]:
+    """The reference labels and, per organ, its deepest voxel (z, y, x) and its 5-95th percentile range."""
+    from scipy import ndimage
+
+    from ctui.engine.actions.opened import open_input
+
+    lab = open_input(str(labels_path)).labels
+    out = {}
+    for name, k in ORGANS:
+        m = np.pad(lab == k, 1)
+        dt = ndimage.distance_transform_edt(m, sampling=spacing)[1:-1, 1:-1, 1:-1]
+        out[name] = tuple(int(v) for v in np.unravel_index(int(np.argmax(dt)), lab.shape))
+    return lab, out
+
+
+def dice(a: np.ndarray, b: np.ndarray) -> float:
+    s = int(a.sum()) + int(b.sum())
+    return 2.0 * int((a & b).sum()) / s if s else 1.0
+
+
+class Counter:
+    """The pilot's input events, counted (keys, clicks, wheel notches)."""
+
+    def __init__(self, pilot) -> None:
+        self.pilot = pilot
+        self.n = 0
+
+    async def press(self, *keys: str) -> None:
+        self.n += len(keys)
+        await self.pilot.press(*keys)
+
+    async def type(self, text: str) -> None:
+        await self.press(*[{",": "comma", ":": "colon", "-": "minus", ".": "full_stop"}.get(c, c) for c in text])
+
+    async def click(self, widget: str, offset) -> None:
+        self.n += 1
+        await self.pilot.click(widget, offset=offset)
+
+    async def wheel(self, widget: str, up: bool) -> None:
+        from ctui.screens.testing import wheel
+
+        self.n += 1
+        await wheel(self.pilot, widget, up=up)
+
+
+async def _wait_proposal(pilot, ws, timeout: float = 300.0) -> bool:
+    end = time.monotonic() + timeout
+    await pilot.pause(0.05)
+    while time.monotonic() < end:
+        if ws._prop is None:
+            return ws.proposal is not None
+        await pilot.pause(0.05)
+    return False
+
+
+async def _review(c: Counter, ws, truth_mask: np.ndarray) -> None:
+    """``}`` through the marks; ``C`` at the first one where the proposal's slice overlaps the
+    reference less than half (what the person sees as the leak) - then the rest is gone."""
+    s = ws.s
+    for _ in range(12):
+        before = s.z
+        await c.press("right_curly_bracket")
+        if s.z == before or ws.proposal is None:
+            return
+        prop = ws.proposal.slice_mask(s.z)
+        ref = truth_mask[s.z]
+        if prop.any() and dice(prop, ref) < 0.5:
+            await c.press("C")
+            return
+
+
+async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, first: bool, review: bool,
+                 rng: tuple[float, float] | None) -> dict:
+    from ctui.screens.testing import answer_prompt, cell_of_voxel
+
+    ws, s = app.workspace, app.session
+    pilot = c.pilot
+    n0, t0 = c.n, time.perf_counter()
+    if not first:
+        await c.press("n")
+    if rng is not None:
+        await c.press("T")
+        c.n += len(f"{rng[0]:g}:{rng[1]:g}") + 1  # typed into the prompt, then Enter
+        await answer_prompt(pilot, f"{rng[0]:g}:{rng[1]:g}")
+    z, y, x = seed
+    typed = f"{x},{y},{z}"
+    if abs(z - s.z) + 1 <= len(typed) + 3:  # wheel to the slice, click there (fills)
+        if not s.click_fills:
+            await c.press("z")
+        while s.z != z:
+            await c.wheel("#main", up=z > s.z)
+        await pilot.pause()
+        await c.click("#main", cell_of_voxel(app, (z, y, x)))
+        if not s.click_fills:
+            await c.press("enter")
+    else:
+        await c.press("g")
+        c.n += len(typed) + 1
+        await answer_prompt(pilot, typed)
+        await c.press("enter")
+    filled = s.seg.voxels(s.current)
+    await c.press("p")
+    got = await _wait_proposal(pilot, ws)
+    if got and review:
+        await _review(c, ws, truth_mask)
+    if got:
+        await c.press("a")
+    await pilot.pause()
+    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_fill": filled, "proposal": got,
+            "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx}
+
+
+async def session(size: tuple[int, int], image: Path, labels: Path, *, review: bool, use_range: bool,
+                  out_dir: Path) -> dict:
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.testing import wait_for, wait_workspace
+
+    graphics._chosen = "halfblock"
+    os.chdir(out_dir)
+    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
+    app = CtuiApp(str(image), autosave_s=1e9)
+    rows = []
+    t_start = time.perf_counter()
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        s = app.session
+        truth, seeds = seeds_and_truth(labels, s.volume.spacing)
+        c = Counter(pilot)
+        for i, (name, k) in enumerate(ORGANS):
+            rng = None
+            if use_range:
+                vals = s.volume.data[truth == k]
+                rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95)))
+            rows.append(await _organ(c, app, name, seeds[name], truth == k, first=i == 0, review=review, rng=rng))
+        n_save = c.n
+        await c.press("ctrl+s")
+        await pilot.pause()
+        await c.press("enter")
+        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
+                       what="the saved project")
+        save_events = c.n - n_save
+        proj_path = s.project_path
+        errors = list(app.internal_errors) if hasattr(app, "internal_errors") else []
+    wall = time.perf_counter() - t_start
+    from ctui.engine.actions.project import load_project
+
+    saved = load_project(proj_path).labels
+    for r, (name, k) in zip(rows, ORGANS):
+        got = saved == r["object"]
+        ref = truth == k
+        r["dice"] = dice(got, ref)
+        r["volume_ratio"] = float(got.sum()) / max(int(ref.sum()), 1)
+    return {"size": size, "organs": rows, "save_events": save_events, "wall_s": wall, "project": proj_path,
+            "errors": errors}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", action="append", default=None, help="terminal WxH (repeatable; default 160x50 and 80x24)")
+    ap.add_argument("--data", default=str(DATA), help="the totalseg_example folder")
+    ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
+    ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
+    args = ap.parse_args(argv)
+    data = Path(args.data)
+    image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
+    if not image.exists():
+        print(f"skipped: {image} is missing")
+        return 0
+    sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
+    print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
+          f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
+          "defaults otherwise")
+    print(f"{'size':>7} {'organ':<12} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z")
+    for size in sizes:
+        with tempfile.TemporaryDirectory() as tmp:
+            res = asyncio.run(session(size, image, labels, review=args.review, use_range=args.range, out_dir=Path(tmp)))
+        for r in res["organs"]:
+            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+                  f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}"
+                  f"{'' if r['proposal'] else '  (no proposal)'}")
+        print(f"{'':>7} save: {res['save_events']} events; session wall time {res['wall_s']:.1f} s"
+              f"{'; errors: ' + str(res['errors']) if res['errors'] else ''}")
+    print("issue 22 baseline (keyboard only, by hand): one kidney 433 keys / 8.4 min; kidney + spleen 959 keys / 9.9 min")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
