@@ -32,7 +32,10 @@ def files(tmp_path_factory) -> dict[str, Path]:
 
 def _err(capsys, argv: list) -> str:
     capsys.readouterr()
-    rc = main([str(a) for a in argv])
+    try:
+        rc = main([str(a) for a in argv])
+    except SystemExit as exc:  # argparse: one line too (cli._Parser)
+        rc = exc.code
     out, err = capsys.readouterr()
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert rc == 2 and len(lines) == 1 and lines[0].startswith(f"ctui {argv[0]}: "), (rc, err, out)
@@ -146,3 +149,159 @@ def test_filter_parameters_are_bounded(spec, files, capsys):
     raised or ran for minutes: all refused in one line naming the parameter."""
     line = _err(capsys, ["segment", files["series"], "--seed", SEED, "--range", "200:400", "--filter", spec])
     assert spec.split(":")[1].split("=")[0] in line
+
+
+@pytest.mark.parametrize("argv", [
+    ["mesh", "{series}", "--iso", "nan", "--out", "{tmp}/o.stl"], ["mesh", "{series}", "--iso", "inf", "--out", "{tmp}/o.stl"],
+    ["segment", "{series}", "--seed", SEED, "--range", "200:400", "--neck", "nan"],
+    ["segment", "{series}", "--seed", SEED, "--range", "200:400", "--neck", "inf"],
+    ["segment", "{series}", "--seed", SEED, "--range", "200:400", "--neighbourhood", "100000"],
+    ["segment", "{series}", "--seed", SEED, "--range", "nan:400"],
+    ["segment", "{series}", "--seed", SEED, "--tolerance", "inf"],
+    ["render", "{project}", "--azimuth", "inf", "--out", "{tmp}/o.png"],
+    ["render", "{project}", "--roll", "inf", "--out", "{tmp}/o.png"],
+    ["render", "{project}", "--turntable", "3", "--fps", "nan", "--out", "{tmp}/o.gif"],
+    ["render", "{project}", "--flythrough", "auto", "--fov", "0", "--out", "{tmp}/o.gif"],
+    ["render", "{project}", "--slice", "x:nan", "--out", "{tmp}/o.png"],
+    ["render", "{project}", "--turntable", "100000", "--size", "40x40", "--out", "{tmp}/o.gif"],
+    ["render", "{project}", "--flythrough", "auto", "--frames", "1000000", "--out", "{tmp}/o.gif"],
+    ["measure", "{project}", "--path", "auto", "--step", "nan"],
+    ["measure", "{project}", "--path", "1e308,0,0;0,0,0"],
+    ["measure", "{project}", "--path", "auto", "--between", "nan,nan"],
+    ["drift", "{project}", "--threshold", "nan"],
+    ["mesh", "{project}", "--out", "{tmp}/o.stl", "--smooth", "100000000"],
+])
+def test_numeric_options_refused_in_one_line(argv, files, capsys, tmp_path):
+    """Every number an option takes is finite, in range and bounded in work: one line, exit 2,
+    before anything is computed or written."""
+    subs = {"{series}": str(files["series"]), "{project}": str(files["project"])}
+    args = [subs.get(a, a.replace("{tmp}", str(tmp_path))) for a in argv]
+    _err(capsys, args)
+    assert not list(tmp_path.iterdir())
+
+
+def test_engine_checks_numbers_too(files, tmp_path):
+    """The engine refuses the same numbers when called directly (the TUI, scripts)."""
+    from ctui.engine.actions.measure import measure_object
+    from ctui.engine.actions.render import render_view
+    from ctui.engine.core.errors import CtuiError
+
+    with pytest.raises(CtuiError, match="turntable"):
+        render_view(files["project"], out=tmp_path / "o.gif", turntable=100000)
+    with pytest.raises(CtuiError, match="azimuth"):
+        render_view(files["project"], out=tmp_path / "o.png", azimuth=float("inf"))
+    with pytest.raises(CtuiError, match="step"):
+        measure_object(files["project"], path="auto", step_mm=float("nan"))
+
+
+# ----------------------------------------------------------------- 6: undecodable compressed pixels
+@pytest.mark.parametrize("syntax", ["RLELossless", "JPEGBaseline8Bit", "JPEG2000Lossless"])
+def test_info_of_undecodable_compressed_pixels(syntax, files, tmp_path, capsys):
+    """Garbage RLE/JPEG/J2K fragments: `ctui info` gives the headers, 'values unknown' and a
+    warning naming the decoder's fault, no traceback."""
+    import pydicom
+    import pydicom.uid
+    from pydicom.encaps import encapsulate
+
+    out = tmp_path / "enc"
+    out.mkdir()
+    for f in sorted(files["series"].glob("*.dcm"))[:4]:
+        ds = pydicom.dcmread(f)
+        ds.file_meta.TransferSyntaxUID = getattr(pydicom.uid, syntax)
+        ds.PixelData = encapsulate([bytes(range(256)) * 2])
+        ds["PixelData"].VR = "OB"
+        ds.save_as(out / f.name, enforce_file_format=True)
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["value_range"] is None and d["shape_zyx"] == [4, 48, 48]
+    assert any("could not be decoded" in w for w in d["warnings"])
+
+
+# ----------------------------------------------------------------- 7: NaN / inf voxels
+def test_nan_voxels_never_reach_a_mesh(tmp_path, capsys):
+    """A raw float32 volume with NaN and inf voxels: the loader replaces them (a warning),
+    `mesh --iso` writes finite vertices and a finite volume (the 4x6x7 mm box: 0.168 mL)."""
+    a = np.zeros((10, 12, 14), np.float32)
+    a[3:7, 3:9, 3:10] = 100
+    a[0, 0, :5] = np.nan
+    a[1, 1, 1] = np.inf
+    a[9, 11, 13] = -np.inf
+    a.tofile(tmp_path / "v.raw")
+    capsys.readouterr()
+    assert main(["mesh", str(tmp_path / "v.raw"), "--shape", "10,12,14", "--dtype", "float32", "--iso", "50",
+                 "--out", str(tmp_path / "o.stl"), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["volume_ml"] is not None and abs(d["volume_ml"] - 0.168) < 0.03
+    from ctui.engine.io.meshes import load_mesh
+
+    assert np.isfinite(load_mesh(tmp_path / "o.stl").vertices).all()
+    from ctui.engine.io.series import load
+
+    vol = load(tmp_path / "v.raw", shape=(10, 12, 14), dtype="float32")
+    assert np.isfinite(vol.data).all() and any("NaN" in w for w in vol.warnings)
+
+
+# ----------------------------------------------------------------- 8: MONOCHROME1
+def test_monochrome1_ct_keeps_its_hounsfield_units(files, tmp_path, capsys):
+    """MONOCHROME1 is display polarity only: info and the loader give the same HU range as
+    the MONOCHROME2 original (0..300 HU for the sphere phantom)."""
+    import pydicom
+
+    from ctui.engine.io.series import load
+
+    out = tmp_path / "m1"
+    out.mkdir()
+    for f in files["series"].glob("*.dcm"):
+        ds = pydicom.dcmread(f)
+        ds.PhotometricInterpretation = "MONOCHROME1"
+        ds.save_as(out / f.name)
+    ref = load(files["series"])
+    vol = load(out)
+    np.testing.assert_array_equal(vol.data, ref.data)
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["value_range"] == [float(ref.data.min()), float(ref.data.max())]
+
+
+# ----------------------------------------------------------------- 10: implausible scaling
+def test_implausible_spacing_and_slope(files, tmp_path, capsys):
+    """PixelSpacing 1e-30 and RescaleSlope 1e-300 are replaced with a warning (not 0.00 mL and
+    zeroed voxels); a project with spacing 1e-300 is refused on open in one line."""
+    import pydicom
+    import zipfile
+
+    from ctui.engine.io.series import load
+
+    out = tmp_path / "sc"
+    out.mkdir()
+    for f in files["series"].glob("*.dcm"):
+        ds = pydicom.dcmread(f)
+        ds.PixelSpacing, ds.RescaleSlope = ["1e-30", "1e-30"], "1e-300"
+        ds.save_as(out / f.name)
+    vol = load(out)
+    assert vol.spacing[1:] == (1.0, 1.0) and vol.data.max() == 300
+    assert any("RescaleSlope" in w and "PixelSpacing" in w for w in vol.warnings)
+    with zipfile.ZipFile(files["project"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    doc = json.loads(members["project.json"])
+    doc["geometry"]["spacing_zyx_mm"] = [1e-300, 1.0, 1.0]
+    members["project.json"] = json.dumps(doc).encode()
+    bad = tmp_path / "tiny.ctui"
+    with zipfile.ZipFile(bad, "w") as zf:
+        for n, b in members.items():
+            zf.writestr(n, b)
+    for cmd in (["measure", bad], ["mesh", bad, "--out", tmp_path / "o.stl"], ["export", bad, "--format", "csv",
+                                                                               "--out", tmp_path / "o.csv"]):
+        assert "spacing" in _err(capsys, cmd)
+
+
+# ----------------------------------------------------------------- 20: stdout closed
+def test_stdout_closed(files):
+    """`ctui info X --json >&-`: exit 0, no AttributeError traceback."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(f"{sys.executable} -m ctui info {files['series']} --json >&-", shell=True,
+                       capture_output=False, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
