@@ -48,6 +48,7 @@ DEPTH_REACH_MM = 10.0  # the local depth is the deepest in-range point within th
 SWEEP_MM = 2.0  # the sweep's voxel size (mm; the series' own when coarser)
 BOX_MM = 150.0  # half-size of the sweep's box around the seed (mm)
 MAX_RADII = 14
+HOLE_MM2 = 200.0  # largest hole filled (mm^2 a slice): noise and vessels, not the renal sinus (Dice best on the kidneys)
 
 
 @dataclass
@@ -268,10 +269,23 @@ def cut_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, width_mm: float, spa
     back &= filled
     got = fill3d_seeds(back, hit, connectivity=connectivity)
     status = "cut" if np.count_nonzero(got & raw) < np.count_nonzero(raw) else "ok"
-    if not fill_holes:
-        got &= raw
+    got &= raw if not fill_holes else _small_holes(raw, spacing[1:])
     out[box] = got
     return out, status
+
+
+def _small_holes(raw: np.ndarray, spacing_yx: tuple[float, ...]) -> np.ndarray:
+    """``raw`` with its holes up to ``HOLE_MM2`` per slice filled (noise, vessels), larger ones (the renal
+    sinus) left open: bool, same shape (2D or 3D)."""
+    if raw.ndim == 3:
+        return np.stack([_small_holes(m, spacing_yx) for m in raw]) if len(raw) else raw.copy()
+    holes = fill_holes_2d(raw) & ~raw
+    if not holes.any():
+        return raw.copy()
+    n, lab, stats, _c = cv2.connectedComponentsWithStats(holes.view(np.uint8), connectivity=4)
+    small = stats[:, cv2.CC_STAT_AREA] * float(spacing_yx[0]) * float(spacing_yx[1]) <= HOLE_MM2
+    small[0] = False
+    return raw | small[lab]
 
 
 def cut_2d(candidate: np.ndarray, reference: np.ndarray, *, width_mm: float, spacing_yx: tuple[float, float],
@@ -295,7 +309,7 @@ def cut_2d(candidate: np.ndarray, reference: np.ndarray, *, width_mm: float, spa
     back = (cv2.dilate(kept.view(np.uint8), kern) & filled.view(np.uint8)).view(bool)
     got = seeded_components(back, kept, connectivity=connectivity)
     status = "cut" if np.count_nonzero(got & raw) < np.count_nonzero(raw) else "ok"
-    return (got if fill_holes else got & raw), status
+    return got & (_small_holes(raw, spacing_yx) if fill_holes else raw), status
 
 
 def cut_faces(removed: np.ndarray, kept: np.ndarray, *, at_most: int = 4) -> list[tuple[float, float, int]]:
