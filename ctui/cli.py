@@ -123,7 +123,8 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
 
 
 #: Engine keywords whose CLI flag is not ``--`` + the keyword with ``-`` for ``_``.
-FLAGS: dict[str, str] = {}
+FLAGS = {"threshold_mm": "--threshold", "objects": "--object", "slice_plane": "--slice", "step_mm": "--step",
+         "average_mm": "--average", "section_step_mm": "--step"}
 
 
 def flag_of(option: str) -> str:

@@ -97,7 +97,7 @@ def test_cli_partial_volume_on_a_project(tmp_path, capsys, phantom):
     save_labels(lf, (vol.data > 150).astype(np.uint8), vol)
     assert main(["measure", str(lf), "--partial-volume"]) == 2
     err = capsys.readouterr().err
-    assert "--partial-volume needs a project" in err and len(err.strip().splitlines()) == 1
+    assert "partial volumes need a project" in err and "(see --partial-volume)" in err and len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("sp", [(1.0, 1.0, 1.0), (3.0, 1.0, 1.0), (1.5, 0.5, 0.5)], ids=["iso", "1:3", "3:1"])

@@ -67,9 +67,9 @@ def drift_check(source: str | os.PathLike | Opened, *, objects: Sequence[int] | 
     series' grey levels. ``plot``: a PNG of centroids and deviations.
     """
     if fit_window < 3:
-        raise CtuiError("--fit-window must be >= 3")
+        raise CtuiError("the fit window must be at least 3 slices", option="fit_window")
     if threshold_mm is not None and threshold_mm <= 0:
-        raise CtuiError("--threshold must be > 0")
+        raise CtuiError("the drift threshold must be above 0 mm", option="threshold_mm")
     if isinstance(source, Opened):
         opened = source
     else:
@@ -78,7 +78,8 @@ def drift_check(source: str | os.PathLike | Opened, *, objects: Sequence[int] | 
     if opened.labels is None:
         raise CtuiError("no label volume to check", path=opened.path)
     if estimate == "phase" and opened.volume is None:
-        raise CtuiError("--estimate phase needs the source series", path=opened.path)
+        raise CtuiError("the phase estimate needs the source series' grey levels", path=opened.path,
+                        option="estimate")
     spacing: Any = opened.geometry.spacing if opened.geometry is not None else None
     report = analyze_drift(opened.labels, None, spacing=spacing, object_ids=list(objects) if objects else None,
                            threshold_mm=threshold_mm, method=fit, window=fit_window)

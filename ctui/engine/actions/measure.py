@@ -100,11 +100,11 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     on the object's partial-volume fraction from the source series' grey levels.
     """
     if not 0.01 <= step_mm <= 1000:  # also NaN: bounded work (sections = path length / step)
-        raise CtuiError(f"--step must be from 0.01 to 1000 mm, got {step_mm}")
+        raise CtuiError(f"the section step must be from 0.01 to 1000 mm, got {step_mm}", option="step_mm")
     if not 0 <= average_mm <= 1000:
-        raise CtuiError(f"--average must be from 0 to 1000 mm, got {average_mm}")
+        raise CtuiError(f"the slab average must be from 0 to 1000 mm, got {average_mm}", option="average_mm")
     if between is not None and not all(np.isfinite(v) and abs(v) <= 1e9 for v in between):
-        raise CtuiError(f"--between {between}: want finite arc lengths in mm")
+        raise CtuiError(f"between {between}: want finite arc lengths in mm", option="between")
     if isinstance(source, Opened):
         opened = source
     else:
@@ -119,12 +119,14 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
         opened = open_input(p, require_labels=True, with_series=True if partial_volume else None)
     if opened.kind == "mesh":
         if path is not None or between is not None:
-            raise CtuiError("a mesh gives volume and area only (no --path/--between)", path=opened.path)
+            raise CtuiError("a mesh gives volume and area only (no path, no volume between planes)", path=opened.path,
+                            option="path")
         return _mesh_input(opened)
     image = None
     if partial_volume:
         if opened.volume is None:
-            raise CtuiError("--partial-volume needs a project whose source series can be loaded", path=opened.path)
+            raise CtuiError("partial volumes need a project whose source series can be loaded", path=opened.path,
+                            option="partial_volume")
         image = opened.volume.data
     oid = opened.pick_objects(object)[0]
     g = opened.geometry
@@ -160,7 +162,7 @@ def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None
     check_outputs({"section table": csv, "section plot": plot, "path table": path_csv},
                   inputs=[result.input, *inputs])
     if path_csv and result.path_mm is None:
-        raise CtuiError("no path to write: --path-csv needs --path (auto or points)")
+        raise CtuiError("no path to write: a path table needs a path (auto or points)", option="path")
     written = []
     if path_csv:
         write_path_csv(path_csv, result.path_mm)

@@ -110,9 +110,9 @@ def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str,
     vol = opened.volume
     assert vol is not None
     if iso is None:
-        raise CtuiError("a series needs --iso VALUE (e.g. --iso 300 for bone in CT)", path=opened.path)
+        raise CtuiError("a series needs an iso value (e.g. 300 HU for bone in CT)", path=opened.path, option="iso")
     if not np.isfinite(iso) or abs(iso) > 1e9:
-        raise CtuiError(f"--iso {iso!r}: want a finite value within +-1e9", path=opened.path)
+        raise CtuiError(f"iso value {iso!r}: want a finite value within +-1e9", path=opened.path, option="iso")
     if method == "contours":
         mask = (vol.data > iso).astype(np.uint8)
         mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,
@@ -122,7 +122,8 @@ def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str,
                           progress=progress)
     if mesh.n_faces == 0:
         lo, hi = vol.value_range()
-        raise CtuiError(f"no surface at --iso {iso:g} (values range {lo:g} .. {hi:g})", path=opened.path)
+        raise CtuiError(f"no surface at iso value {iso:g} (values range {lo:g} .. {hi:g})", path=opened.path,
+                        option="iso")
     return mesh
 
 
@@ -142,9 +143,9 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
     geometry whose series is gone.
     """
     if smooth < 0:
-        raise CtuiError(f"--smooth {smooth}: must be 0 or more iterations")
+        raise CtuiError(f"smoothing {smooth}: must be 0 or more iterations", option="smooth")
     if decimate is not None and decimate < 4:
-        raise CtuiError(f"--decimate {decimate}: need at least 4 triangles")
+        raise CtuiError(f"decimation to {decimate} triangles: need at least 4", option="decimate")
     if isinstance(source, Opened):
         opened = source
     else:
@@ -159,9 +160,10 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
                      notes=list(opened.notes))
     if kind == "mric":
         if method != "contours":
-            raise CtuiError("an MRIC file holds contours only: use --method contours", path=opened.path)
+            raise CtuiError("an MRIC file holds contours only: mesh it with the contours method", path=opened.path,
+                            option="method")
         if iso is not None:
-            raise CtuiError("--iso applies to a series, not to an MRIC file", path=opened.path)
+            raise CtuiError("an iso value applies to a series, not to an MRIC file", path=opened.path, option="iso")
         obj = objects if isinstance(objects, (int, np.integer)) or objects is None else objects[0]
         mesh = connect_mric(opened.path, object_index=obj, spacing=spacing, method=tiling)
         if mesh.n_faces == 0:
@@ -169,10 +171,11 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
         res.meshes = {0: mesh}
     elif kind in ("project", "labels"):
         if iso is not None:
-            raise CtuiError("--iso applies to a series; a project's objects are meshed from their labels",
-                            path=opened.path)
+            raise CtuiError("an iso value applies to a series; a project's objects are meshed from their labels",
+                            path=opened.path, option="iso")
         if terraced and method == "contours":
-            raise CtuiError("--terraced applies to marching cubes, not to --method contours")
+            raise CtuiError("terraced surfaces come from marching cubes, not from the contours method",
+                            option="terraced")
         assert opened.labels is not None and opened.geometry is not None
         res.objects = opened.pick_objects(objects)
         res.meshes = label_meshes(opened.labels, opened.geometry, res.objects, method=method, terraced=terraced,

@@ -202,13 +202,13 @@ def open_project(path: str, *, with_series: bool | None = None, require_labels: 
                         path=path)
     elif project.geometry is None and project.labels is not None and spacing is not None:
         out.geometry = Geometry(tuple(project.labels.shape), spacing)
-        out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from --spacing "
+        out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from the given spacing "
                          "(origin 0, identity direction)")
     elif project.geometry is None:
         if project.labels is not None:
             raise CtuiError(f"the source series {project.source_path!r} is missing and the project records no "
-                            "geometry (an old project: give --spacing dz,dy,dx, or re-save it with its series)",
-                            path=path)
+                            "geometry (an old project: give its voxel spacing dz,dy,dx, or re-save it with its series)",
+                            path=path, option="spacing")
     elif not series_available(project):
         out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from the project")
     return out
@@ -232,8 +232,8 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
             raise CtuiError("no such file or folder", path=q or "(empty path)")
     kind = input_kind(s)
     if kind not in ("series", "labels") or (kind == "labels" and not s.lower().endswith(defaults.LABEL_SUFFIXES)):
-        raise CtuiError("--labels goes with a volume (DICOM folder or file, NIfTI, NRRD, MetaImage...), not a "
-                        "project, mesh or DICOM-SEG/RTSTRUCT file", path=s)
+        raise CtuiError("a label file goes over a volume (DICOM folder or file, NIfTI, NRRD, MetaImage...), not "
+                        "over a project, mesh or DICOM-SEG/RTSTRUCT file", path=s, option="labels")
     if spacing is not None:
         load_options["spacing"] = spacing
     volume = load(s, **load_options)

@@ -3,7 +3,8 @@
 Lists are comma-separated in (z, y, x) order: ``--shape 40,256,256`` (or ``256,256`` per
 slice), ``--spacing 2,0.5,0.5``, ``--crop z0,z1,y0,y1,x0,x1``, ``--downsample 2`` or
 ``1,2,2``. :func:`load_options` turns the text into keyword arguments for
-:func:`ctui.engine.io.series.load`, with a one-line error naming the option.
+:func:`ctui.engine.io.series.load`, with a one-line error naming the option
+(``CtuiError.option``: the CLI adds its flag).
 """
 
 from __future__ import annotations
@@ -13,10 +14,16 @@ from typing import Any
 from ctui.engine.core.errors import CtuiError
 
 
+def _key(option: str) -> str:
+    """The loader keyword an option label names ("spacing" or "spacing" -> "spacing")."""
+    return option.lstrip("-").replace("-", "_")
+
+
 def _items(text: str, option: str, what: str) -> list[str]:
     s = str(text).strip()
     if "x" in s.lower():
-        raise CtuiError(f"{option} {text!r}: write {what} separated by commas (e.g. 40,256,256), not with 'x'")
+        raise CtuiError(option=_key(option),
+                        message=f"{option} {text!r}: write {what} separated by commas (e.g. 40,256,256), not with 'x'")
     return [v.strip() for v in s.split(",")]
 
 
@@ -35,11 +42,13 @@ def parse_floats(text: Any, option: str, *, n: tuple[int, ...] = (3,), positive:
     try:
         vals = tuple(float(v) for v in items)
     except (TypeError, ValueError):
-        raise CtuiError(f"{option} {text!r}: expected numbers separated by commas") from None
+        raise CtuiError(option=_key(option),
+                        message=f"{option} {text!r}: expected numbers separated by commas") from None
     if len(vals) not in n:
-        raise CtuiError(f"{option} {text!r}: expected {' or '.join(map(str, n))} numbers")
+        raise CtuiError(option=_key(option), message=f"{option} {text!r}: expected {' or '.join(map(str, n))} numbers")
     if any(v != v or v in (float("inf"), float("-inf")) for v in vals) or (positive and min(vals) <= 0):
-        raise CtuiError(f"{option} {text!r}: expected {'positive ' if positive else ''}finite numbers")
+        raise CtuiError(option=_key(option),
+                        message=f"{option} {text!r}: expected {'positive ' if positive else ''}finite numbers")
     return vals
 
 
@@ -55,11 +64,12 @@ def parse_ints(text: Any, option: str, *, n: tuple[int, ...], minimum: int | Non
         try:
             out.append(int(str(v)))
         except ValueError:
-            raise CtuiError(f"{option} {text!r}: expected integers separated by commas") from None
+            raise CtuiError(option=_key(option),
+                            message=f"{option} {text!r}: expected integers separated by commas") from None
     if len(out) not in n:
-        raise CtuiError(f"{option} {text!r}: expected {' or '.join(map(str, n))} integers")
+        raise CtuiError(option=_key(option), message=f"{option} {text!r}: expected {' or '.join(map(str, n))} integers")
     if minimum is not None and any(v is not None and v < minimum for v in out):
-        raise CtuiError(f"{option} {text!r}: every value must be >= {minimum}")
+        raise CtuiError(option=_key(option), message=f"{option} {text!r}: every value must be >= {minimum}")
     return tuple(out)
 
 
@@ -71,20 +81,20 @@ def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, 
         s = str(series).strip()
         kw["series"] = int(s) if s.isdigit() and len(s) < 6 else s
     if spacing not in (None, ""):
-        vals = parse_floats(spacing, "--spacing", n=(1, 3))
+        vals = parse_floats(spacing, "spacing", n=(1, 3))
         kw["spacing"] = vals * 3 if len(vals) == 1 else vals
     if shape not in (None, ""):
-        kw["shape"] = parse_ints(shape, "--shape", n=(2, 3))
+        kw["shape"] = parse_ints(shape, "shape", n=(2, 3))
     if dtype not in (None, ""):
         kw["dtype"] = str(dtype)
     if offset is not None:
         if int(offset) < 0:
-            raise CtuiError(f"--offset {offset}: must be >= 0")
+            raise CtuiError(f"offset {offset}: must be >= 0", option="offset")
         kw["offset"] = int(offset)
     if crop not in (None, ""):
-        kw["crop"] = parse_ints(crop, "--crop", n=(6,), minimum=None, allow_empty=True)
+        kw["crop"] = parse_ints(crop, "crop", n=(6,), minimum=None, allow_empty=True)
     if downsample not in (None, ""):
-        vals = parse_ints(downsample, "--downsample", n=(1, 3))
+        vals = parse_ints(downsample, "downsample", n=(1, 3))
         kw["downsample"] = vals[0] if len(vals) == 1 else vals
     if not resample:
         kw["resample"] = False

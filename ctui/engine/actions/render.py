@@ -57,7 +57,7 @@ def _open(src: str, *, need_volume: bool, load_options: dict) -> Opened:
             raise CtuiError("project has no segmented objects to render", path=src)
         return opened
     if os.path.isfile(src) and not src.lower().endswith(defaults.LABEL_SUFFIXES) and input_kind(src) == "labels":
-        return open_input(src, kind="labels")  # a DICOM-SEG (an RTSTRUCT needs --labels over its series)
+        return open_input(src, kind="labels")  # a DICOM-SEG (an RTSTRUCT needs its series, labels over it)
     return open_input(src, kind="series", **load_options)
 
 
@@ -79,10 +79,12 @@ def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = N
     if mode in SURFACE_MODES:
         vol = opened.volume
         if iso is None:
-            raise CtuiError(f"--mode {mode} on a series needs --iso LEVEL (e.g. --iso 300 for bone)", path=opened.path)
+            raise CtuiError(f"mode {mode} on a series needs an iso value (e.g. 300 HU for bone)", path=opened.path,
+                           option="iso")
         m = isosurface(vol.data, iso, spacing=vol.spacing, origin=vol.origin, direction=vol.direction)
         if m.n_faces == 0:
-            raise CtuiError(f"no surface at --iso {iso:g} (values range {vol.value_range()})", path=opened.path)
+            raise CtuiError(f"no surface at iso value {iso:g} (values range {vol.value_range()})", path=opened.path,
+                           option="iso")
         return [m]
     return []
 
@@ -100,7 +102,7 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
     meshes = scene_meshes(opened, mode=mode, objects=objects, iso=iso)
     volume = opened.volume
     if mode in VOLUME_MODES and volume is None:
-        raise CtuiError(f"--mode {mode} needs a series (volume), not a {kind}", path=opened.path)
+        raise CtuiError(f"mode {mode} needs a series (volume), not a {kind}", path=opened.path, option="mode")
     if not meshes and mode not in VOLUME_MODES:
         raise CtuiError("nothing to render", path=opened.path)
     scene = Scene()
@@ -131,14 +133,16 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
         o.background = tuple(v / 255.0 for v in background)
     if slice_plane:
         if volume is None:
-            raise CtuiError("--slice needs a series or a project whose source series loads", path=opened.path)
+            raise CtuiError("a slice plane needs a series or a project whose source series loads", path=opened.path,
+                            option="slice_plane")
         ax, _, idx = slice_plane.partition(":")
         if ax.lower() not in ("x", "y", "z", "axial", "coronal", "sagittal"):
-            raise CtuiError(f"--slice {slice_plane}: axis must be z, y or x")
+            raise CtuiError(f"slice plane {slice_plane}: axis must be z, y or x", option="slice_plane")
         try:
             index = int(idx) if idx else None
         except ValueError:
-            raise CtuiError(f"--slice {slice_plane}: INDEX must be a whole number") from None
+            raise CtuiError(f"slice plane {slice_plane}: the index must be a whole number",
+                            option="slice_plane") from None
         o.slice_plane = SlicePlane(axis=ax.lower(), index=index)
         if kind == "series" and mode in VOLUME_MODES:
             o.slice_plane = None
@@ -156,8 +160,8 @@ def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = N
         if opened.kind == "project" and not ids and len(opened.object_ids) == 1:
             ids = opened.object_ids  # the project's only object
         if opened.kind != "project" or opened.geometry is None or len(ids) != 1:
-            raise CtuiError("--flythrough auto needs a .ctui project and one --object (a tubular object)",
-                            path=opened.path)
+            raise CtuiError("an automatic fly-through path needs a .ctui project and one object (a tubular one)",
+                            path=opened.path, option="objects")
         g = opened.geometry
         path = centreline(opened.labels == ids[0], spacing=g.spacing, origin=g.origin, direction=g.direction)
         if path is None or len(path) < 2:
@@ -168,7 +172,7 @@ def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = N
     except ValueError:
         pts = np.zeros((0, 0))
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.isfinite(pts).all() or np.abs(pts).max() > 1e6:
-        raise CtuiError(f"bad --flythrough {spec!r} (want 'auto' or 'x,y,z;x,y,z;...' in mm)")
+        raise CtuiError(f"bad fly-through path {spec!r} (want 'auto' or 'x,y,z;x,y,z;...' in mm)", option="flythrough")
     return pts
 
 
@@ -189,7 +193,7 @@ def _check_numbers(**values: Any) -> None:
         except (TypeError, ValueError):
             ok = False
         if not ok:
-            raise CtuiError(f"--{key} {v!r}: want a finite number from {lo:g} to {hi:g}")
+            raise CtuiError(f"{key} {v!r}: want a finite number from {lo:g} to {hi:g}", option=key)
 
 
 def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
@@ -205,15 +209,15 @@ def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
     outp = Path(out)
     w, h = (int(v) for v in size)
     if not (1 <= w <= defaults.MAX_RENDER_SIDE and 1 <= h <= defaults.MAX_RENDER_SIDE):
-        raise CtuiError(f"--size {w}x{h}: width and height must be 1..{defaults.MAX_RENDER_SIDE}")
+        raise CtuiError(f"image size {w}x{h}: width and height must be 1..{defaults.MAX_RENDER_SIDE}", option="size")
     if turntable is not None and turntable < 1:
-        raise CtuiError("--turntable needs N >= 1")
+        raise CtuiError("a turntable needs at least 1 frame", option="turntable")
     _check_numbers(turntable=turntable, frames=frames, fps=fps, fov=fov, **scene_options)
     op = scene_options.get("opacity")
     if op is not None and not 0.0 <= op <= 1.0:
-        raise CtuiError("--opacity must be between 0 and 1")
+        raise CtuiError("opacity must be between 0 and 1", option="opacity")
     if flythrough is not None and outp.suffix.lower() not in (".gif", ".apng", ""):
-        raise CtuiError("--flythrough writes a .gif/.apng or a folder of PNG frames", path=outp)
+        raise CtuiError("a fly-through is written as a .gif/.apng or a folder of PNG frames", path=outp, option="out")
     if outp.suffix.lower() not in (".png", ".gif", ".apng") and flythrough is None:
         raise CtuiError("output must end in .png, .gif or .apng", path=outp)
     if isinstance(source, Opened):
@@ -229,7 +233,7 @@ def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
     res = RenderResult(os.fspath(outp), opened.kind, mode, (w, h), notes=list(opened.notes))
     if flythrough is not None:
         if frames < 2:
-            raise CtuiError("--frames must be at least 2")
+            raise CtuiError("a fly-through needs at least 2 frames", option="frames")
         path_mm = flythrough_path(flythrough, opened, scene_options.get("objects"))
         save_flythrough(outp, scene, path_mm, frames, (w, h), fov_deg=fov, fps=fps, renderer=renderer)
         res.frames, res.flythrough_points = frames, len(path_mm)
