@@ -271,6 +271,10 @@ class CtuiApp(App):
         text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
         if self.workspace is not None and screen is not self.workspace:
             text += f"[b]Slice workspace[/b]\n{bindings_help(self.workspace)}\n\n"
+        if self.workspace is not None:
+            from ctui.screens.ws_mouse import MOUSE_HELP
+
+            text += MOUSE_HELP
         text += "[b]Command palette[/b]: Ctrl+P lists every action by name.\n"
         text += "Graphics: --graphics auto|sixel|kitty|halfblock|ascii or CTUI_GRAPHICS.\n"
         self.push_screen(TextScreen("ctui help", text))

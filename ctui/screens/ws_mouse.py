@@ -33,6 +33,11 @@ from ctui.screens.imageview import ImageView
 from ctui.screens.strip import ReviewStrip
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
+MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): click = cursor (z: click fills; "
+              "brush down: a dab), drag = paint/erase with the brush down, the ROI box after y; right click or "
+              "Ctrl+click = background seed; Shift/Alt or middle drag = pan; wheel = slices, Ctrl+wheel = zoom; "
+              "click an object in the side panel to select it, the review strip to go to a slice. "
+              "g takes a slice, x,y or x,y,z.\n")
 SEED_COLOR = (0, 230, 255)
 BOX_COLOR = (255, 150, 0)
 
