@@ -267,10 +267,16 @@ class CtuiApp(App):
     def action_help(self) -> None:
         from ctui.screens.dialogs import TextScreen, bindings_help
 
+        from ctui.screens.help import task_help
+
         screen = self.screen
-        text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
+        cols = int(self.size.width * 0.9) - 6  # the help box's text width: groups side by side when it fits
+        if screen is self.workspace:  # by task, the main actions first
+            text = f"[b]Keys on this screen[/b], by task\n\n{task_help((screen, self), width=cols)}\n\n"
+        else:
+            text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
         if self.workspace is not None and screen is not self.workspace:
-            text += f"[b]Slice workspace[/b]\n{bindings_help(self.workspace)}\n\n"
+            text += f"[b]Slice workspace[/b]\n{task_help((self.workspace, self), width=cols)}\n\n"
         if self.workspace is not None:
             from ctui.screens.ws_mouse import MOUSE_HELP
 

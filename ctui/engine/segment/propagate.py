@@ -51,7 +51,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Generator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import cv2
@@ -215,8 +215,11 @@ class _SliceFiller:
                 inr[(lab != 0) & (lab != self.object_id)] = 0
             if s.box is not None:
                 _outside_box(inr, s.box, y0, x0)
+            beyond = None
             if self.region is not None:
-                inr &= self.region.crop(z, y0, y1, x0, x1)
+                allowed = self.region.crop(z, y0, y1, x0, x1)
+                beyond = inr.astype(bool) & ~allowed  # in range but past the guard's cut
+                inr &= allowed
             prevc = np.zeros(inr.shape, np.uint8)
             prevc[py0 - y0:py0 - y0 + pm.shape[0], px0 - x0:px0 - x0 + pm.shape[1]] = pm
             near = _grow(prevc, s.neighbourhood)
@@ -233,6 +236,11 @@ class _SliceFiller:
                 break
             margin = max(margin * 4, max(self.ny, self.nx))  # region leaves the crop: take the whole slice
         comp = self._cut_necks(comp, prevc.astype(bool), near)
+        if beyond is not None and beyond.any():
+            faces = cut_faces(beyond, comp)
+            if faces:
+                self.face = faces + self.face
+                self.cut = "cut"
         self.face = [(fy + y0, fx + x0, n) for fy, fx, n in self.face]
         bb = _bbox(comp)
         if bb is None:
