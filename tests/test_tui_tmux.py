@@ -86,7 +86,7 @@ def test_real_binary_in_tmux(tmux_session, tmp_path, size):
     # help lists the bindings
     _keys(tmux_session, "?")
     screen = _wait(tmux_session, "ctui help")
-    assert "Keys on this screen" in screen and "Cursor left" in screen
+    assert "Keys on this screen" in screen and "Segment" in screen and "Fill" in screen  # by task, main keys first
     _keys(tmux_session, "Escape")
     # resize the window: still alive and redrawn
     subprocess.run(_tmux("resize-window", "-t", tmux_session, "-x", "60", "-y", "20"), capture_output=True, timeout=10, env=_env())

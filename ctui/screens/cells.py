@@ -157,17 +157,29 @@ def physical_image(rgb: np.ndarray, spacing_yx: tuple[float, float], *, max_side
 
 
 def draw_cursor(grid: np.ndarray, vm: ViewMap, x: float, y: float, *, color=(255, 40, 40), radius: int | None = None) -> None:
-    """Draw the red cursor circle (in place) at image pixel (x, y) on a target grid.
+    """Draw the red cursor (in place) at image pixel (x, y) on a target grid.
 
-    The radius is at least 2 display pixels and covers the image pixel when zoomed.
-    A centre dot marks the exact pixel.
+    The glyph scales with the zoom: where an image pixel is drawn at least 2 display
+    pixels wide, a circle around it (radius 1.5 image pixels) with a centre dot; on a
+    small view (one display pixel shows one or more image pixels) four 2-pixel ticks
+    around the pixel and the dot, leaving the anatomy next to it visible (a ring of
+    5 display pixels covered a kidney at 80x24). ``radius`` forces the circle.
     """
     xd, yd = vm.to_display(x, y)
-    if radius is None:
-        radius = int(max(2, round(1.5 * max(vm.sx, vm.sy))))
     c = (int(np.floor(xd)), int(np.floor(yd)))
-    cv2.circle(grid, c, radius, color, 1, lineType=cv2.LINE_8)
-    if 0 <= c[1] < grid.shape[0] and 0 <= c[0] < grid.shape[1]:
+    h, w = grid.shape[:2]
+    scale = max(vm.sx, vm.sy)
+    if radius is None and scale < 2.0:
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            for k in (2, 3):
+                px, py = c[0] + dx * k, c[1] + dy * k
+                if 0 <= py < h and 0 <= px < w:
+                    grid[py, px] = color
+    else:
+        if radius is None:
+            radius = int(max(2, round(1.5 * scale)))
+        cv2.circle(grid, c, radius, color, 1, lineType=cv2.LINE_8)
+    if 0 <= c[1] < h and 0 <= c[0] < w:
         grid[c[1], c[0]] = color
 
 

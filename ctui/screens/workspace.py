@@ -13,12 +13,13 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.containers import Grid, Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Label, ProgressBar, Static
+from textual.widgets import Label, ProgressBar, Static
 
 from ctui.engine.core.windows import apply_window
 from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import JobDone, JobFailed, JobProgress, LabelsChanged, Status
 from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
@@ -61,7 +62,8 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
     WorkspaceScreen #progress-row { height: 1; display: none; }
     WorkspaceScreen #progress-row.on { display: block; }
     WorkspaceScreen #progress-row Label { width: auto; padding: 0 1; }
-    WorkspaceScreen #status { height: 1; background: $boost; padding: 0 1; }
+    WorkspaceScreen #status { height: auto; max-height: 3; background: $boost; padding: 0 1; }
+    WorkspaceScreen #panel.hidden { display: none; }
     """
 
     def __init__(self, session: Session) -> None:
@@ -103,7 +105,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             yield ProgressBar(total=100, id="progress", show_eta=False)
             yield Label("[dim]Esc cancels[/dim]")
         yield Static("", id="status")
-        yield Footer()
+        yield KeyBar(id="keys")  # the main keys, wrapped at narrow widths (80x24)
 
     def on_mount(self) -> None:
         self.refresh_view()
@@ -270,7 +272,20 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         self.update_strip()
 
     def set_status(self, msg: str) -> None:
-        self.query_one("#status", Static).update(msg, layout=False)
+        """The status line; a message longer than the width wraps (up to 3 lines)."""
+        lines = 1 + len(str(msg)) // max(self.size.width - 2, 20)
+        relayout = lines != getattr(self, "_status_lines", 1)
+        self._status_lines = lines
+        self.query_one("#status", Static).update(msg, layout=relayout)
+
+    def action_toggle_panel(self) -> None:
+        """\\: hide or show the side panel (the views get its width: 80x24 terminals)."""
+        panel = self.query_one("#panel", SidePanel)
+        panel.set_class(not panel.has_class("hidden"), "hidden")
+        for iv in self.query(ImageView):
+            iv.token = None
+        self.refresh_view()
+        self.set_status("Side panel hidden: \\ shows it" if panel.has_class("hidden") else "Side panel shown: \\ hides it")
 
     # ------------------------------------------------------------------ messages from workers and screens
     @on(JobDone)
