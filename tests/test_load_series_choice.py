@@ -24,7 +24,7 @@ RTDOSE = "1.2.840.10008.5.1.4.1.1.481.2"
 GSPS = "1.2.840.10008.5.1.4.1.1.11.1"
 SR = "1.2.840.10008.5.1.4.1.1.88.33"
 KO = "1.2.840.10008.5.1.4.1.1.88.59"
-LABELS_HINT = "DICOM-SEG: open it as labels with --labels"
+LABELS_HINT = "DICOM-SEG: open it as labels over its image series"
 
 
 def _object(path: Path, sop_class: str | None, modality: str) -> None:
@@ -76,7 +76,7 @@ def test_image_series_chosen_and_non_image_objects_listed(mixed_folder: Path):
     objects = {sk["file"]: sk for sk in vol.skipped if sk.get("object")}
     assert len(objects) == 6 + 6 + 5
     assert all(objects[f"seg/s{k:03d}.dcm"]["reason"] == LABELS_HINT for k in range(6))
-    assert objects["objects/rs.dcm"]["reason"] == "RTSTRUCT: open it as labels with --labels"
+    assert objects["objects/rs.dcm"]["reason"] == "RTSTRUCT: open it as labels over its image series"
     kinds = {f: sk["object"] for f, sk in objects.items()}
     assert kinds["dose/s000.dcm"] == "RT Dose" and kinds["objects/pr.dcm"] == "presentation state"
     assert kinds["objects/pr_nouid.dcm"] == "presentation state"
@@ -88,7 +88,7 @@ def test_image_series_chosen_and_non_image_objects_listed(mixed_folder: Path):
 
 
 def test_non_image_object_alone_is_not_loadable(mixed_folder: Path):
-    with pytest.raises(LoadError, match="DICOM-SEG: open it as labels with --labels"):
+    with pytest.raises(LoadError, match="DICOM-SEG: open it as labels over its image series"):
         load(mixed_folder / "seg" / "s000.dcm")
     with pytest.raises(LoadError, match=r"only non-image DICOM objects \(KO, RTSTRUCT, SR, presentation state\); "
                                         "open a DICOM-SEG or RTSTRUCT as labels"):

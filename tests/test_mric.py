@@ -253,7 +253,7 @@ def test_without_spacing_refused_unless_given(tmp_path):
     assert not sidecar_path(f).exists() and read_mric(f).spacing is None
     with pytest.raises(CtuiError) as exc:
         mesh_objects(f)
-    assert "--spacing" in str(exc.value) and str(f) in str(exc.value)
+    assert exc.value.option == "spacing" and "voxel spacing" in str(exc.value) and str(f) in str(exc.value)
     assert mesh_objects(f, spacing=(2.0, 1.0, 1.0)).mesh.n_faces > 0
 
 

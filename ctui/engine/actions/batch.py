@@ -297,7 +297,7 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
     jobs = read_manifest(manifest, default_outdir=default_outdir)
     if not jobs:
         raise CtuiError("the manifest holds no job", path=manifest)
-    check_output(out_s, inputs=[manifest, *(j.series for j in jobs if j.series)], label="--out")
+    check_output(out_s, inputs=[manifest, *(j.series for j in jobs if j.series)], label="the results table")
     previous = read_results(out_s)
     rows: dict[int, dict] = {}
     todo = []

@@ -195,7 +195,7 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     if fmt not in FORMATS:
         raise CtuiError(f"unknown format {format!r} (one of {', '.join(FORMATS)})")
     report(progress, 0.0, 1.0, "reading")
-    check_output(out, inputs=[source.path if isinstance(source, Opened) else source, series], label="--out")
+    check_output(out, inputs=[source.path if isinstance(source, Opened) else source, series], label="the output")
     src = export_source(source, series=series, series_uid=series_uid)
     why = unsupported(fmt, series_kind=series_kind(src))
     if why:
@@ -217,7 +217,7 @@ def export(source: str | os.PathLike | Opened, *, format: str, out: str | os.Pat
     ids = [o["id"] for o in objs]
     labels = src.labels if objects is None else np.where(np.isin(src.labels, ids), src.labels, 0).astype(np.uint8)
     if src.series:
-        check_output(out, inputs=[src.series], label="--out")
+        check_output(out, inputs=[src.series], label="the output")
     res = ExportResult(fmt, os.fspath(out), [{"id": o["id"], "name": o["name"]} for o in objs],
                        warnings=list(src.notes))
     p = Path(out)

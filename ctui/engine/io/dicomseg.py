@@ -123,7 +123,7 @@ def source_datasets(path: str | os.PathLike, volume: Any = None, *, series: str 
     """
     p = Path(path)
     if not p.exists():
-        raise CtuiError("the source series is not there (give its folder with --series)", path=p)
+        raise CtuiError("the source series is not there (give its folder)", path=p, option="series")
     headers = _read_headers(p)
     if not headers:
         raise CtuiError("no DICOM image found: DICOM-SEG and RTSTRUCT need the DICOM series the labels were drawn on",

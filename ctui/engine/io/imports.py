@@ -134,7 +134,7 @@ def describe_mismatch(src: Geometry, dst: Geometry) -> str:
 def _refuse(path: Any, src: Geometry, dst: Geometry, why: str) -> CtuiError:
     return CtuiError(f"does not fit the series: {why}: {describe_mismatch(src, dst)}. Resample the label map onto "
                      "the series (e.g. 3D Slicer 'Resample Image (BRAINS)' with the series as reference) or give the "
-                     "series it was drawn on (--series)", path=path)
+                     "series it was drawn on", path=path, option="series")
 
 
 def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02) -> np.ndarray:
@@ -248,8 +248,8 @@ def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "")
     from ctui.engine.io.rtstruct import read_rtstruct, roi_mask
 
     if grid is None:
-        raise CtuiError("an RTSTRUCT holds contours only: open it over the series it was drawn on "
-                        "(ctui open SERIES --labels FILE)", path=p)
+        raise CtuiError("an RTSTRUCT holds contours only: open it as labels over the series it was drawn on",
+                        path=p, option="labels")
     c = read_rtstruct(p)
     if not c.rois:
         raise FormatError("the RTSTRUCT holds no ROI (empty or cut short)", path=p)

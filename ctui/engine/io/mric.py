@@ -267,7 +267,7 @@ def require_spacing(data: MricData, path: str | os.PathLike, spacing=None) -> tu
         return _finite3(spacing, "spacing (dz, dy, dx)", path, positive=True)
     if data.spacing is None:
         raise CtuiError(f"the MRIC file stores no voxel size and {sidecar_path(path).name} is missing; "
-                        f"give --spacing dz,dy,dx (mm)", path=path)
+                        f"give the voxel spacing dz,dy,dx (mm)", path=path, option="spacing")
     return data.spacing
 
 

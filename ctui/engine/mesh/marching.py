@@ -190,7 +190,7 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
     if nt == 0 and nv == 0:
         return None
     check_allocation(nv * 12 * (2 if normals else 1) + nt * 12,
-                     what=f"a surface of {nt:,} triangles", hint="raise --iso or crop the series")
+                     what=f"a surface of {nt:,} triangles", hint="raise the iso value or crop the series")
     verts = np.empty((nv, 3), np.float32)
     norms = np.empty((nv, 3) if normals else (1, 3), np.float32)
     faces = np.empty((nt, 3), np.int32)

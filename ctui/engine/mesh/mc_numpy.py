@@ -58,7 +58,7 @@ def _slab_edges(ins: np.ndarray, z0: int, n_planes: int, shape: tuple[int, int, 
     # the end, where they are concatenated once more
     out = n * (32 + 72)
     check_allocation(n * 120 + out + (kept_bytes + out), what=f"a surface of over {2 * n:,} triangles",
-                     hint="raise --iso or crop the series")
+                     hint="raise the iso value or crop the series")
     for axis, cross in enumerate(crossings):
         z, y, x = np.nonzero(cross)
         z = z + z0

@@ -46,7 +46,7 @@ def check_image_size(size: tuple[int, int], *, msaa: bool = False, max_side: int
     if max_side and (w > max_side or h > max_side):
         raise CtuiError(f"image size {w}x{h}: this OpenGL context draws at most {max_side} pixels a side")
     check_allocation(float(w) * h * (BYTES_PER_PIXEL + (MSAA_BYTES_PER_PIXEL if msaa else 0)),
-                     what=f"rendering a {w}x{h} image", hint="use a smaller --size")
+                     what=f"rendering a {w}x{h} image", hint="use a smaller image size")
 
 
 def _egl_message(exc: BaseException) -> str:

@@ -46,7 +46,7 @@ def check_frames(n: int, size: tuple[int, int]) -> None:
     (``--turntable 2000`` on a small machine)."""
     w, h = int(size[0]), int(size[1])
     check_allocation(float(n) * w * h * ANIMATION_BYTES_PER_PIXEL, what=f"{n} frames of {w}x{h}",
-                     hint="use fewer frames or a smaller --size")
+                     hint="use fewer frames or a smaller image size")
 
 
 def turntable_frames(scene: Scene, n: int, size: tuple[int, int], *, renderer=None,

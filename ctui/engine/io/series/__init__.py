@@ -320,11 +320,12 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
         objects = sorted({d["object"] for d in skipped if d.get("object")})
         if objects and len(reasons) > 1:
             why = (f"no image series, only non-image DICOM objects ({', '.join(objects)})"
-                   + ("; open a DICOM-SEG or RTSTRUCT as labels over its image series with --labels"
+                   + ("; open a DICOM-SEG or RTSTRUCT as labels over its image series"
                       if {"DICOM-SEG", "RTSTRUCT"} & set(objects) else ""))
-        hint = ("; for headerless raw data give shape and dtype (--shape, --dtype)"
+        hint = ("; for headerless raw data give its shape and data type"
                 if any("not a DICOM" in r for r in reasons) else "")
-        raise LoadError(f"nothing loadable: {why}{hint}", path=path_label)
+        option = "labels" if {"DICOM-SEG", "RTSTRUCT"} & set(objects) else ("shape" if hint else None)
+        raise LoadError(f"nothing loadable: {why}{hint}", path=path_label, option=option)
     ordered = dicom._ordered_series(found)
     summaries = [dicom.series_summary(s, ids=ids) for s in ordered]
     chosen = dicom.pick_series(ordered, series, path_label, slices=[d["shape_zyx"][0] for d in summaries])
@@ -334,7 +335,7 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
     if len(ordered) > 1:
         idx = ordered.index(chosen)
         vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "
-                            f"({len(chosen.frames)} images); choose another with series=N (--series N)")
+                            f"({len(chosen.frames)} images); choose another with series=N")
     vol.meta["series_index"] = ordered.index(chosen)
     return vol
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 _STORAGE = "1.2.840.10008.5.1.4.1.1."
-_LABELS_HINT = "open it as labels with --labels"
+_LABELS_HINT = "open it as labels over its image series"
 
 #: exact SOP Class UIDs -> (kind, reason)
 _EXACT: dict[str, tuple[str, str]] = {

@@ -59,8 +59,8 @@ def load_raw(
     """
     shp = parse_shape(shape, path)
     if shp is None:
-        raise CtuiError("raw data needs a shape: (z, y, x) for one file, (y, x) for one file per slice "
-                        "(--shape z,y,x), plus --dtype", path=path)
+        raise CtuiError("raw data needs a shape: (z, y, x) for one file, (y, x) for one file per slice, "
+                        "and a data type", path=path, option="shape")
     dt = parse_dtype(dtype, path)
     warnings = list(warnings or [])
     native = dt.newbyteorder("=")
