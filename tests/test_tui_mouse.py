@@ -199,3 +199,52 @@ async def test_help_names_the_mouse():
 
         text = " ".join(str(w.render()) for w in app.screen.query(Static))
         assert "Mouse" in text and "right click" in text and "wheel" in text
+
+
+async def test_brush_footprint_drawn_at_any_zoom():
+    """With the brush down its footprint (a green circle of the brush radius in mm) is drawn
+    around the cursor: its radius on screen is the radius in mm times the zoom's pixels per mm."""
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        iv = app.workspace.main_view
+        s.brush = 4.0
+        s.tool = "brush"
+        for zoom in (1.0, 4.0):
+            s.zoom = zoom
+            app.workspace.refresh_view()
+            await pilot.pause()
+            grid = iv._grid((iv.size.width, 2 * iv.size.height))
+            ys, xs = np.nonzero(np.all(grid == (80, 255, 80), axis=2))
+            assert ys.size > 8
+            cx, cy = iv.view_map.to_display(*iv.cursor)
+            r = np.hypot(xs - cx, ys - cy)
+            expect = (4.0 + 0.5) * iv.view_map.sx
+            assert abs(float(np.median(r)) - expect) <= 1.5, (zoom, float(np.median(r)), expect)
+        s.tool = None
+        app.workspace.refresh_view()
+        await pilot.pause()
+        grid = iv._grid((iv.size.width, 2 * iv.size.height))
+        assert not np.all(grid == (80, 255, 80), axis=2).any()  # lifted: no footprint
+
+
+async def test_value_readout_raw_and_filtered():
+    s = _cylinder()
+    s.volume.data[s.z, s.y, s.x] = 0  # one dark voxel in the bright cylinder: a median removes it
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        panel = app.workspace.query_one("#panel")
+        assert "Value 0 HU" in str(panel.render()) and "filtered" not in str(panel.render())
+        s.pipeline.add("median", size=3)
+        app.workspace.refresh_view()
+        await pilot.pause()
+        text = str(panel.render())
+        assert "Value 0 HU" in text and "filtered 300" in text
+        # the fill compares the filtered value: a range around 0 rejects it, and says why
+        s.range_ = (-50.0, 50.0)
+        await pilot.press("enter")
+        await pilot.pause()
+        assert s.seg.voxels(1) == 0
+        assert any("filtered value 300" in n.message and "raw 0" in n.message for n in app._notifications)
