@@ -1,5 +1,5 @@
 """DICOM geometry against analytic truths: a gantry-tilted series with uneven gaps keeps
-every voxel of its object (grid grows, z step from the smallest regular gap); hostile
+every voxel of its object (grid grows, z step from the smallest gap, as dcm2niix); hostile
 slice positions (outliers, thousands of distinct gaps) are skipped or bounded; the
 memory limit is checked before the regular grid is allocated; a single slice with a
 negative SpacingBetweenSlices gives a positive voxel size."""
@@ -80,7 +80,7 @@ def test_tilted_uneven_series_keeps_every_voxel(tmp_path):
     vol = load(tmp_path / "tilt")
 
     text = " ".join(vol.warnings)
-    assert "gantry tilt 18.5" in text and "grown" in text and "smallest regular gap" in text
+    assert "gantry tilt 18.5" in text and "grown" in text and "the smallest gap, as dcm2niix" in text
     # the closely spaced part's step (1 mm of table, cos(t) along the normal), not the median
     assert vol.spacing[0] == pytest.approx(np.cos(t), rel=1e-3)
     assert vol.shape[1] > n  # grown: the shear moves part of the sphere past row 64

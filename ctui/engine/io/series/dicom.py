@@ -38,8 +38,8 @@ Pipeline
      dcm2niix does, and the grid grows to keep every pixel (up to 2x; beyond that the
      share cut is said); a warning gives the angle and the growth;
    * uneven gaps (missing slices, variable spacing) are resampled (linear along the
-     normal) at the smallest regular gap, or the user's ``spacing`` dz, on at most 4x
-     the slice count; a warning says what was done. The original positions stay in
+     normal) at the smallest gap as dcm2niix does (at most 2x the slice count), or
+     the user's ``spacing`` dz (at most 4x); a warning says what was done. The original positions stay in
      ``Volume.slice_positions``.
 
 No patient identifiers (name, ID, birth date, accession number, institution) are put
@@ -272,8 +272,8 @@ def load_series(
     """Decode one series into a Volume (see the module docstring).
 
     ``spacing``: (dz, dy, dx) or a number; its dz is the step of the regular grid an
-    unevenly spaced or tilted series is resampled onto (default: the smallest regular
-    gap). In-plane spacing always comes from the header.
+    unevenly spaced or tilted series is resampled onto (default: the smallest gap, at
+    most 2x the slices, as dcm2niix). In-plane spacing always comes from the header.
     """
     n_skipped_at_entry = len(skipped)
     prep = prepare_series(s, path=path, base=base, skipped=skipped, crop=crop, downsample=downsample,
