@@ -1,6 +1,8 @@
 """``ctui segment PATH --seed X,Y,Z (--range LO:HI | --tolerance T) [--background X,Y,Z] [--method ...]``.
 
-Parses arguments and calls :func:`ctui.engine.actions.segment.segment` (the TUI calls the same).
+Parses arguments and calls :func:`ctui.engine.actions.segment.segment`. The TUI's Enter fills
+with the same neck-cut fill (``actions.edit.fill_slice``); its ``p`` propagates slice by slice
+on screen (``screens/propagation.py``).
 """
 
 from __future__ import annotations
@@ -238,7 +240,8 @@ def _thresholds(args: argparse.Namespace) -> list:
 def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=None):
     """Run the segment action for the parsed arguments; returns (Segmentation, pipeline, settings, results).
 
-    ``results``: one dict per object (id, seed, range, stops, warnings), as before the action existed.
+    ``results``: one dict per object (id, seed, range, stops, warnings, neck_cut_slices), as the
+    JSON report and the project record them.
     """
     from ctui.engine.actions.segment import segment
 

@@ -382,7 +382,7 @@ def split_non_manifold(mesh: Mesh) -> Mesh:
     # ordinary edges: two half-edges in opposite directions
     two = starts[counts == 2]
     h1, h2 = order[two], order[two + 1]
-    mate[h1] = h2  # (same direction twice: a flipped face; still joined, as before)
+    mate[h1] = h2  # (same direction twice is a flipped face: joined all the same)
     mate[h2] = h1
     extra_rows: list[np.ndarray] = []  # corner pairs to join on edges left unresolved
     # edges shared by more than two faces: pair across the inside wedges

@@ -30,7 +30,7 @@ of a still breath-hold CT (all 30 classes) this flags no slice, where centroids 
 flagged 27 of 30; a 4-pixel jolt of one slice there is flagged alone.
 
 Other candidates are reported as ``shape_change`` (not flagged). ``confirm=False``
-gives the old behaviour (every candidate flagged).
+flags every candidate (centroids alone).
 
 Units: centroids are reported in pixels (x, y) and in patient mm (x, y, z, through the
 volume geometry); deviations are in mm along the x and y index axes (pixel offset
