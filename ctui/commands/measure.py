@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--path", default=None, metavar='auto|"x,y,z;x,y,z;..."',
                    help="sections along the automatic centreline ('auto') or a path through points in mm")
     p.add_argument("--path-voxels", action="store_true", help="--path points are voxel indices (z,y,x), not mm")
-    p.add_argument("--step", type=number("--step", 0.01, 1000), default=defaults.SECTION_STEP_MM, metavar="MM",
+    p.add_argument("--step", type=float, default=defaults.SECTION_STEP_MM, metavar="MM",
                    help=f"distance between sections (default {defaults.SECTION_STEP_MM:g} mm, as the TUI's M screen)")
     p.add_argument("--between", default=None, metavar="S1,S2",
                    help="volume between the planes normal to the path at arc lengths S1 and S2 mm")

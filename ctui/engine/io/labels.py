@@ -199,6 +199,9 @@ def _geometry_volume(p: Path, data_xyz: np.ndarray, affine_lps: np.ndarray, fmt:
     direction = m / spacing_xyz[None, :]
     if abs(np.linalg.det(direction)) < 1e-6:
         raise FormatError(f"{p}: degenerate geometry (collinear axes) in the {fmt} header")
+    if np.abs(direction.T @ direction - np.eye(3)).max() > 1e-3:
+        raise FormatError(f"{p}: the {fmt} header's axes are not at right angles (a sheared grid): a label map must "
+                          "lie on a rectangular voxel grid; resample it (e.g. 3D Slicer's Resample Scalar Volume)")
     if data_xyz.dtype.kind not in "biuf":
         raise FormatError(f"{p}: label data of type {data_xyz.dtype} is not numeric")
     if data_xyz.dtype.kind == "f":

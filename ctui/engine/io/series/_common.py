@@ -279,6 +279,31 @@ def to_grey(arr: np.ndarray, *, channels_last: bool = True) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- header geometry
+def orthonormal(direction: Any, *, what: str) -> tuple[np.ndarray, list[str]]:
+    """``direction`` (3, 3; columns = index axes) with unit columns at right angles.
+
+    A voxel grid cannot be sheared: a header whose axes are not at right angles (NIfTI
+    sform with off-diagonal shear, MetaImage ``TransformMatrix 1 5 0 ...``) gets the
+    nearest rotation (polar decomposition; handedness kept) and a warning giving the
+    largest change of an axis in degrees. Slight shears (under 0.06 degrees) are kept.
+    Returns (direction, warnings); a degenerate matrix gives the identity (and a warning).
+    """
+    d = np.array(direction, dtype=np.float64).reshape(3, 3)
+    with np.errstate(all="ignore"):
+        norms = np.sqrt((d * d).sum(axis=0))
+    if not (np.all(np.isfinite(d)) and np.all(norms > 1e-9)) or abs(np.linalg.det(d / norms[None, :])) < 1e-6:
+        return np.eye(3), [f"{what} gives degenerate axis directions: axis-aligned directions used"]
+    d = d / norms[None, :]
+    if np.abs(d.T @ d - np.eye(3)).max() < 1e-3:
+        return d, []
+    u, _, vt = np.linalg.svd(d)
+    r = u @ vt
+    cos = np.clip((d * r).sum(axis=0), -1.0, 1.0)
+    worst = float(np.degrees(np.arccos(cos)).max())
+    return r, [f"{what} gives axes that are not at right angles (a shear): the nearest orthonormal directions "
+               f"are used (an axis moves by up to {worst:.1f} degrees)"]
+
+
 def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
                  ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Validate a header's index-axis matrix and origin (NIfTI, NRRD, MetaImage).
@@ -306,6 +331,10 @@ def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
     if abs(np.linalg.det(m / norms[None, :])) < 1e-6:
         m = np.diag(norms)
         warnings.append(f"{what} gives collinear axis directions: axis-aligned directions used")
+    else:
+        d, sheared = orthonormal(m / norms[None, :], what=what)
+        m = d * norms[None, :]
+        warnings += sheared
     o = np.zeros(3)
     try:
         given = np.array(origin, dtype=np.float64).reshape(-1)[:3]

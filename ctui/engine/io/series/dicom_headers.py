@@ -22,6 +22,15 @@ from ctui.engine.core.limits import available_memory, fmt_bytes
 from ctui.engine.io.series._common import rel
 from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
 from ctui.engine.io.series.dicom_sop import _check_image, _NotImage, _Skip
+from ctui.engine.io.series.dicom_values import (  # noqa: F401 - re-exported for the loaders
+    _implausible,
+    _int_or_none,
+    _intercept,
+    _num,
+    _plausible_spacing,
+    _slope,
+    _vec,
+)
 
 _NATIVE_SYNTAXES = {
     "1.2.840.10008.1.2",  # implicit VR little endian
@@ -105,65 +114,6 @@ class Series:
 
 
 # ===================================================================== headers
-def _num(v: Any, default: float | None = None) -> float | None:
-    try:
-        if v is None or v == "":
-            return default
-        if isinstance(v, (list, tuple)) or hasattr(v, "__len__") and not isinstance(v, (str, bytes)):
-            v = v[0]
-        f = float(v)
-    except (TypeError, ValueError, IndexError, OverflowError):
-        return default
-    return f if np.isfinite(f) else default
-
-
-def _slope(v: Any, default: float = 1.0) -> float:
-    """RescaleSlope, or ``default`` when missing or implausible (non-finite, |slope| under
-    1e-6, which zeroes every voxel, or over 1e6)."""
-    f = _num(v)
-    return f if f is not None and 1e-6 <= abs(f) <= 1e6 else default
-
-
-def _implausible(ds: Any) -> str:
-    """What of the header's scaling :func:`_slope`, :func:`_intercept` or the PixelSpacing
-    bounds replace ("" when nothing)."""
-    out = []
-    for key, fn, default in (("RescaleSlope", _slope, 1.0), ("RescaleIntercept", _intercept, 0.0)):
-        v = ds.get(key)
-        if v not in (None, "") and fn(v) == default and _num(v) != default:
-            out.append(f"{key} {str(v)[:24]} (ignored: {default:g} used)")
-    ps = _vec(ds.get("PixelSpacing"), 2)
-    if ps is not None and not (np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5)):
-        out.append(f"PixelSpacing {[float(v) for v in ps]} (outside 0.001..1e5 mm: 1 mm used)")
-    return "; ".join(out)
-
-
-def _intercept(v: Any, default: float = 0.0) -> float:
-    """RescaleIntercept, or ``default`` when missing or implausible (non-finite, > 1e7)."""
-    f = _num(v)
-    return f if f is not None and abs(f) <= 1e7 else default
-
-
-def _int_or_none(v: Any) -> int | None:
-    f = _num(v)
-    return int(f) if f is not None and np.isfinite(f) and abs(f) < 2**31 else None
-
-
-def _vec(v: Any, n: int) -> np.ndarray | None:
-    try:
-        if v is None:
-            return None
-        a = np.array([float(x) for x in v], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        return None
-    # positions / orientations beyond a kilometre are corrupt values, not geometry
-    if a.shape != (n,) or not np.all(np.isfinite(a)) or np.abs(a).max() > 1e6:
-        return None
-    return a
-
-
-
-
 class _Fast:
     """Read-only ``get(keyword)`` over a dataset that decodes simple elements from their
     raw bytes (pydicom's general value conversion costs ~30 us an element, which made
@@ -513,7 +463,7 @@ def _frames_from_dataset(ds: Any, path: str, syntax: str) -> list[Frame]:
     ps = _vec(ds.get("PixelSpacing"), 2)
     if ps is None:
         ps = _vec(ds.get("ImagerPixelSpacing"), 2)
-    if ps is not None and np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5):  # core.limits bounds
+    if ps is not None and _plausible_spacing(ps):
         base.pixel_spacing = (float(ps[0]), float(ps[1]))
     if nframes == 1:
         return [base]
@@ -552,7 +502,7 @@ def _multiframe(ds: Any, base: Frame, nframes: int) -> list[Frame]:
         pm = lookup(own, "PixelMeasuresSequence")
         if pm is not None:
             ps = _vec(pm.get("PixelSpacing"), 2)
-            if ps is not None and np.all(np.isfinite(ps)) and np.all(ps >= 1e-3) and np.all(ps <= 1e5):
+            if ps is not None and _plausible_spacing(ps):
                 f.pixel_spacing = (float(ps[0]), float(ps[1]))
             st = _num(pm.get("SliceThickness"))
             if st is not None:

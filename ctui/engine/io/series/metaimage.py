@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError, LoadError
+from ctui.engine.io.series._common import orthonormal
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series.raw import load_raw
 from ctui.engine.io.series.stacks import _default_spacing_warning, parse_spacing
@@ -158,10 +159,13 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
     org = floats(hdr.get("Offset") or hdr.get("Position") or hdr.get("Origin"), 3, 0.0) or [0.0, 0.0, 0.0]
     tm = hdr.get("TransformMatrix") or hdr.get("Rotation") or hdr.get("Orientation")
     direction = np.eye(3)
+    geo_warnings: list[str] = []
     if tm:
         v = floats(tm, 9, 0.0)
         if v is not None and abs(np.linalg.det(np.array(v).reshape(3, 3))) > 1e-6:
             direction = np.array(v).reshape(3, 3).T  # each triple: one index axis (ITK MetaImageIO)
+            direction, sheared = orthonormal(direction, what="the MetaImage TransformMatrix")
+            geo_warnings = sheared
     datafile = hdr["ElementDataFile"]
     compressed = hdr.get("CompressedData", "False").lower() == "true"
     modality = {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT")
@@ -214,5 +218,5 @@ def load_mhd(path: Path, *, skipped: list[dict[str, str]], crop: Any = None, dow
         keep_order=files is not None,
         source_kind="MetaImage" if files is None else "MetaImage slices",
         zlib_compressed=compressed,
-        warnings=[] if spacing is not None else sp_warnings,
+        warnings=([] if spacing is not None else sp_warnings) + geo_warnings,
     )
