@@ -248,3 +248,34 @@ async def test_value_readout_raw_and_filtered():
         await pilot.pause()
         assert s.seg.voxels(1) == 0
         assert any("filtered value 300" in n.message and "raw 0" in n.message for n in app._notifications)
+
+
+async def test_polygon_scissors_by_clicks():
+    """P then clicks: a triangle on the slice; scissors inside it on this slice erase exactly
+    the engine's polygon mask there (one undo step)."""
+    from ctui.engine.segment.edit import polygon_mask
+
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s.range_ = (200.0, 400.0)
+        await pilot.press("enter")
+        z = s.z
+        before = s.seg.labels.copy()
+        s.x, s.y = 14, 14
+        await pilot.press("P")
+        for v in ((z, 34, 14), (z, 34, 34)):
+            await pilot.click("#main", offset=cell_of_voxel(app, v))
+        assert len(s.polygon) == 3 and s.zyx[0] == z
+        await pilot.press("t")
+        await choose(pilot, "scissors_in_slice")
+        cut = polygon_mask(s.polygon, s.shape[1:]) & (before[z] == 1)
+        assert cut.sum() > 50
+        assert s.seg.voxels(1) == int((before == 1).sum()) - int(cut.sum())
+        assert np.array_equal(s.seg.labels[z + 1], before[z + 1])
+        await pilot.press("u")
+        assert np.array_equal(before, s.seg.labels)
+        await pilot.press("Y")
+        assert s.polygon == [] and not s.polygon_mode
+        assert not app.internal_errors

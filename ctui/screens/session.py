@@ -80,6 +80,8 @@ class Session:
     # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
     roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
     box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
+    polygon: list[tuple[int, int]] = field(default_factory=list)  # scissors polygon, (x, y) voxels on the slices
+    polygon_mode: bool = False  # clicks add polygon points (P starts it; Y clears box and polygon)
     # a project opened without its series (labels only): the series' recorded identity,
     # kept when the project is saved (the stand-in zeros must not replace it)
     source_identity: dict | None = None

@@ -31,6 +31,7 @@ from ctui.engine.segment import review
 from ctui.screens import planes
 from ctui.screens.imageview import ImageView
 from ctui.screens.strip import ReviewStrip
+from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): click = cursor (z: click fills; "
@@ -40,6 +41,7 @@ MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): c
               "g takes a slice, x,y or x,y,z.\n")
 SEED_COLOR = (0, 230, 255)
 BOX_COLOR = (255, 150, 0)
+POLY_COLOR = (255, 220, 60)
 
 MOUSE_BINDINGS = [
     Binding("z", "click_fills", "Click fills on/off", show=False),
@@ -50,6 +52,7 @@ MOUSE_BINDINGS = [
     Binding("left_curly_bracket", "mark(-1)", "Previous marked slice of the proposal", show=False),
     Binding("C", "cut_here", "Cut the proposal at this slice", show=False),
     Binding("A", "accept_to_here", "Accept the proposal from the seed to here", show=False),
+    Binding("P", "polygon_point", "Scissors polygon: a point at the cursor (then clicks add points)", show=False),
 ]
 
 
@@ -99,6 +102,12 @@ def draw_overlay(ws, plane: str, grid, vm) -> None:
     if s.box_corner is not None and s.box_corner[pv.normal] == idx:
         xd, yd = (int(v) for v in disp(s.box_corner))
         cv2.rectangle(grid, (xd - 2, yd - 2), (xd + 2, yd + 2), BOX_COLOR, 1)
+    if s.polygon and pv.normal == 0:
+        pts = [tuple(int(v) for v in disp((idx, y, x))) for x, y in s.polygon]
+        for a, b in zip(pts, pts[1:] + pts[:1] if len(pts) > 2 else pts[1:]):
+            cv2.line(grid, a, b, POLY_COLOR, 1)
+        for p in pts:
+            cv2.rectangle(grid, (p[0] - 1, p[1] - 1), (p[0] + 1, p[1] + 1), POLY_COLOR, 1)
     if s.tool in ("brush", "eraser"):
         xd, yd = disp(s.zyx)
         ax = (max(int(round((s.brush / pv.spacing_yx[1] + 0.5) * vm.sx)), 1),
@@ -107,7 +116,7 @@ def draw_overlay(ws, plane: str, grid, vm) -> None:
         cv2.ellipse(grid, (int(xd), int(yd)), ax, 0, 0, 360, col, 1)
 
 
-class MouseMixin:
+class MouseMixin(ToolsMixin):
     """Mouse handlers and the review/box/seed/3D-edit actions; the host provides ``s``,
     ``app``, ``refresh_view``, ``update_panel``, ``set_status``, ``labels_changed``,
     ``action_fill``, ``dab``, ``stroke``, ``_editable`` and ``proposal``."""
@@ -178,6 +187,11 @@ class MouseMixin:
         s.plane = plane
         s.z, s.y, s.x = zyx
         s.clamp()
+        if s.polygon_mode and planes.plane_view(s.volume, plane).normal == 0:
+            s.polygon.append((int(s.x), int(s.y)))
+            self.set_status(f"Polygon: {len(s.polygon)} point(s); t then Scissors cuts, Y clears")
+            self.refresh_view()
+            return
         if s.box_corner is not None:
             self._drag = ("box", iv, plane, s.zyx)
         elif s.tool in ("brush", "eraser"):
@@ -358,8 +372,10 @@ class MouseMixin:
         self.refresh_view()
 
     def action_box_clear(self) -> None:
-        self.s.roi_box, self.s.box_corner = None, None
-        self.set_status("ROI box off")
+        s = self.s
+        s.roi_box, s.box_corner = None, None
+        s.polygon, s.polygon_mode = [], False
+        self.set_status("ROI box and polygon off")
         self.refresh_view()
 
     # ------------------------------------------------------------------ review of a proposal
@@ -435,76 +451,3 @@ class MouseMixin:
             return
         self.proposal = review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p))
         accept(self)
-
-    # ------------------------------------------------------------------ 3D edit tools (t menu)
-    def _tool(self, fn, msg: str) -> None:
-        if not self._editable():
-            return
-        try:
-            r = fn()
-        except EDIT_ERRORS as exc:
-            self.app.notify(f"{exc} (nothing changed)", severity="warning")
-            return
-        self.labels_changed()
-        self.set_status(msg.format(**r, obj=self.s.current))
-        self.refresh_view()
-
-    def _island(self, keep: bool, in_slice: bool) -> None:
-        s = self.s
-        what = ("Kept the" if keep else "Removed the") + (" slice island" if in_slice else " island")
-        self._tool(lambda: et.island(s.seg, s.zyx, object_id=s.current, keep=keep, in_slice=in_slice, box=s.roi_box),
-                   what + " under the cursor of object {obj}: {removed} voxels removed, {voxels} left (u undoes)")
-
-    def action_keep_island(self) -> None:
-        self._island(True, False)
-
-    def action_keep_island_slice(self) -> None:
-        self._island(True, True)
-
-    def action_remove_island(self) -> None:
-        self._island(False, False)
-
-    def _scissors(self, inside: bool, where: str) -> None:
-        s = self.s
-        if s.roi_box is None:
-            self.app.notify("Scissors cut with the ROI box: set one first (y, or drag after y)", severity="warning")
-            return
-        slices = {"slice": (s.z, s.z), "box": None, "all": (0, s.shape[0] - 1)}[where]
-        self._tool(lambda: et.cut(s.seg, object_id=s.current, box=s.roi_box, inside=inside, slices=slices),
-                   f"Scissors ({'inside' if inside else 'outside'} the box, {where}): " + "{removed} voxels of object {obj} erased (u undoes)")
-
-    def action_scissors_in_slice(self) -> None:
-        self._scissors(True, "slice")
-
-    def action_scissors_in_box(self) -> None:
-        self._scissors(True, "box")
-
-    def action_scissors_in_all(self) -> None:
-        self._scissors(True, "all")
-
-    def action_scissors_out_box(self) -> None:
-        self._scissors(False, "box")
-
-    def action_scissors_out_all(self) -> None:
-        self._scissors(False, "all")
-
-    def action_smooth(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
-        s = self.s
-
-        def done(val: str | None) -> None:
-            if not val or not val.strip():
-                return
-            words = val.replace(":", " ").split()
-            try:
-                method, size = words[0].lower(), float(words[1]) if len(words) > 1 else 3.0
-            except ValueError:
-                self.app.notify("Smooth: write a method and a size in mm, e.g. 'median 3'", severity="error")
-                return
-            self._tool(lambda: et.smooth(s.seg, object_id=s.current, method=method, size_mm=size,
-                                         spacing=tuple(s.volume.spacing), box=s.roi_box),
-                       f"Smoothed ({method} {size:g} mm) object " + "{obj}: {ml_before:.1f} -> {ml:.1f} ml "
-                       "(-{removed} +{added} voxels; u undoes)")
-
-        self.app.push_screen(PromptScreen(f"Smooth object {s.current}: median|opening|closing and a size in mm", "median 3"), done)

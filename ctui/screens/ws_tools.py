@@ -1,0 +1,109 @@
+"""The workspace's 3D edit tools (a mixin under :class:`ctui.screens.ws_mouse.MouseMixin`),
+from the ``t`` menu: keep or remove the island under the cursor (3D or its slice), scissors
+inside or outside the ROI box or a polygon (this slice, the box's slices, all slices),
+smoothing with a size in mm. Each is one undo step of the engine's ``Segmentation``
+through :mod:`ctui.engine.actions.edit`; bad input is a message and nothing changes."""
+
+from __future__ import annotations
+
+from ctui.engine.actions import edit as et
+from ctui.engine.core.errors import CtuiError
+
+EDIT_ERRORS = (CtuiError, ValueError, IndexError)
+
+
+class ToolsMixin:
+    """3D edit actions; the host provides ``s``, ``app``, ``_editable``, ``labels_changed``,
+    ``set_status`` and ``refresh_view``."""
+
+    # ------------------------------------------------------------------ 3D edit tools (t menu)
+    def _tool(self, fn, msg: str) -> None:
+        if not self._editable():
+            return
+        try:
+            r = fn()
+        except EDIT_ERRORS as exc:
+            self.app.notify(f"{exc} (nothing changed)", severity="warning")
+            return
+        self.labels_changed()
+        self.set_status(msg.format(**r, obj=self.s.current))
+        self.refresh_view()
+
+    def _island(self, keep: bool, in_slice: bool) -> None:
+        s = self.s
+        what = ("Kept the" if keep else "Removed the") + (" slice island" if in_slice else " island")
+        self._tool(lambda: et.island(s.seg, s.zyx, object_id=s.current, keep=keep, in_slice=in_slice, box=s.roi_box),
+                   what + " under the cursor of object {obj}: {removed} voxels removed, {voxels} left (u undoes)")
+
+    def action_keep_island(self) -> None:
+        self._island(True, False)
+
+    def action_keep_island_slice(self) -> None:
+        self._island(True, True)
+
+    def action_remove_island(self) -> None:
+        self._island(False, False)
+
+    def _scissors(self, inside: bool, where: str) -> None:
+        """Erase inside/outside the polygon (3 points or more: P) or else the ROI box, on this
+        slice, the box's slices (a polygon: the slice limits, else all) or all slices."""
+        s = self.s
+        poly = s.polygon if len(s.polygon) >= 3 else None
+        if poly is None and s.roi_box is None:
+            self.app.notify("Scissors cut with the ROI box or a polygon: set one first (y / P, or drag after y)",
+                            severity="warning")
+            return
+        nz = s.shape[0]
+        slices = {"slice": (s.z, s.z), "box": None if poly is None else s.limits.slices, "all": (0, nz - 1)}[where]
+        what = "polygon" if poly is not None else "box"
+        self._tool(lambda: et.cut(s.seg, object_id=s.current, box=None if poly else s.roi_box, polygon=poly,
+                                  inside=inside, slices=slices),
+                   f"Scissors ({'inside' if inside else 'outside'} the {what}, {where}): "
+                   + "{removed} voxels of object {obj} erased (u undoes)")
+
+    def action_polygon_point(self) -> None:
+        """P: a polygon point at the cursor (the file's slice plane); clicks then add points too."""
+        s = self.s
+        if not s.polygon_mode:
+            s.polygon = []
+            s.polygon_mode = True
+        s.polygon.append((int(s.x), int(s.y)))
+        self.set_status(f"Polygon: {len(s.polygon)} point(s); click or P adds points, t then Scissors cuts "
+                        "(3 points or more), Y clears")
+        self.refresh_view()
+
+    def action_scissors_in_slice(self) -> None:
+        self._scissors(True, "slice")
+
+    def action_scissors_in_box(self) -> None:
+        self._scissors(True, "box")
+
+    def action_scissors_in_all(self) -> None:
+        self._scissors(True, "all")
+
+    def action_scissors_out_box(self) -> None:
+        self._scissors(False, "box")
+
+    def action_scissors_out_all(self) -> None:
+        self._scissors(False, "all")
+
+    def action_smooth(self) -> None:
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+
+        def done(val: str | None) -> None:
+            if not val or not val.strip():
+                return
+            words = val.replace(":", " ").split()
+            try:
+                method, size = words[0].lower(), float(words[1]) if len(words) > 1 else 3.0
+            except ValueError:
+                self.app.notify("Smooth: write a method and a size in mm, e.g. 'median 3'", severity="error")
+                return
+            self._tool(lambda: et.smooth(s.seg, object_id=s.current, method=method, size_mm=size,
+                                         spacing=tuple(s.volume.spacing), box=s.roi_box),
+                       f"Smoothed ({method} {size:g} mm) object " + "{obj}: {ml_before:.1f} -> {ml:.1f} ml "
+                       "(-{removed} +{added} voxels; u undoes)")
+
+        self.app.push_screen(PromptScreen(f"Smooth object {s.current}: median|opening|closing and a size in mm", "median 3"), done)
