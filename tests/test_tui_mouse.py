@@ -279,3 +279,29 @@ async def test_polygon_scissors_by_clicks():
         await pilot.press("Y")
         assert s.polygon == [] and not s.polygon_mode
         assert not app.internal_errors
+
+
+async def test_shift_drag_pans_and_ortho_click_sets_plane():
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(160, 50)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("plus", "plus")
+        assert s.zoom == 4.0
+        await pilot.pause()
+        c0 = ws.pan_center or ws._view_center()
+        cursor = s.zyx
+        w, h = ws.main_view.size
+        await drag(pilot, "#main", [(w // 2, h // 2), (w // 2 + 8, h // 2), (w // 2 + 16, h // 2)], shift=True)
+        c1 = ws.pan_center
+        assert c1 is not None and c1[0] < c0[0] - 2 and abs(c1[1] - c0[1]) < 1  # dragged right: the view moves left
+        assert s.zyx == cursor  # panning does not move the cursor
+        # the 2x2 layout: a click in the sagittal view moves y and z, keeps x, makes it the active plane
+        await pilot.press("minus", "minus", "0")
+        await pilot.pause()
+        x = s.x
+        target = (5, 30, x)
+        await pilot.click("#o-sagittal", offset=cell_of_voxel(app, target, "#o-sagittal", "sagittal"))
+        assert s.plane == "sagittal" and s.x == x and _near(s.zyx, target), s.zyx
+        assert not app.internal_errors
