@@ -54,26 +54,25 @@ def run(args: argparse.Namespace) -> int:
     import os
     from pathlib import Path
 
-    from ctui.engine.actions.mesh import mesh_objects
+    from ctui.engine.actions.mesh import MESH_SUFFIXES, mesh_objects, save_mesh
     from ctui.engine.actions.options import load_options, parse_floats
     from ctui.engine.core.atomic import check_output
     from ctui.engine.core.errors import CtuiError
     from ctui.engine.core.jsonio import dumps
-    from ctui.engine.io.meshes import FORMATS, save_mesh
 
     from ctui.commands._progress import progress_bar
     from ctui.commands.info import load_kwargs
 
     src = args.input
     out = Path(args.out)
-    if out.suffix.lower() not in FORMATS:
+    if out.suffix.lower() not in MESH_SUFFIXES:
         raise CtuiError(f"unknown mesh format {out.suffix or '(no extension)'}; use .stl, .ply or .obj", path=out)
     if not os.path.exists(src):
         raise CtuiError("no such file or folder", path=src)
     if out.parent and not out.parent.exists():
         raise CtuiError(f"folder {out.parent} does not exist", path=out)
     check_output(out, inputs=[src, args.labels], label="--out")
-    spacing = parse_floats(args.spacing, "--spacing") if getattr(args, "spacing", None) else None
+    spacing = parse_floats(args.spacing, "spacing") if getattr(args, "spacing", None) else None
     load = {k: v for k, v in load_kwargs(args).items() if k != "spacing"}
     if args.labels:  # a label file over its series
         from ctui.engine.actions.opened import open_input

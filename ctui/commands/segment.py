@@ -164,7 +164,7 @@ def parse_range(text: str) -> tuple[float, float]:
 
 
 def build_pipeline(args: argparse.Namespace):
-    from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
+    from ctui.engine.actions.series import Pipeline, parse_filter_spec
 
     window = None
     if args.window:
@@ -187,7 +187,7 @@ def load_volume(path: str, *, series: str | None = None):
 
     if not os.path.exists(path):
         raise _err(f"{path}: no such file or folder")
-    from ctui.engine.io.series import load
+    from ctui.engine.actions.series import load
 
     opts = {"series": series} if series else {}
     return load(path, **opts)
@@ -257,7 +257,7 @@ def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=
 
 
 def objects_report(seg, volume, results) -> list[dict]:
-    from ctui.engine.segment.selection import label_counts
+    from ctui.engine.actions.series import label_counts
 
     vox_ml = volume.voxel_volume_mm3() / 1000.0
     counts = label_counts(seg.labels)  # slab by slab: no int64 copy of the volume
@@ -350,7 +350,7 @@ def _edit_project(args: argparse.Namespace) -> int:
 
     from ctui.engine.actions.opened import open_input
     from ctui.engine.actions.segment import edit_objects
-    from ctui.engine.segment.selection import Segmentation
+    from ctui.engine.actions.series import Segmentation
 
     if not (args.interpolate or args.keep_largest or args.min_island):
         raise _err(f"{args.path}: a project with no --seed: give --interpolate, --keep-largest or --min-island N")

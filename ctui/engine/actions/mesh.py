@@ -16,6 +16,8 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.progress import Progress, report
+from ctui.engine.io.meshes import FORMATS as MESH_SUFFIXES  # re-exported with save_mesh for ctui mesh --out
+from ctui.engine.io.meshes import save_mesh
 from ctui.engine.io.mric import read_mric, require_spacing
 from ctui.engine.mesh import meshtools
 from ctui.engine.mesh.contour_connect import connect_contours
