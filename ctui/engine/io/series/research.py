@@ -121,6 +121,15 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
                    f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements"]
     warnings += bad
     sp, direction = _geometry_from_matrix(m)
+    try:
+        pix = _raw_pixdim(nib, path, hdr)
+    except Exception:  # noqa: BLE001 - a warning only
+        pix = np.ones(3)
+    neg = [a for a in range(min(3, len(shape))) if np.isfinite(pix[a]) and pix[a] < 0]
+    if neg and spacing is None:
+        warnings.append("the NIfTI header gives a negative pixdim along "
+                        f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in neg)}: the voxel size of its affine "
+                        f"({', '.join(f'{v:g}' for v in sp[::-1])} mm, x y z) is used")
     if spacing is not None:
         from ctui.engine.io.series.stacks import parse_spacing
 
@@ -144,7 +153,14 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
                        direction=direction, source_kind="NIfTI", warnings=warnings)
         vol.meta["format"] = "nifti"
         return vol
-    out_dt = np.dtype(np.float32) if scaled or dt.kind == "f" else dt.newbyteorder("=")
+    if dt.kind not in "buif" or (dt.kind == "V" and dt.fields is None):
+        if dt.kind == "c":
+            warnings.append(f"NIfTI of complex values ({dt.name}): the magnitude is loaded")
+        elif dt.fields is not None and len(dt.fields) in (3, 4):
+            warnings.append("NIfTI of RGB colour voxels: the luminance (0.299 R + 0.587 G + 0.114 B) is loaded")
+        else:
+            raise LoadError(f"NIfTI of {dt} voxels is not a scalar volume", path=path)
+    out_dt = np.dtype(np.float32) if scaled or dt.kind in "fcV" else dt.newbyteorder("=")
     oshape = plan.out_shape(full)
     check_memory(int(np.prod(full)) * max(dt.itemsize, out_dt.itemsize) + int(np.prod(oshape)) * out_dt.itemsize,
                  shape=oshape, path=path, limit=memory_limit)
@@ -157,6 +173,11 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
     while arr.ndim > 3:
         arr = arr[..., 0]
     data = arr.T[plan.z, plan.y, plan.x]  # (i, j, k) Fortran -> (k, j, i) C-contiguous view
+    if data.dtype.kind == "c":
+        data = np.abs(data)
+    elif data.dtype.fields is not None:  # RGB(A) records
+        r, g, b = (data[n].astype(np.float32) for n in data.dtype.names[:3])
+        data = r * 0.299 + g * 0.587 + b * 0.114
     data = np.ascontiguousarray(data, dtype=out_dt)
     return _finish(data, sp, direction, origin, path=path, fmt="NIfTI", skipped=skipped, warnings=warnings, plan=plan, full=full)
 
