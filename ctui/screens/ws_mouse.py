@@ -288,8 +288,8 @@ class MouseMixin(ToolsMixin):
 
     def _wheel(self, event, d: int) -> None:
         w = self._under(event)
-        if isinstance(w, ReviewStrip):
-            self.action_slice(d)
+        if isinstance(w, ReviewStrip):  # the strip's axis is the slice index
+            self._go_slice(self.s.z + d)
             return
         iv = self._image_view(event)
         if iv is None:
