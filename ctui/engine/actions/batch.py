@@ -32,6 +32,7 @@ import hashlib
 import io
 import logging
 import os
+import stat
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,8 +44,10 @@ import numpy as np
 from ctui.engine.core.atomic import check_output, check_outputs, write_text
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
+from ctui.engine.core.safetext import csv_cell
 
 MANIFEST_COLUMNS = ("series", "seed", "range", "method", "mode", "background", "filter", "outdir", "sections", "name")
+WRITE_EVERY_S = 2.0  # RESULTS.csv rewritten (atomically) at most this often while jobs finish, and at the end
 RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
                   "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
                   "slices", "project", "mesh", "seconds", "cpu_seconds")
@@ -141,18 +144,50 @@ def _job(n: int, row: dict, base: Path, default_outdir: str) -> Job:
 def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[Job]:
     """Parse MANIFEST.csv (relative paths are relative to its folder). CtuiError when unreadable."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise CtuiError(f"cannot read ({exc.strerror or exc})", path=p) from None
+    text = _read_text(p, what="manifest")
     reader = csv.DictReader(io.StringIO(text))
-    cols = [c.strip().lower() for c in reader.fieldnames or []]
+    try:
+        cols = [c.strip().lower() for c in reader.fieldnames or []]
+    except csv.Error as exc:
+        raise CtuiError(f"not a readable CSV manifest ({exc})", path=p) from None
     missing = [c for c in ("series", "seed", "range") if c not in cols]
     if missing:
         raise CtuiError(f"the manifest lacks the column(s) {', '.join(missing)} (columns: series, seed, range, "
                         "optional method, background, filter, outdir, sections, name)", path=p)
     reader.fieldnames = cols
-    return [_job(n, row, p.parent.resolve(), default_outdir) for n, row in enumerate(reader, start=1)]
+    try:
+        return [_job(n, row, p.parent.resolve(), default_outdir) for n, row in enumerate(reader, start=1)]
+    except csv.Error as exc:  # a field over the csv module's 131,072 characters, a stray NUL...
+        raise CtuiError(f"not a readable CSV manifest (line {reader.line_num}: {exc})", path=p) from None
+
+
+MAX_TABLE_BYTES = 64 << 20  # a manifest or results table larger than this is not one
+
+
+def _read_text(p: Path, *, what: str) -> str:
+    """A regular file's text (at most MAX_TABLE_BYTES): UTF-8 (with or without BOM), UTF-16
+    with a BOM, else Latin-1 (every byte is a character). A device, FIFO or folder is
+    refused (``/dev/zero`` would never end, a FIFO blocks)."""
+    try:
+        st = os.stat(p)
+        if not stat.S_ISREG(st.st_mode):
+            raise CtuiError(f"the {what} is not a regular file", path=p)
+        if st.st_size > MAX_TABLE_BYTES:
+            raise CtuiError(f"the {what} is {st.st_size} bytes: over the {MAX_TABLE_BYTES >> 20} MB a table may have",
+                            path=p)
+        with open(p, "rb") as fh:
+            raw = fh.read(MAX_TABLE_BYTES + 1)
+    except OSError as exc:
+        raise CtuiError(f"cannot read ({exc.strerror or exc})", path=p) from None
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            raise CtuiError(f"the {what} starts with a UTF-16 mark but is not UTF-16 text", path=p) from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
 
 
 # =========================================================================== one job
@@ -230,9 +265,9 @@ def read_results(path: str | os.PathLike) -> dict[str, dict]:
     """{job key: row} of an existing RESULTS.csv ({} when absent or unreadable)."""
     try:
         text = Path(path).read_text(encoding="utf-8")
-    except OSError:
+        return {r["job"]: r for r in csv.DictReader(io.StringIO(text)) if r.get("job")}
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError):  # absent, or not a table ctui wrote: rewritten
         return {}
-    return {r["job"]: r for r in csv.DictReader(io.StringIO(text)) if r.get("job")}
 
 
 def write_results(path: str | os.PathLike, rows: list[dict]) -> None:
@@ -240,8 +275,9 @@ def write_results(path: str | os.PathLike, rows: list[dict]) -> None:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=RESULT_COLUMNS, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
-    for r in rows:
-        w.writerow({k: "" if r.get(k) is None else r.get(k) for k in RESULT_COLUMNS})
+    for r in rows:  # free text (names, errors) cannot become a spreadsheet formula (OWASP)
+        w.writerow({k: "" if r.get(k) is None else csv_cell(r.get(k)) if k in ("name", "error") else r.get(k)
+                    for k in RESULT_COLUMNS})
     write_text(path, buf.getvalue())
 
 
@@ -270,9 +306,12 @@ def _client(scheduler: str | None, workers: int | None, processes: bool) -> tupl
     from distributed import Client, LocalCluster
 
     if scheduler:
+        if not str(scheduler).startswith(("tcp://", "tls://", "ucx://", "ws://", "wss://", "inproc://")):
+            raise CtuiError(f"--scheduler {scheduler!r}: want the address of a running Dask scheduler, "
+                            "tcp://HOST:PORT")
         try:
             return Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
             raise CtuiError(f"cannot reach the Dask scheduler at {scheduler} ({' '.join(str(exc).split())[:120]})") \
                 from None
     extra = {"env": dict.fromkeys(SINGLE_THREAD_ENV, "1")} if processes else {}  # one core per job
@@ -310,6 +349,7 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
     order = lambda: [rows[j.row] for j in jobs if j.row in rows]
     write_results(out_s, order())
     report(progress, len(rows), len(jobs), f"{len(rows)} done before")
+    last_write = time.perf_counter()
     if todo:
         client, cluster = _client(scheduler, workers, processes)
         try:
@@ -324,8 +364,11 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
                 rows[j.row] = row
                 res.ran += 1
                 res.failed += row.get("status") != "ok"
-                write_results(out_s, order())
+                if time.perf_counter() - last_write >= WRITE_EVERY_S:  # not after every job: quadratic in rows
+                    write_results(out_s, order())
+                    last_write = time.perf_counter()
                 report(progress, len(rows), len(jobs), f"{j.name}: {row.get('status')}")
+            write_results(out_s, order())
         finally:
             client.close()
             if cluster is not None:

@@ -214,6 +214,7 @@ def write_csv(job: ExportJob) -> list[dict]:
 
     from ctui.engine.core.atomic import write_text
     from ctui.engine.core.progress import report
+    from ctui.engine.core.safetext import csv_cell
     from ctui.engine.measure.stats import object_stats  # numpy, scipy, the mesh stack
 
     g = job.src.geometry
@@ -231,7 +232,7 @@ def write_csv(job: ExportJob) -> list[dict]:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_KEYS, lineterminator="\n")
     w.writeheader()
-    w.writerows(rows)
+    w.writerows({k: csv_cell(v) for k, v in r.items()} for r in rows)  # names from files: no formulas (OWASP)
     write_text(job.path, buf.getvalue())
     return rows
 
