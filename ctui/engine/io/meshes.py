@@ -191,7 +191,7 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     # 10.6x): checked against the process's limits (RLIMIT_AS, cgroup), not a MemoryError
     check_allocation(12 * p.stat().st_size, what=f"reading this {ext[1:].upper()} mesh", path=p)
     if ext == ".stl":
-        return _load_stl(p)
+        return _usable(p, _load_stl(p))
     import trimesh
 
     try:
@@ -223,4 +223,19 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
             normals = np.asarray(vn, np.float32)
     except Exception:
         normals = None
-    return Mesh(vertices=v, faces=f.astype(np.int32), normals=normals, meta={"source": p.name, "format": ext[1:]})
+    return _usable(p, Mesh(vertices=v, faces=f.astype(np.int32), normals=normals,
+                           meta={"source": p.name, "format": ext[1:]}))
+
+
+def _usable(p: Path, mesh: Mesh) -> Mesh:
+    """``mesh``, unless it has no triangle of non-zero area (then measure would report 0 mL
+    and render a blank image with exit 0): FormatError. Chunked cross products (1 M faces)."""
+    v, f = mesh.vertices, mesh.faces
+    if len(f) == 0:
+        raise FormatError(f"{p}: no triangles found")
+    for i in range(0, len(f), 1 << 20):
+        t = v[f[i:i + (1 << 20)]].astype(np.float64)
+        if np.any(np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).max(axis=1) > 0):
+            return mesh
+    raise FormatError(f"{p}: every one of its {len(f)} triangles is degenerate (zero area): no surface to measure "
+                      "or render")
