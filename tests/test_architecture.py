@@ -117,3 +117,24 @@ def test_no_string_named_imports_in_the_ui():
             if "import_module" in code or "__import__(" in code or re.search(r"""\bengine\(\s*["']""", code):
                 bad.append(f"{p.relative_to(ROOT)}:{k}: {line.strip()}")
     assert not bad, "string-named imports: " + "; ".join(bad)
+
+
+def test_no_module_writes_another_objects_private_attributes():
+    """``obj._name = ...`` (or setattr(obj, "_name", ...)) only on ``self``/``cls``: a screen,
+    a worker or a helper module changes another object's state through its methods."""
+    bad = []
+    for p in _py_files():
+        for node in ast.walk(ast.parse(p.read_text())):
+            targets = node.targets if isinstance(node, ast.Assign) else \
+                [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+            for t in targets:
+                for e in ast.walk(t):
+                    if (isinstance(e, ast.Attribute) and isinstance(e.ctx, ast.Store) and e.attr.startswith("_")
+                            and not e.attr.startswith("__")
+                            and not (isinstance(e.value, ast.Name) and e.value.id in ("self", "cls"))):
+                        bad.append(f"{p.relative_to(ROOT)}:{e.lineno} {ast.unparse(e)}")
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "setattr"
+                    and len(node.args) > 1 and isinstance(node.args[1], ast.Constant)
+                    and str(node.args[1].value).startswith("_")):
+                bad.append(f"{p.relative_to(ROOT)}:{node.lineno} {ast.unparse(node)}")
+    assert not bad, "writes to another object's private attributes: " + "; ".join(bad)

@@ -56,10 +56,12 @@ class CtuiApp(App):
         self.project_file = project
         self.graphics = graphics
         if graphics:
-            from ctui.screens import graphics as _g
+            from ctui.screens.graphics import use_graphics
 
-            if graphics in ("halfblock", "ascii") or _g._chosen is None:
-                _g._chosen = graphics if graphics in ("halfblock", "ascii") else "halfblock"
+            if graphics in ("halfblock", "ascii"):
+                use_graphics(graphics)
+            else:  # sixel/kitty need the terminal probed before Textual starts: half-blocks unless it was
+                use_graphics("halfblock", unless_chosen=True)
         self.load_options = load_options
         self.session: Session | None = session
         self.workspace = None

@@ -70,6 +70,14 @@ def prepare_graphics(mode: str | None = None) -> str:
     return mode
 
 
+def use_graphics(mode: str, *, unless_chosen: bool = False) -> None:
+    """Record ``mode`` as the graphics mode without probing the terminal (``unless_chosen``:
+    keep a mode :func:`prepare_graphics` already chose)."""
+    global _chosen
+    if not (unless_chosen and _chosen is not None):
+        _chosen = mode
+
+
 def graphics_mode() -> str:
     """The mode chosen by :func:`prepare_graphics` (``halfblock`` if it never ran)."""
     return _chosen or "halfblock"

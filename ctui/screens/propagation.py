@@ -89,7 +89,7 @@ def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | N
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
-    ws._prop = run
+    ws.track_propagation(run)
     ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})", 0, 100)
     ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
                   name="segment")
@@ -161,7 +161,7 @@ def start_propagation(ws, direction: str) -> None:
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
-    ws._prop = run
+    ws.track_propagation(run)
     ws.show_progress(f"Propagating object {s.current} {direction}", 0, s.shape[0])
     ws.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
 
@@ -195,7 +195,7 @@ def _work(run: PropagationRun, settings) -> None:
 
 
 def finished(ws, run: PropagationRun) -> None:
-    ws._prop = None
+    ws.track_propagation(None)
     ws.show_progress(None)
     p = run.proposal
     ws.proposal = p

@@ -82,6 +82,15 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         self.last_views = None
         self.last_export: str | None = None
 
+    def track_job(self, worker):
+        """Make ``worker`` the running cancellable job (Escape cancels it); returns it."""
+        self._job = worker
+        return worker
+
+    def track_propagation(self, run) -> None:
+        """The running propagation (a ``screens.propagation.PropagationRun``), or None when it ended."""
+        self._prop = run
+
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
         with Horizontal(id="views"):

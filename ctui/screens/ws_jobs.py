@@ -73,5 +73,4 @@ def run_job(ws, fn, *, what: str, name: str) -> Worker:
             return
         ws.post_message(JobDone("message", msg))
 
-    ws._job = ws.run_worker(body, thread=True, group="job", name=name)
-    return ws._job
+    return ws.track_job(ws.run_worker(body, thread=True, group="job", name=name))
