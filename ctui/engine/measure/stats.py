@@ -67,6 +67,34 @@ def edge_counts(faces: np.ndarray) -> tuple[int, int]:
     return int((counts == 1).sum()), int((counts > 2).sum())
 
 
+def _component_sums(v: np.ndarray, f: np.ndarray, flab: np.ndarray, n: int, areas: np.ndarray) -> tuple:
+    """Per component k < n: signed Gauss volume (origin at the vertices' mean, as
+    :func:`signed_volume_mm3`), area, face count, boundary and non-manifold edge counts,
+    and the bounding box (lo, hi) of its vertices."""
+    if n == 0:
+        z = np.zeros(0)
+        return z, z, z.astype(np.int64), z.astype(np.int64), z.astype(np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+    c = v - v.mean(axis=0)
+    term = np.einsum("ij,ij->i", c[f[:, 0]], np.cross(c[f[:, 1]], c[f[:, 2]])) / 6.0
+    vols = np.bincount(flab, weights=term, minlength=n)
+    barea = np.bincount(flab, weights=areas, minlength=n)
+    nfaces = np.bincount(flab, minlength=n)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e.sort(axis=1)
+    _, first, counts = np.unique(e, axis=0, return_index=True, return_counts=True)
+    elab = np.tile(flab, 3)[first]
+    bnd = np.bincount(elab[counts == 1], minlength=n)
+    nonman = np.bincount(elab[counts > 2], minlength=n)
+    vlab = np.full(len(v), -1, np.int64)
+    vlab[f.ravel()] = np.repeat(flab, 3)
+    used = np.flatnonzero(vlab >= 0)
+    order = used[np.argsort(vlab[used], kind="stable")]
+    starts = np.searchsorted(vlab[order], np.arange(n))
+    lo = np.minimum.reduceat(v[order], starts, axis=0)
+    hi = np.maximum.reduceat(v[order], starts, axis=0)
+    return vols, barea, nfaces, bnd, nonman, lo, hi
+
+
 def mesh_stats(mesh: Mesh) -> dict[str, Any]:
     """Volume (Gauss theorem) and area of a mesh, per connected component.
 
@@ -83,25 +111,15 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
     f = np.asarray(mesh.faces, dtype=np.int64)
     n, flab = mesh_components(mesh)
     areas = face_areas(v, f)
-    comps = []
     warnings = []
-    total = 0.0
-    boxes = []
-    for k in range(n):
-        fk = f[flab == k]
-        vol = signed_volume_mm3(v, fk)
-        b, nm = edge_counts(fk)
-        pk = v[np.unique(fk)]
-        boxes.append((pk.min(axis=0), pk.max(axis=0)))
-        comps.append({
-            "volume_mm3": vol,
-            "area_mm2": float(areas[flab == k].sum()),
-            "faces": len(fk),
-            "closed": b == 0,
-            "boundary_edges": b,
-            "nonmanifold_edges": nm,
-        })
-        total += vol
+    # per-component sums in one pass each (bincount), not one pass over the mesh per
+    # component: 32,000 islands took 95 s (quadratic), now linear
+    vols, barea, nfaces, bnd, nonman, lo, hi = _component_sums(v, f, flab, n, areas)
+    comps = [{"volume_mm3": float(vols[k]), "area_mm2": float(barea[k]), "faces": int(nfaces[k]),
+              "closed": bool(bnd[k] == 0), "boundary_edges": int(bnd[k]), "nonmanifold_edges": int(nonman[k])}
+             for k in range(n)]
+    boxes = list(zip(lo, hi))
+    total = float(vols.sum())
     if total < 0:  # the mesh is oriented inwards as a whole
         total = -total
         for c in comps:
@@ -117,7 +135,9 @@ def mesh_stats(mesh: Mesh) -> dict[str, Any]:
     # lies outside every positive component is turned inside out (flipped faces)
     pos = [boxes[i] for i, c in enumerate(comps) if c["volume_mm3"] > 0]
     neg = [i for i, c in enumerate(comps) if c["volume_mm3"] < 0]
-    flipped = [i for i in neg if not any(np.all(lo <= boxes[i][0]) and np.all(boxes[i][1] <= hi) for lo, hi in pos)]
+    plo = np.array([p[0] for p in pos]).reshape(-1, 3)
+    phi = np.array([p[1] for p in pos]).reshape(-1, 3)
+    flipped = [i for i in neg if not np.any(np.all(plo <= boxes[i][0], axis=1) & np.all(boxes[i][1] <= phi, axis=1))]
     if flipped and n > 1:
         warnings.append(f"{len(flipped)} component(s) outside the others enclose negative volume (flipped faces)")
     comps.sort(key=lambda c: -abs(c["volume_mm3"]))
