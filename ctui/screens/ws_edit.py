@@ -20,12 +20,6 @@ class EditMixin:
     ``update_panel``, ``set_status`` and ``labels_changed``."""
 
     # ------------------------------------------------------------------ guards
-    def _need_seg(self) -> bool:
-        if self.s.seg is None or self.s.pipeline is None:
-            self.app.notify("The selection engine is not available in this build", severity="error")
-            return False
-        return True
-
     def _busy(self) -> bool:
         """Label edits wait while a propagation reads the labels (Escape cancels it)."""
         if self._prop is not None:
@@ -34,7 +28,7 @@ class EditMixin:
         return False
 
     def _editable(self) -> bool:
-        return not self._busy() and self._need_seg()
+        return not self._busy()
 
     def _edited(self, msg: str) -> None:
         self.labels_changed()
@@ -282,8 +276,6 @@ class EditMixin:
 
     # ------------------------------------------------------------------ objects
     def action_new_object(self) -> None:
-        if not self._need_seg():
-            return
         try:
             self.s.current = self.s.seg.add_object()
         except ValueError as exc:
@@ -296,8 +288,6 @@ class EditMixin:
         from ctui.screens.dialogs import PromptScreen
 
         s = self.s
-        if not self._need_seg():
-            return
         s.seg.add_object(object_id=s.current)
         info = s.seg.objects[s.current]
 

@@ -254,15 +254,13 @@ class NavMixin:
     def action_propagate(self, direction: str) -> None:
         from ctui.screens.propagation import start_propagation
 
-        if self._need_seg():
-            start_propagation(self, direction)
+        start_propagation(self, direction)
 
     def action_segment_here(self) -> None:
         """S: the current object from the cursor, with the segmentation panel's options (actions.segment)."""
         from ctui.screens.propagation import start_segment
 
-        if self._need_seg():
-            start_segment(self, "both")
+        start_segment(self, "both")
 
     def action_segment_panel(self) -> None:
         from ctui.screens.segpanel import SegmentPanel, describe
@@ -304,9 +302,6 @@ class NavMixin:
         from ctui.screens.pipeline_editor import PipelineEditor
 
         if self._busy():
-            return
-        if self.s.pipeline is None:
-            self.app.notify("The pipeline engine is not available in this build", severity="error")
             return
         self.app.push_screen(PipelineEditor(self.s), lambda _=None: self._after_pipeline())
 
