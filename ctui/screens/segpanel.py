@@ -67,7 +67,7 @@ class SegmentPanel(ModalScreen):
     SegmentPanel Horizontal { height: auto; }
     SegmentPanel Label { width: 18; padding: 1 0 0 0; }
     SegmentPanel Input, SegmentPanel Select { width: 1fr; }
-    SegmentPanel #hint { width: 1fr; color: $text-muted; padding: 0; }
+    SegmentPanel .hint { width: 1fr; color: $text-muted; padding: 0; }
     """
     BINDINGS = [("escape", "dismiss_panel", "Cancel")]
 
@@ -81,7 +81,7 @@ class SegmentPanel(ModalScreen):
         rtxt = rng if isinstance(rng, str) else f"{rng[0]:g}:{rng[1]:g}"
         neck = o.get("neck")
         with Vertical():
-            yield Label("Segmentation (S segments from the cursor, p from the object's seed)", id="hint")
+            yield Label("Segmentation (S segments from the cursor, p from the object's seed)", classes="hint")
             with Horizontal():
                 yield Label("Method")
                 yield Select([(m, m) for m in METHODS], value=o.get("method", "fill"), allow_blank=False, id="method")
@@ -101,7 +101,7 @@ class SegmentPanel(ModalScreen):
             yield Checkbox("Fill holes inside the object", value=bool(o.get("fill_holes", True)), id="fill_holes")
             yield Checkbox("Keep the largest 3D island", value=bool(o.get("keep_largest", False)), id="keep_largest")
             yield Checkbox("Fill between key slices", value=bool(o.get("interpolate", False)), id="interpolate")
-            yield Label("Fields are pre-filled: Ctrl+U clears one. Enter applies, Escape cancels.", id="hint")
+            yield Label("Fields are pre-filled: Ctrl+U clears one. Enter applies, Escape cancels.", classes="hint")
             with Horizontal():
                 yield Button("Apply", id="apply", variant="primary")
                 yield Button("Cancel", id="cancel")
