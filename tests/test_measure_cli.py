@@ -205,3 +205,9 @@ def test_labels_over_a_volume_that_does_not_match_is_refused(capsys, aorta_crop,
     nib.save(nib.Nifti1Image(np.asarray(img.dataobj), aff), tmp_path / "shifted.nii.gz")
     rc, out, err = _run(capsys, ct, "--labels", tmp_path / "shifted.nii.gz")
     assert rc == 2 and "fraction of a voxel" in err
+
+
+def test_values_need_the_series(label_file, capsys):
+    p, _, _ = label_file
+    rc, out, err = _run(capsys, p, "--values")
+    assert rc == 2 and "grey-level statistics need the series" in err

@@ -52,6 +52,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--partial-volume", action="store_true",
                    help="project input: measure sections, and a third volume, on the object's partial-volume "
                    "fraction from the series' grey levels (sub-voxel; for small vessels and rods)")
+    p.add_argument("--values", action="store_true",
+                   help="the object's grey-level statistics (HU for CT: mean, sd, percentiles) from the series "
+                   "(a project's series is loaded; on with --labels)")
     p.add_argument("--labels", metavar="FILE", default=None,
                    help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the volume INPUT (a DICOM "
                    "series or a NIfTI/NRRD/MetaImage CT: its grey levels give HU statistics and --partial-volume); "
@@ -97,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
         source = open_input(args.input, labels=args.labels)
     res = measure_object(source, object=args.object, path=args.path or None, path_voxels=args.path_voxels,
                          step_mm=args.step, between=between, mesh=not args.no_mesh, area=args.area,
-                         average_mm=args.average, partial_volume=args.partial_volume)
+                         average_mm=args.average, partial_volume=args.partial_volume,
+                         values=bool(args.values or args.labels))
     written = save_sections(res, csv=args.csv, plot=args.plot, references=refs, path_csv=args.path_csv)
     if args.json:
         print(dumps(res, indent=1))

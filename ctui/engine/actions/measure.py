@@ -28,7 +28,7 @@ class MeasureResult:
     sections left out: end caps, branches, outside), between ({volume_ml, area1_mm2,
     area2_mm2}) when a path was given; path ({index, s_mm, x_mm, y_mm, z_mm} per point: the
     centreline or given path, patient mm); values ({unit, mean, sd, min, p5, median, p95,
-    max, voxels}: the object's grey levels, HU for CT) when the series is loaded;
+    max, voxels}: the object's grey levels, HU for CT) when asked for;
     rows (full section dicts with contours) and path_mm (n, 3) for drawing, not in JSON.
     """
 
@@ -90,7 +90,8 @@ def _mesh_input(opened: Opened) -> MeasureResult:
 def measure_object(source: str | os.PathLike | Opened, *, object: int | None = None, path: Any = None,
                    path_voxels: bool = False, step_mm: float = defaults.SECTION_STEP_MM,
                    between: Sequence[float] | None = None, mesh: bool = True, area: str = defaults.SECTION_AREA,
-                   average_mm: float = defaults.SECTION_AVERAGE_MM, partial_volume: bool = False) -> MeasureResult:
+                   average_mm: float = defaults.SECTION_AVERAGE_MM, partial_volume: bool = False,
+                   values: bool = False) -> MeasureResult:
     """Measure one object of a project / label map (or a mesh file: volume and area only).
 
     ``object``: its id (default: the first present). ``path``: None (no sections),
@@ -98,6 +99,8 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     (n, 3) array; sections every ``step_mm``; ``between`` (s1, s2) mm: the volume between
     the planes normal to the path there. ``partial_volume``: sections and a third volume
     on the object's partial-volume fraction from the source series' grey levels.
+    ``values``: the object's grey-level statistics (HU for CT) from the series (a
+    project's series is loaded for it).
     """
     if not 0.01 <= step_mm <= 1000:  # also NaN: bounded work (sections = path length / step)
         raise CtuiError(f"the section step must be from 0.01 to 1000 mm, got {step_mm}", option="step_mm")
@@ -116,7 +119,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
         if input_kind(p) not in ("project", "labels", "mesh"):
             raise CtuiError("unknown input type (expected .ctui, .nii, .nii.gz, .nrrd, .seg.nrrd, a DICOM-SEG or "
                             "RTSTRUCT file, .stl, .ply or .obj)", path=p)
-        opened = open_input(p, require_labels=True, with_series=True if partial_volume else None)
+        opened = open_input(p, require_labels=True, with_series=True if partial_volume or values else None)
     if opened.kind == "mesh":
         if path is not None or between is not None:
             raise CtuiError("a mesh gives volume and area only (no path, no volume between planes)", path=opened.path,
@@ -138,9 +141,11 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
                                  average_mm=average_mm, image=image)
     pv = res.get("partial_volume")
     vol = opened.volume
-    values = None
-    if vol is not None and not (vol.meta or {}).get("labels_only") and tuple(vol.shape) == tuple(g.shape):
-        values = object_values(vol.data, opened.mask(oid), modality=vol.modality)
+    grey = None
+    if values:
+        if vol is None or (vol.meta or {}).get("labels_only") or tuple(vol.shape) != tuple(g.shape):
+            raise CtuiError("grey-level statistics need the series the labels were drawn on", path=opened.path)
+        grey = object_values(vol.data, opened.mask(oid), modality=vol.modality)
     return MeasureResult(
         os.path.basename(opened.path), object=res["object"], volume_ml=res["volume_ml"],
         volume_difference_percent=res["volume_difference_percent"], area_mm2=res["area_mm2"],
@@ -148,7 +153,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
         centroid_mm=res["centroid_mm"], principal_axes_mm=res["principal_axes_mm"],
         partial_volume=None if pv is None else {"object_value": pv["fg"], "surroundings_value": pv["bg"]},
         warnings=list(opened.notes) + list(res["warnings"]), step_mm=step_mm, rows=res["rows"],
-        path_mm=res["path_mm"], stats=res["stats"], section_flags=res.get("section_flags"), values=values)
+        path_mm=res["path_mm"], stats=res["stats"], section_flags=res.get("section_flags"), values=grey)
 
 
 def save_sections(result: MeasureResult, *, csv: str | os.PathLike | None = None,
