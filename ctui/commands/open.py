@@ -28,8 +28,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import sys
+
+    if sys.stderr is not None and sys.stderr.isatty():  # on screen at once, before the heavy imports
+        sys.stderr.write(f"ctui: opening {args.path or 'the bundled sample series'} ...\n")
+        sys.stderr.flush()
     from ctui.engine.core.errors import CtuiError
-    from ctui.screens.graphics import prepare_graphics
+    from ctui.screens.graphics import enable_truecolor, prepare_graphics
+
+    enable_truecolor()  # tmux with RGB, or a terminal that always does 24-bit: no banding, no warning
 
     try:
         mode = prepare_graphics(args.graphics)  # before Textual owns the terminal

@@ -34,6 +34,9 @@ __all__ = ["AUTOSAVE_SECONDS", "CtuiApp", "LoadingScreen", "project_from_session
 AUTOSAVE_SECONDS = 180.0
 
 
+SIDECARS = (".json", ".txt", ".md", ".csv", ".xml", ".html", ".pdf", ".log", ".yaml", ".yml", ".py", ".sh")
+
+
 class CtuiApp(App):
     """ctui: slice series to measured 3D models, from the keyboard."""
 
@@ -184,7 +187,10 @@ class CtuiApp(App):
         self.session = session
         for w in session.volume.warnings[:3] if recovery else []:
             self.notify(w, title="Series", severity="warning", timeout=6)
-        skipped = session.volume.skipped if recovery else []
+        # sidecar files (the sample's truth.json, notes, tables) are not images anyone expected
+        # to load: listed by `ctui info`, not announced
+        skipped = [sk for sk in (session.volume.skipped if recovery else [])
+                   if not str(sk.get("file", "")).lower().endswith(SIDECARS)]
         if len(skipped) == 1:
             sk = skipped[0]
             self.notify(f"Skipped {sk.get('file')}: {sk.get('reason')}", severity="information", timeout=4)

@@ -88,21 +88,73 @@ def cell_pixels() -> tuple[int, int]:
     return _cell_px
 
 
-def colour_advice(color_system: str | None) -> str | None:
-    """A one-time hint when the terminal only gets 256 (or fewer) colours.
+#: TERM_PROGRAM values of terminals that always draw 24-bit colour
+TRUECOLOR_PROGRAMS = ("iTerm.app", "WezTerm", "vscode", "ghostty", "Hyper", "rio", "Tabby")
+TMUX_FIX = "set -ga terminal-overrides ',*:RGB' in ~/.tmux.conf (or start tmux with -T RGB)"
 
-    Grey CT slices band visibly in 256 colours; over SSH COLORTERM is usually not
-    forwarded, so Rich falls back to 256 colours even on truecolor terminals.
+
+def tmux_rgb(env=None) -> bool | None:
+    """Inside tmux: whether tmux passes 24-bit colour to the terminal it is drawn on
+    (its client's features name RGB or Tc); None outside tmux or when tmux does not say
+    (a detached session, tmux before 3.2)."""
+    import subprocess
+
+    env = os.environ if env is None else env
+    if not env.get("TMUX"):
+        return None
+    try:
+        out = subprocess.run(["tmux", "display-message", "-p", "#{client_termfeatures}"], capture_output=True,
+                             text=True, timeout=1.0).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if not out:
+        return None
+    feats = {f.strip() for f in out.split(",")}
+    return bool(feats & {"RGB", "Tc"})
+
+
+def truecolor_available(env=None) -> bool:
+    """Whether the terminal takes 24-bit colour although COLORTERM does not say so
+    (tmux with RGB passed through, or a terminal that always does)."""
+    env = os.environ if env is None else env
+    if str(env.get("COLORTERM", "")).lower() in ("truecolor", "24bit"):
+        return True
+    if env.get("TMUX"):
+        return bool(tmux_rgb(env))
+    return env.get("TERM_PROGRAM", "") in TRUECOLOR_PROGRAMS or str(env.get("TERM", "")).endswith("-direct")
+
+
+def enable_truecolor() -> bool:
+    """Before the app starts: set COLORTERM=truecolor when the terminal takes 24-bit
+    colour but does not say so (Rich would fall back to 256 colours and grey slices
+    would band). Never overrides TEXTUAL_COLOR_SYSTEM. True when truecolor is on."""
+    if os.environ.get("TEXTUAL_COLOR_SYSTEM"):
+        return os.environ["TEXTUAL_COLOR_SYSTEM"] == "truecolor"
+    if truecolor_available():
+        os.environ["COLORTERM"] = "truecolor"
+        return True
+    return False
+
+
+def colour_advice(color_system: str | None, env=None) -> str | None:
+    """A one-time hint when the terminal really only gets 256 (or fewer) colours.
+
+    Grey CT slices band visibly in 256 colours. Inside tmux the one-line fix is tmux's
+    RGB feature (:data:`TMUX_FIX`); over SSH COLORTERM is usually not forwarded.
     """
+    env = os.environ if env is None else env
     if color_system in (None, "truecolor", "windows"):
         return None
-    over_ssh = bool(os.environ.get("SSH_CONNECTION") or os.environ.get("SSH_TTY"))
+    over_ssh = bool(env.get("SSH_CONNECTION") or env.get("SSH_TTY"))
     where = "over SSH " if over_ssh else ""
-    return (
-        f"Terminal {where}reports only {color_system} colours, so grey slices band. "
+    head = f"Terminal {where}reports only {color_system} colours, so grey slices band. "
+    if env.get("TMUX"):
+        head += f"Inside tmux: {TMUX_FIX}, then reattach. "
+    return head + (
         "If your terminal does truecolor, start ctui with TEXTUAL_COLOR_SYSTEM=truecolor "
-        "(or COLORTERM=truecolor), or add 'SendEnv COLORTERM' to ~/.ssh/config "
-        "(and 'AcceptEnv COLORTERM' on the server)."
+        "(or COLORTERM=truecolor)" + (", or add 'SendEnv COLORTERM' to ~/.ssh/config "
+                                      "(and 'AcceptEnv COLORTERM' on the server)." if over_ssh or not env.get("TMUX")
+                                      else ".")
     )
 
 

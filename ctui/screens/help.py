@@ -118,7 +118,17 @@ def _groups(nodes) -> list[tuple[str, list[tuple[str, str]]]]:
 
 
 def _esc(text: str) -> str:
+    """Text for Textual markup: "[" escaped (a lone backslash stays literal unless a "["
+    follows it: see :func:`bold_key`)."""
     return text.replace("[", "\\[")
+
+
+def bold_key(key: str) -> str:
+    """A key name in bold markup; a trailing backslash (the ``\\`` key) is put after the
+    closing tag, where it cannot escape the tag's "["."""
+    if key.endswith("\\"):
+        return f"[b]{_esc(key[:-1])}[/b]\\" if key[:-1] else "\\"
+    return f"[b]{_esc(key)}[/b]"
 
 
 def _cell(keys: str, desc: str, key_w: int, width: int) -> str:
@@ -126,7 +136,7 @@ def _cell(keys: str, desc: str, key_w: int, width: int) -> str:
     room = width - key_w - 1
     if len(desc) > room:
         desc = desc[: max(room - 1, 1)] + "…"
-    return f"[b]{_esc(keys)}[/b]{' ' * max(key_w - len(keys), 0)} {_esc(desc)}{' ' * (room - len(desc))}"
+    return f"{bold_key(keys)}{' ' * max(key_w - len(keys), 0)} {_esc(desc)}{' ' * (room - len(desc))}"
 
 
 def _balanced(blocks: list[list], ncol: int) -> list[list]:
@@ -158,7 +168,7 @@ def task_help(nodes, *, width: int | None = None) -> str:
         out: list[str] = []
         for task, items in groups:
             out += ([""] if out else []) + [f"[b]{task}[/b]"]
-            out += [f"  [b]{_esc(k)}[/b]{' ' * max(18 - len(k), 1)}{_esc(d)}" for k, d in items]
+            out += [f"  {bold_key(k)}{' ' * max(18 - len(k), 1)}{_esc(d)}" for k, d in items]
         return "\n".join(out)
     key_w = min(max((len(k) for _t, items in groups for k, _d in items), default=4), 12)
     col_w = (int(width or 0) - 2 * (ncol - 1)) // ncol

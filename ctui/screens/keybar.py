@@ -8,7 +8,7 @@ from __future__ import annotations
 from textual.binding import Binding
 from textual.widgets import Static
 
-from ctui.screens.help import key_name
+from ctui.screens.help import _esc, bold_key, key_name
 
 
 def shown_keys(nodes) -> list[tuple[str, str]]:
@@ -65,6 +65,6 @@ class KeyBar(Static):
             return
         self._width = width
         pairs = shown_keys((self.screen, self.app))
-        text = "\n".join("  ".join(f"[b]{k.replace('[', chr(92) + '[')}[/b] {d}" for k, d in line)
+        text = "\n".join("  ".join(f"{bold_key(k)} {_esc(d)}" for k, d in line)
                           for line in wrap_pairs(pairs, width))
         self.update(text)
