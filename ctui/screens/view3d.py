@@ -18,6 +18,7 @@ from textual.widgets import Footer, Static
 
 from ctui.engine import render
 from ctui.engine.actions import defaults
+from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.mesh import label_meshes
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
@@ -26,6 +27,7 @@ from ctui.engine.actions.render import centreline  # the function the fly-throug
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import JobDone, JobFailed, Status
+from ctui.screens.session import safe_cwd
 
 METHODS = ("marching-cubes", "contours")
 
@@ -296,8 +298,9 @@ class View3DScreen(GuardMixin, Screen):
         self._info()
         self.request_render()
 
-    def _ask_path(self, title: str, default: str, then) -> None:
-        """Prompt for an output path, then call ``then(path)`` (nothing on cancel)."""
+    def _ask_path(self, title: str, tag: str, suffix: str, what: str, write) -> None:
+        """Prompt for an output path (default ``<input stem>-<tag><suffix>`` in the folder ctui
+        started from), then ``write(path)`` in a worker; ``what`` names the file in messages."""
         from ctui.screens.dialogs import PromptScreen
 
         if self.scene is None:
@@ -305,40 +308,38 @@ class View3DScreen(GuardMixin, Screen):
 
         def done(path: str | None) -> None:
             if path and path.strip():
-                then(path.strip())
+                self._save_worker(what, path.strip(), write)
 
-        self.app.push_screen(PromptScreen(title, default), done)
+        default = safe_cwd() / output_name(self.s.project_path or self.s.source_path, suffix, tag=tag)
+        self.app.push_screen(PromptScreen(title, str(default)), done)
+
+    @work(thread=True, group="save")
+    def _save_worker(self, what: str, path: str, write) -> None:
+        self.post_message(Status(f"Writing {what} {path} ..."))
+        try:
+            write(path)
+        except Exception as exc:
+            self.post_message(JobFailed(f"{what.capitalize()} not saved", str(exc)))
+            return
+        self.post_message(JobDone("saved", path))
+
+    def _scene_now(self):
+        scene = self.scene.snapshot()
+        scene.mode = self.mode
+        return scene
 
     def action_save(self) -> None:
-        self._ask_path("Save the 3D view as PNG", "ctui-3d.png", self._save_png)
+        self._ask_path("Save the 3D view as PNG", "3d", ".png", "PNG", self._write_png)
 
-    @work(thread=True, group="save")
-    def _save_png(self, path: str) -> None:
-        scene = self.scene.snapshot()
-        scene.mode = self.mode
-        try:
-            w, h = 1024, 1024
-            img = render.get_renderer().submit(scene, (w, h)).result()
-            render.save_png(path, img)
-        except Exception as exc:
-            self.post_message(JobFailed("PNG not saved", str(exc)))
-            return
-        self.post_message(JobDone("saved", path))
+    def _write_png(self, path: str) -> None:
+        render.save_png(path, render.get_renderer().submit(self._scene_now(), (1024, 1024)).result())
 
     def action_turntable(self) -> None:
-        self._ask_path("Turntable animation (36 frames, GIF)", "ctui-turntable.gif", self._turntable)
+        self._ask_path(f"Turntable animation ({defaults.TURNTABLE_FRAMES} frames, GIF)", "turntable", ".gif",
+                       "turntable", self._write_turntable)
 
-    @work(thread=True, group="save")
-    def _turntable(self, path: str) -> None:
-        scene = self.scene.snapshot()
-        scene.mode = self.mode
-        self.post_message(Status(f"Writing turntable {path} ..."))
-        try:
-            render.save_turntable(path, scene, defaults.TURNTABLE_FRAMES, (384, 384))
-        except Exception as exc:
-            self.post_message(JobFailed("Turntable not saved", str(exc)))
-            return
-        self.post_message(JobDone("saved", path))
+    def _write_turntable(self, path: str) -> None:
+        render.save_turntable(path, self._scene_now(), defaults.TURNTABLE_FRAMES, (384, 384))
 
     # ------------------------------------------------------------------ fly-through
     FLY_FRAMES = defaults.FLY_FRAMES
@@ -407,19 +408,11 @@ class View3DScreen(GuardMixin, Screen):
         self._status(f"fly-through frame {i}/{n} ({dt * 1000:.0f} ms); f stops, F saves a GIF")
 
     def action_fly_save(self) -> None:
-        self._ask_path(f"Fly-through animation ({self.FLY_FRAMES} frames, GIF)", "ctui-flythrough.gif",
-                       self._fly_save)
+        self._ask_path(f"Fly-through animation ({self.FLY_FRAMES} frames, GIF)", "flythrough", ".gif", "fly-through",
+                       self._write_flythrough)
 
-    @work(thread=True, group="save")
-    def _fly_save(self, path: str) -> None:
-        scene = self._fly_scene()
-        self.post_message(Status(f"Writing fly-through {path} ..."))
-        try:
-            render.save_flythrough(path, scene, self._fly_path(), self.FLY_FRAMES, (384, 384))
-        except Exception as exc:
-            self.post_message(JobFailed("Fly-through not saved", str(exc)))
-            return
-        self.post_message(JobDone("saved", path))
+    def _write_flythrough(self, path: str) -> None:
+        render.save_flythrough(path, self._fly_scene(), self._fly_path(), self.FLY_FRAMES, (384, 384))
 
     def action_close(self) -> None:
         self._req += 1  # drop anything in flight
