@@ -18,14 +18,16 @@ A pixel belongs to a structure when its centre is inside the contour or on it.
 rt-utils writes the polygon through the centres of the boundary pixels
 (``cv2.findContours``) and reads with ``cv2.fillPoly`` after rounding the vertices to
 pixel centres (centres inside or on the outline); plastimatch writes an ITK
-marching-squares line just outside the boundary centres and rasterises by pixel centre
-inside, as SlicerRT does (closed surface -> ``vtkPolyDataToImageStencil``). ctui writes
+marching-squares line (``ContourExtractor2DImageFilter`` at 0.5 on the structure's bit:
+half-way or further out) and rasterises by pixel centre inside; SlicerRT cuts its closed
+surface (flying edges at half-way, smoothed) with ``vtkCutter`` and reads back through a
+closed surface and ``vtkPolyDataToImageStencil`` (pixel centre inside). ctui writes
 the 0.75 iso-line of the mask (marching squares): a quarter pixel outside the boundary
 pixels' centres, so that rounding readers (rt-utils) land on those centres and
 centre-inside readers (plastimatch, SlicerRT, dicompyler) find every boundary centre
 strictly inside and every background centre 0.75 px outside: all of them rasterise
 exactly the slice's mask. ctui reads by pixel centre inside **or on** the outline (within
-0.01 px), so rt-utils' centre polygons come back whole too (they lost one boundary pixel
+0.001 px), so rt-utils' centre polygons come back whole too (they lost one boundary pixel
 in two before: -7 to -10% of the volume).
 """
 
@@ -60,7 +62,8 @@ _COPIED = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyI
 
 # =========================================================================== contours
 CONTOUR_LEVEL = 0.75  # iso-level of the written outlines: 0.25 px outside the boundary pixel centres
-ON_EDGE_TOL = 0.01  # px: a pixel centre this close to an outline is on it (inside)
+ON_EDGE_TOL = 1e-3  # px: a pixel centre this close to an outline is on it (inside); plastimatch's lines pass
+# 0.5/2**bit px from background centres (0.004 px for its 8th structure): those stay outside
 
 
 def slice_contours(mask2d: np.ndarray) -> list[np.ndarray]:
@@ -125,7 +128,7 @@ def fill_contours(polys: Sequence[np.ndarray], shape: tuple[int, int]) -> np.nda
     return inside | outline_pixels(polys, shape)
 
 
-def outline_pixels(polys: Sequence[np.ndarray], shape: tuple[int, int], *, tol: float = 0.01) -> np.ndarray:
+def outline_pixels(polys: Sequence[np.ndarray], shape: tuple[int, int], *, tol: float = ON_EDGE_TOL) -> np.ndarray:
     """bool (ny, nx): the pixels whose centre lies on a closed polygon's outline (within ``tol`` px).
 
     Each edge is walked along its major axis: a centre on the edge has a whole coordinate
