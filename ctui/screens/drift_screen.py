@@ -12,6 +12,7 @@ from textual.widgets import Footer, Label, Static
 
 from ctui.engine.actions import drift
 from ctui.engine.actions.drift import drift_check
+from ctui.engine.actions.formats import output_name
 from ctui.engine.core.colors import object_color
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
@@ -166,7 +167,8 @@ class DriftScreen(GuardMixin, Screen):
             if path:
                 self._save(path.strip())
 
-        self.app.push_screen(PromptScreen("Save the drift plot (PNG)", "ctui-drift.png"), done)
+        self.app.push_screen(PromptScreen("Save the drift plot (PNG)",
+                                     output_name(self.s.project_path or self.s.source_path, ".png", tag="drift")), done)
 
     @work(thread=True, group="drift-save")
     def _save(self, path: str) -> None:

@@ -17,6 +17,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
+from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.measure import measure_object, save_sections
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
@@ -271,7 +272,9 @@ class MeasureScreen(GuardMixin, Screen):
             if path:
                 self._save(path.strip())
 
-        self.app.push_screen(PromptScreen("Save sections as CSV (a PNG plot is written beside it)", f"ctui-sections-{self.sections_obj}.csv"), done)
+        self.app.push_screen(PromptScreen("Save sections as CSV (a PNG plot is written beside it)",
+                                     output_name(self.s.project_path or self.s.source_path, ".csv",
+                                                 tag=f"sections{self.sections_obj}")), done)
 
     @work(thread=True, group="ms-save")
     def _save(self, path: str) -> None:
