@@ -60,7 +60,8 @@ def test_island_off_the_object_is_an_error_and_changes_nothing():
 
 def test_scissors_box_inside_outside_slice_ranges():
     seg = _two_blocks()
-    box = et.parse_box("4,4,0:9,9,9", seg.shape)  # x,y,z corners around block A, all slices
+    box = et.parse_box("4,4,0,9,9,9", seg.shape)  # x,y,z corners around block A, all slices
+    assert et.parse_box("4,4:9,9", seg.shape) == et.parse_box("4,4,0:9,9,9", seg.shape)
     assert box == ((0, 9), (4, 9), (4, 9))
     r = et.cut(seg, object_id=1, box=box)
     assert r["removed"] == 144 and seg.voxels(1) == 96

@@ -41,7 +41,7 @@ def test_keep_island_cut_and_smooth(capsys, blocks, tmp_path):
     assert res["volume_ml"] == pytest.approx(96 * 2 / 1000)
     assert int((load_project(str(out)).labels == 1).sum()) == 96
     out2 = tmp_path / "b.ctui"
-    rc, cap = _run(capsys, "edit", str(blocks), "--box", "4,4,3:9,9,3", "--cut", "inside", "--project", str(out2))
+    rc, cap = _run(capsys, "edit", str(blocks), "--box", "4,4,3,9,9,3", "--cut", "inside", "--project", str(out2))
     assert rc == 0 and "-36" in cap.out
     assert int((load_project(str(out2)).labels == 1).sum()) == 240 - 36
     out3 = tmp_path / "c.ctui"

@@ -17,14 +17,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "confines the island and smoothing edits, as the TUI's ROI box. Voxel indices x,y,z numbered from 0 "
         "as in the TUI and `ctui segment --seed`. Writes --project NEW.ctui (then `ctui export`).",
         epilog="Examples: ctui edit kidney.ctui --keep-island 120,88,40 --project kidney2.ctui\n"
-        "          ctui edit liver.ctui --object 2 --box 100,80,10:180,160,40 --cut outside --project out.ctui\n"
+        "          ctui edit liver.ctui --object 2 --box 100,80,10,180,160,40 --cut outside --project out.ctui\n"
         "          ctui edit spleen.ctui --smooth closing:4 --json --project out.ctui",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("path", help="a .ctui project")
     p.add_argument("--object", type=int, default=None, metavar="N", help="object id (default: the only/first object)")
-    p.add_argument("--box", default=None, metavar="X,Y,Z:X,Y,Z",
-                   help="ROI box by two opposite corners (voxels; X,Y:X,Y for every slice)")
+    p.add_argument("--box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="ROI box by two opposite corners (voxels, as ctui segment --box; X0,Y0,X1,Y1: every slice)")
     p.add_argument("--keep-island", default=None, metavar="X,Y,Z", help="keep only the island through this voxel")
     p.add_argument("--remove-island", default=None, metavar="X,Y,Z", help="remove the island through this voxel")
     p.add_argument("--island-slice", action="store_true", help="islands of the voxel's slice only (2D)")

@@ -9,7 +9,7 @@ under N voxels, fill between slices.
 under a voxel (:func:`island`), scissors inside/outside a box or polygon (:func:`cut`),
 smoothing with a size in mm (:func:`smooth`); painting, fills and these tools are
 confined to an ROI box when one is given (``box``: ((z0, z1), (y0, y1), (x0, x1))
-inclusive voxel ranges, :func:`parse_box` reads "x,y,z:x,y,z").
+inclusive voxel ranges, :func:`parse_box` reads "X0,Y0,Z0,X1,Y1,Z1" as ``ctui segment --box``).
 
 Modes as the TUI shows them: *add* joins the object (other objects kept); *replace*:
 a fill becomes the object on its slice, a brush claims other objects' voxels;
@@ -103,17 +103,16 @@ def dab(seg: Segmentation, volume, zyx: tuple[int, int, int], *, axis: int, obje
 
 
 def parse_box(text: str, shape: tuple[int, int, int]) -> Roi:
-    """``"x0,y0,z0:x1,y1,z1"`` (two opposite corners, voxel indices; ``z`` may be left out
-    on both: all slices) -> ((z0, z1), (y0, y1), (x0, x1)), checked against ``shape``."""
+    """``"X0,Y0,Z0,X1,Y1,Z1"`` (two opposite corners, voxel indices, as ``ctui segment --box``;
+    ``"X0,Y0,Z0:X1,Y1,Z1"`` too; ``"X0,Y0,X1,Y1"`` or ``"X0,Y0:X1,Y1"``: every slice) ->
+    ((z0, z1), (y0, y1), (x0, x1)), checked against ``shape``."""
     try:
-        a, b = text.split(":")
-        p, q = [[int(v) for v in c.split(",")] for c in (a, b)]
-        if len(p) != len(q) or len(p) not in (2, 3):
+        v = [int(t) for t in text.replace(":", ",").split(",")]
+        if len(v) not in (4, 6):
             raise ValueError
     except ValueError:
-        raise CtuiError(f"box {text!r}: write two corners x,y,z:x,y,z (or x,y:x,y for every slice)") from None
-    if len(p) == 2:
-        p, q = p + [0], q + [shape[0] - 1]
+        raise CtuiError(f"box {text!r}: write two corners X0,Y0,Z0,X1,Y1,Z1 (or X0,Y0,X1,Y1 for every slice)") from None
+    p, q = (v[:3], v[3:]) if len(v) == 6 else (v[:2] + [0], v[2:] + [shape[0] - 1])
     box = box_of_corners((p[2], p[1], p[0]), (q[2], q[1], q[0]))
     roi_slices(box, shape)  # raises for a zero-size box or one off the volume
     return box
