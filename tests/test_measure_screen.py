@@ -87,3 +87,18 @@ async def test_measure_screen_messages():
         assert "No sections computed yet" not in status
         assert "Nothing to save for object 1" in status and "--path" in status
         assert not app.internal_errors
+
+
+async def test_measure_table_fits_80_columns():
+    s = _slab_session()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.press("M")
+        await wait_for(pilot, lambda: getattr(app.screen, "stats", None), what="the measure row", timeout=60)
+        await pilot.pause()
+        table = app.screen.query_one("#ms-table")
+        assert "PV-vox %" in [str(c.label) for c in table.columns.values()]
+        width = sum(c.get_render_width(table) for c in table.columns.values())
+        assert width <= 80, width  # every column on screen, none cut
+        assert not app.internal_errors

@@ -36,6 +36,10 @@ def is_tubular(stats: dict) -> bool:
     return len(ax) >= 2 and ax[1] > 0 and ax[0] / ax[1] >= 3.0
 
 
+COLUMNS = ("obj", "name", "voxels", "vol ml", "PV ml", "PV-vox %", "area mm²", "closed", "axes mm", "slices")
+NARROW_COLUMNS = ("obj", "name", "vol ml", "PV ml", "PV-vox %", "area mm²", "axes mm", "slices")
+
+
 def no_sections_reason(res, stats: dict | None = None) -> str:
     """Why an object got no cross-sections along its automatic centreline (``res`` a
     :class:`~ctui.engine.actions.measure.MeasureResult`), and what to do instead."""
@@ -85,6 +89,7 @@ class MeasureScreen(GuardMixin, Screen):
         self.sections_obj: int | None = None
         self.grey = False  # sections on the partial-volume fraction from the grey levels
         self.result = None  # MeasureResult of the sections shown
+        self.columns = COLUMNS
         self.sections_pending: int | None = None  # object whose sections are being computed
 
     def compose(self) -> ComposeResult:
@@ -101,8 +106,10 @@ class MeasureScreen(GuardMixin, Screen):
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)
-        t.add_columns("obj", "name", "voxels", "vol ml", "PV ml", "PV-vox %", "area mm²", "closed", "axes mm", "slices")
-        self.set_class(self.app.size.width < 100, "narrow")
+        narrow = self.app.size.width < 100  # 80x24: the columns that matter, all readable
+        self.columns = NARROW_COLUMNS if narrow else COLUMNS
+        t.add_columns(*self.columns)
+        self.set_class(narrow, "narrow")
         t.focus()
         self.measure()
 
@@ -175,10 +182,13 @@ class MeasureScreen(GuardMixin, Screen):
         # (the mesh volume is kept equal to the voxel volume by construction)
         pv_diff = f"{100.0 * (pv - vox) / vox:+.1f}" if vox and pv is not None and math.isfinite(pv) else "-"
         c = object_color(oid)
-        self.query_one(DataTable).add_row(
-            f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", name[:12], str(st.get("voxels")), f("volume_voxels_ml"),
-            f("volume_pv_ml"), pv_diff, f("area_mm2", "{:.0f}"), {True: "yes", False: "no"}.get(st.get("mesh_closed"), "-"),
-            axes, f"{rng[0]}..{rng[1]}" if rng else "-", key=str(oid))
+        narrow = self.columns is NARROW_COLUMNS
+        cells = {"obj": f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", "name": name[:8] if narrow else name[:12],
+                 "voxels": str(st.get("voxels")), "vol ml": f("volume_voxels_ml"), "PV ml": f("volume_pv_ml"),
+                 "PV-vox %": pv_diff, "area mm²": f("area_mm2", "{:.0f}"),
+                 "closed": {True: "yes", False: "no"}.get(st.get("mesh_closed"), "-"), "axes mm": axes,
+                 "slices": f"{rng[0]}..{rng[1]}" if rng else "-"}
+        self.query_one(DataTable).add_row(*(cells[k] for k in self.columns), key=str(oid))
         warn = list(st.get("warnings") or [])
         if warn:
             self.app.notify(f"Object {oid}: {'; '.join(warn)}", severity="warning", timeout=6)
