@@ -240,7 +240,12 @@ class MouseMixin(ToolsMixin):
         vm = iv.view_map
         if vm is None or self.s.zoom <= 1:
             return
-        cw, ch = (1.0, 2.0) if iv.mode not in ("sixel", "kitty") else (1.0, 1.0)
+        if iv.mode in ("sixel", "kitty"):
+            from ctui.screens.graphics import cell_pixels
+
+            cw, ch = (float(v) for v in cell_pixels())
+        else:
+            cw, ch = 1.0, 2.0  # half blocks: a cell is one pixel wide, two high
         dx = (event.screen_x - sx0) * cw / vm.sx
         dy = (event.screen_y - sy0) * ch / vm.sy
         self.pan_center = (c0[0] - dx, c0[1] - dy)
@@ -254,7 +259,10 @@ class MouseMixin(ToolsMixin):
         if drag[0] == "box":
             self._finish_box(drag[2], drag[3], self.s.zyx)
         elif drag[0] == "paint":
-            self.set_status(f"Painted along the drag (brush {self.s.brush:g} mm); u undoes step by step")
+            lim = self.s.limits
+            within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
+            box = "; inside the ROI box" if self.s.roi_box is not None else ""
+            self.set_status(f"Painted along the drag (brush {self.s.brush:g} mm{within}{box}); u undoes step by step")
 
     def on_click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
