@@ -40,8 +40,8 @@ def require_references(sources: Sequence[Any], *, what: str, path: str | os.Path
     if faults:
         a = "an" if what.upper().startswith(("RT", "A", "E", "I", "O")) else "a"
         raise CtuiError(f"cannot write {a} {what} over this series: {'; '.join(faults)}. {a.title()} {what} "
-                        "points at the series' images by these UIDs and ctui does not invent them: export NIfTI or NRRD instead, "
-                        "or give the series as the scanner wrote it", path=path)
+                        "points at the series' images by these UIDs and ctui does not invent them: export NIfTI or "
+                        "NRRD instead, or give the series as the scanner wrote it", path=path)
 
 
 __all__ = ["missing_references", "require_references"]
