@@ -315,7 +315,9 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
         try:
             return _parse(io.BytesIO(head), path, size)
         except _Skip as sk:
-            if isinstance(sk, _NotImage) or len(head) >= size:
+            # a file without the DICM preamble that the first bytes do not parse as DICOM is
+            # not parsed on to its end (a 20 GB sparse file of zeros reads as empty elements)
+            if isinstance(sk, _NotImage) or len(head) >= size or head[128:132] != b"DICM":
                 raise
         fh.seek(0)
         return _parse(_Capped(fh, size), path, size)
