@@ -83,6 +83,9 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--interpolate", action="store_true",
                    help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
+    from ctui.commands.info import add_load_options
+
+    add_load_options(p, series=False)  # --shape, --dtype, --offset, --spacing, --crop, --downsample, --no-resample
 
 
 def _neck(text: str) -> float | None:
@@ -149,13 +152,9 @@ def parse_seed(text: str) -> tuple[int, int, int]:
 
 
 def parse_range(text: str) -> tuple[float, float]:
-    lo_s, sep, hi_s = text.partition(":")
-    try:
-        if not sep:
-            raise ValueError
-        lo, hi = float(lo_s), float(hi_s)
-    except ValueError:
-        raise _err(f"--range {text!r}: expected LO:HI (numbers), e.g. 115:445") from None
+    from ctui.engine.actions.options import parse_pair
+
+    lo, hi = parse_pair(text, "--range", example="115:445")
     if not (math.isfinite(lo) and math.isfinite(hi) and max(abs(lo), abs(hi)) <= HUGE):
         raise _err(f"--range {text!r}: LO and HI must be finite numbers within +-{HUGE:g}")
     if lo > hi:
@@ -182,27 +181,25 @@ def build_pipeline(args: argparse.Namespace):
     return Pipeline(steps, domain=args.domain, window=window)
 
 
-def load_volume(path: str, *, series: str | None = None):
+def load_volume(path: str, *, series: str | None = None, **load_options):
+    """The series at ``path`` with the loader options (``commands.info.load_kwargs``)."""
     import os
 
     if not os.path.exists(path):
         raise _err(f"{path}: no such file or folder")
     from ctui.engine.actions.series import load
 
-    opts = {"series": series} if series else {}
+    opts = {**load_options, **({"series": series} if series else {})}
     return load(path, **opts)
 
 
 def parse_slices(text: str | None) -> tuple[int, int] | None:
     if not text:
         return None
-    a, sep, b = text.partition(":")
-    try:
-        lo, hi = int(a), int(b)
-        if not sep:
-            raise ValueError
-    except ValueError:
-        raise _err(f"--slices {text!r}: expected A:B (slice numbers from 0), e.g. 10:40") from None
+    from ctui.engine.actions.options import parse_pair
+
+    lo, hi = parse_pair(text, "--slices", integer=True, form="A:B", what="slice numbers from 0",
+                        example="10:40")
     if lo > hi or lo < 0:
         raise _err(f"--slices {text!r}: need 0 <= A <= B")
     return lo, hi
@@ -272,11 +269,11 @@ def objects_report(seg, volume, results) -> list[dict]:
 
 
 def make_project(path: str, volume, seg, pipeline, settings: list[dict], *, series: str | None = None,
-                 drift: dict | None = None):
+                 drift: dict | None = None, source_options: dict | None = None):
     """The project of a segmentation (the one constructor: ``actions.project.new_project``)."""
     from ctui.engine.actions.project import new_project, propagation_record
 
-    return new_project(volume, source_path=path, source_options={"series": series} if series else {},
+    return new_project(volume, source_path=path, source_options=source_options or ({"series": series} if series else {}),
                        pipeline=pipeline.to_dict(), labels=seg.labels, objects=seg.object_list(),
                        propagation=propagation_record(settings), drift=drift)
 
@@ -285,7 +282,10 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
     """--project, --mask and --mric: the project by ``actions.project``, the label map and
     the contours by ``actions.export`` (what ``ctui export`` writes)."""
     written = []
-    project = make_project(args.path, volume, seg, pipeline, settings, series=args.series)
+    from ctui.commands.info import load_kwargs
+
+    project = make_project(args.path, volume, seg, pipeline, settings, series=args.series,
+                           source_options={k: v for k, v in load_kwargs(args).items() if k != "resample" or not v})
     if getattr(args, "project", None):
         from ctui.engine.actions.project import save_project
 
@@ -321,7 +321,9 @@ def run(args: argparse.Namespace) -> int:
     if args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
         return _edit_project(args)
 
-    volume = load_volume(args.path, series=args.series)
+    from ctui.commands.info import load_kwargs
+
+    volume = load_volume(args.path, **load_kwargs(args))
     with progress_bar(args, "segmenting") as progress:
         seg, pipeline, settings, results = segment_volume(volume, args, progress=progress)
     written = write_outputs(args, volume, seg, pipeline, settings)

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions.options import parse_pair
 from ctui.engine.core.atomic import check_output, check_outputs, write_text
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
@@ -99,13 +100,7 @@ def _xyz(text: str, what: str) -> tuple[int, int, int]:
 
 
 def _range(text: str) -> tuple[float, float]:
-    lo, sep, hi = str(text).partition(":")
-    try:
-        if not sep:
-            raise ValueError
-        a, b = float(lo), float(hi)
-    except ValueError:
-        raise CtuiError(f"range {text!r}: expected LO:HI, e.g. 150:300") from None
+    a, b = parse_pair(text, "range", example="150:300")
     if a > b:
         raise CtuiError(f"range {text!r}: LO is above HI")
     return a, b

@@ -14,9 +14,10 @@ from typing import Any
 from ctui.engine.core.errors import CtuiError
 
 
-def _key(option: str) -> str:
-    """The loader keyword an option label names ("spacing" or "spacing" -> "spacing")."""
-    return option.lstrip("-").replace("-", "_")
+def _key(option: str) -> str | None:
+    """The keyword an option label names ("spacing" -> "spacing"); None for a label that is
+    already a CLI flag ("--range": the message names it)."""
+    return None if option.startswith("-") else option.replace("-", "_")
 
 
 def _items(text: str, option: str, what: str) -> list[str]:
@@ -71,6 +72,23 @@ def parse_ints(text: Any, option: str, *, n: tuple[int, ...], minimum: int | Non
     if minimum is not None and any(v is not None and v < minimum for v in out):
         raise CtuiError(option=_key(option), message=f"{option} {text!r}: every value must be >= {minimum}")
     return tuple(out)
+
+
+def parse_pair(text: Any, option: str, *, integer: bool = False, form: str = "LO:HI", what: str = "",
+               example: str = "") -> tuple[float, float] | tuple[int, int]:
+    """``"LO:HI"`` -> (lo, hi): numbers, or whole numbers when ``integer``; a one-line error
+    naming ``option`` ("expected LO:HI (numbers), e.g. 150:300") otherwise. The order is not checked."""
+    a, sep, b = str(text).partition(":")
+    conv = int if integer else float
+    try:
+        if not sep:
+            raise ValueError
+        lo, hi = conv(a), conv(b)
+    except ValueError:
+        what = what or ("whole numbers" if integer else "numbers")
+        eg = f", e.g. {example}" if example else ""
+        raise CtuiError(f"{option} {text!r}: expected {form} ({what}){eg}", option=_key(option)) from None
+    return lo, hi
 
 
 def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, dtype: Any = None,
