@@ -55,7 +55,9 @@ def _source(args: argparse.Namespace):
     if args.labels:  # placed on the series' grid: its geometry (not only its shape) must match
         return open_input(args.path, labels=args.labels, **({"series": args.series} if args.series else {})), \
             None, None, []
-    volume = load_volume(args.path, series=args.series)
+    from ctui.commands.info import load_kwargs
+
+    volume = load_volume(args.path, **load_kwargs(args))
     if args.seed:
         seg, pipeline, settings, _ = segment_volume(volume, args)
         return Opened.of_volume(volume, seg.labels, path=args.path), seg, pipeline, settings
@@ -69,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from ctui.engine.core.atomic import check_outputs
     from ctui.engine.core.jsonio import dumps
 
+    from ctui.commands.info import load_kwargs
     from ctui.commands.segment import build_pipeline
 
     check_outputs({"--project": args.project, "--plot": args.plot}, inputs=[args.path, args.labels])
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             pipeline = pipeline or build_pipeline(args)
             project = new_project(opened.volume, source_path=args.path,
-                                  source_options={"series": args.series} if args.series else {},
+                                  source_options={k: v for k, v in load_kwargs(args).items() if k != "resample" or not v},
                                   labels=opened.labels, objects=seg.object_list() if seg is not None else [],
                                   pipeline=pipeline.to_dict(), propagation=propagation_record(settings),
                                   drift=res.project_drift())

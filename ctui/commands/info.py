@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 
 
-def add_load_options(p: argparse.ArgumentParser) -> None:
-    """Loader options shared by the commands that read a series."""
+def add_load_options(p: argparse.ArgumentParser, *, series: bool = True) -> None:
+    """Loader options shared by the commands that read a series (``series``: add --series too;
+    segment and drift define their own)."""
     g = p.add_argument_group("loading")
-    g.add_argument("--series", help="DICOM series to load: index as listed by `ctui info` (0-based) or SeriesInstanceUID")
+    if series:
+        g.add_argument("--series", help="DICOM series to load: index as listed by `ctui info` (0-based) or SeriesInstanceUID")
     g.add_argument("--spacing", help="voxel size dz,dy,dx in mm: image stacks and raw data (default 1 mm), "
                    "MetaImage (replaces the header's); DICOM: only dz counts, the z step of the regular grid an "
                    "unevenly spaced or tilted series is resampled onto (or the slice step when the headers give "

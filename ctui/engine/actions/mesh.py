@@ -152,8 +152,10 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
         opened = source
     else:
         p = os.fspath(source)
-        opened = open_input(p, require_labels=True, spacing=spacing if not p.lower().endswith(".mric") else None,
-                            **load_options)
+        # --iso asks for a series: a NIfTI/NRRD CT is a series then, not a label map (as info/render/segment)
+        as_series = iso is not None and p.lower().endswith((".nii", ".nii.gz", ".nrrd", ".nhdr"))
+        opened = open_input(p, kind="series" if as_series else None, require_labels=not as_series,
+                            spacing=spacing if not p.lower().endswith(".mric") else None, **load_options)
     kind = opened.kind
     method = method or ("contours" if kind == "mric" else defaults.MESH_METHOD)
     if method not in ("marching-cubes", "contours"):
