@@ -73,3 +73,15 @@ def test_keep_from_seed_to_here_and_accept():
     assert seg.voxels(1) == 400 and seg.slice_range(1) == (10, 13)
     # without a seed mask, the proposal's slices next to the seed are the root
     assert review.keep_to(p, 14).voxels == 400
+
+
+def test_marks_on_an_accepted_object():
+    p, sq = _proposal()
+    seg = Segmentation((30, 50, 50))
+    seg.apply_mask(sq, 1, offset=(10, 0, 0))
+    p.accept(seg)
+    st = review.of_labels(seg.labels, 1, start_slice=10)
+    assert st.areas[10] == 100 and st.areas[15] == 300 and st.areas[12] == 104
+    zs = [m.z for m in review.marks(st)]
+    assert 15 in zs and 16 in zs and all(z >= 15 for z in zs)
+    assert review.of_labels(seg.labels, 1).start_slice == 15  # default: the largest slice

@@ -83,7 +83,33 @@ async def test_strip_jumps_cut_and_accept_to_here():
         await pilot.press("A")
         assert ws.proposal is None
         assert s.seg.voxels(1) == 300 and s.seg.slice_range(1) == (10, 12)
-        assert "on" not in strip.classes
+        # no proposal: the strip reviews the object itself (three slices)
+        assert "on" in strip.classes and list(strip.profile[9:14]) == [0, 100, 100, 100, 0]
         await pilot.press("u")
         assert s.seg.voxels(1) == 100
+        await pilot.pause()
+        assert "on" not in strip.classes  # one slice: nothing to review
+        assert not app.internal_errors
+
+
+async def test_strip_reviews_an_accepted_object():
+    data = np.zeros((30, 48, 48), np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=10)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        sq = np.zeros((48, 48), bool)
+        sq[10:20, 10:20] = True
+        s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
+        s.seg.objects[1].seeds.append((15, 15, 10))  # as Enter records it: the review walks out from the seed
+        ws.proposal = _leaky_proposal(s.shape)
+        ws.refresh_view()
+        await pilot.press("a")  # accept it all, leak included
+        assert ws.proposal is None and s.seg.voxels(1) == 100 + 400 + 300 + 600
+        strip = ws.query_one("#strip", ReviewStrip)
+        assert "on" in strip.classes and strip.profile[15] == 300
+        await pilot.press("right_curly_bracket")
+        assert s.z == 15  # the leak's slice, found on the accepted object
+        assert "keep the island" in str(ws.query_one("#status").render())
         assert not app.internal_errors

@@ -390,28 +390,52 @@ class MouseMixin(ToolsMixin):
     def _seed_mask(self, p):
         return self.s.seg.labels[p.start_slice] == p.object_id
 
+    def review_source(self):
+        """What the strip reviews: the pending proposal, else the current object when it spans
+        three slices or more (``review.Stack``, cached per labels version), else None."""
+        if self.proposal is not None:
+            return self.proposal
+        s = self.s
+        key = (self._labels_version, s.current)
+        cache = getattr(self, "_object_stack", None)
+        if cache is not None and cache[0] == key:
+            return cache[1]
+        stack = None
+        lab = s.labels()
+        rng = s.seg.slice_range(s.current) if lab is not None else None
+        if rng is not None and rng[1] - rng[0] >= 2:
+            info = s.seg.objects.get(s.current)
+            seeds = list(getattr(info, "seeds", []) or [])
+            stack = review.of_labels(lab, s.current, int(seeds[-1][2]) if seeds else None)
+        self._object_stack = (key, stack)
+        return stack
+
     def review_marks(self) -> list:
-        p = self.proposal
-        if p is None:
+        src = self.review_source()
+        if src is None:
             return []
         cache = getattr(self, "_marks_cache", None)
-        if cache is not None and cache[0] is p:
+        if cache is not None and cache[0] is src:
             return cache[1]
-        found = review.marks(p, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=self._seed_mask(p))
-        self._marks_cache = (p, found)
+        seed = self._seed_mask(src) if src is self.proposal else None
+        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed)
+        self._marks_cache = (src, found)
         return found
 
     def update_strip(self) -> None:
+        """The strip shows the proposal, or (on a terminal 30 rows high or more) the current object."""
         strips = self.query("#strip")
         if not strips:
             return
         strip = strips.first(ReviewStrip)
         p = self.proposal
-        if p is None:
+        src = p if p is not None else (self.review_source() if self.size.height >= 30 else None)
+        if src is None:
             strip.set_class(False, "on")
             return
-        prof = review.profile(p, self.s.shape[0], seed_area=int(self._seed_mask(p).sum()))
-        strip.set_data(prof, [m.z for m in self.review_marks()], self.s.z, p.start_slice)
+        seed_area = int(self._seed_mask(p).sum()) if p is not None else 0
+        prof = review.profile(src, self.s.shape[0], seed_area=seed_area)
+        strip.set_data(prof, [m.z for m in self.review_marks()], self.s.z, src.start_slice)
         strip.set_class(True, "on")
 
     def _go_slice(self, z: int) -> None:
@@ -423,12 +447,14 @@ class MouseMixin(ToolsMixin):
             s.plane = sp(s.volume) if sp else "axial"
         self.refresh_view()
         why = {m.z: m.why for m in self.review_marks()}.get(s.z)
-        if why:
+        if why and self.proposal is not None:
             self.set_status(f"Slice {s.z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks")
+        elif why:
+            self.set_status(f"Slice {s.z}: {why}. t: keep the island / scissors on this slice; {{ }} other marks")
 
     def action_mark(self, step: int) -> None:
-        if self.proposal is None:
-            self.app.notify("No proposal to review: p propagates", timeout=2)
+        if self.review_source() is None:
+            self.app.notify("Nothing to review: p propagates (or draw the object on three slices or more)", timeout=2)
             return
         z = review.next_mark(self.review_marks(), self.s.z, step)
         if z is None:

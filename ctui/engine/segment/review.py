@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Mark", "cut_at", "keep_to", "marks", "next_mark", "profile"]
+__all__ = ["Mark", "Stack", "cut_at", "keep_to", "marks", "next_mark", "of_labels", "profile"]
 
 
 @dataclass(frozen=True)
@@ -32,6 +32,32 @@ class Mark:
     z: int
     kind: str
     why: str
+
+
+@dataclass
+class Stack:
+    """An object's slices in the shape :func:`marks` and :func:`profile` read (``start_slice``,
+    ``masks`` {z: (y0, x0, bool)}, ``areas`` {z: pixels}), e.g. an accepted object."""
+
+    start_slice: int
+    shape: tuple[int, int, int]
+    masks: dict
+    areas: dict
+
+
+def of_labels(labels: np.ndarray, object_id: int, start_slice: int | None = None) -> Stack:
+    """The object ``object_id`` of a (z, y, x) label volume as a :class:`Stack` (each slice
+    cropped to its bounding box); ``start_slice`` defaults to the slice of largest area."""
+    masks, areas = {}, {}
+    zs = np.flatnonzero((labels == object_id).any(axis=(1, 2)))
+    for z in zs:
+        m = labels[z] == object_id
+        ys, xs = np.nonzero(m)
+        ya, yb, xa, xb = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+        masks[int(z)], areas[int(z)] = (ya, xa, m[ya:yb, xa:xb]), int(ys.size)
+    if start_slice is None or start_slice not in masks:
+        start_slice = max(areas, key=areas.get) if areas else 0
+    return Stack(int(start_slice), tuple(labels.shape), masks, areas)
 
 
 def profile(proposal, nz: int, seed_area: int = 0) -> np.ndarray:
