@@ -31,6 +31,8 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report, scaled
 from ctui.engine.core.volume import Volume
+from ctui.engine.io.imports import is_label_file, read_label_file
+from ctui.engine.io.series import load
 
 @dataclass
 class ExportSource:
@@ -84,8 +86,6 @@ def _objects(labels: np.ndarray, recorded: Sequence[dict] | None) -> list[dict]:
 
 
 def _load_series(series: str, series_uid: str | None) -> Any:
-    from ctui.engine.io.series import load
-
     if not os.path.exists(series):
         raise CtuiError("no such series folder or file", path=series)
     return load(series, **({"series": series_uid} if series_uid else {}))
@@ -94,8 +94,6 @@ def _load_series(series: str, series_uid: str | None) -> Any:
 def export_source(source: str | os.PathLike | Opened, *, series: str | os.PathLike | None = None,
                   series_uid: str | None = None) -> ExportSource:
     """The labels, geometry and objects an export works on (see the module docstring)."""
-    from ctui.engine.io.imports import is_label_file, read_label_file
-
     if isinstance(source, Opened):
         return _from_opened(source, series, series_uid)
     p = os.fspath(source)

@@ -13,11 +13,19 @@ choices, so each writer imports its libraries (numpy, highdicom, nibabel...) ins
 
 from __future__ import annotations
 
+import csv
+import io
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from ctui.engine.actions import defaults
+from ctui.engine.core.atomic import write_text
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.progress import report, scaled
+from ctui.engine.core.safetext import csv_cell
 
 #: A writer's argument: an :class:`ctui.engine.actions.export.ExportJob` (not imported here:
 #: export.py imports this registry).
@@ -135,7 +143,6 @@ def output_name(source: str | os.PathLike | None, suffix: str, *, tag: str = "")
 
 # =========================================================================== writers
 def _dicom_sources(job: ExportJob, what: str) -> list[Any]:
-    from ctui.engine.core.errors import CtuiError
     from ctui.engine.io.dicomseg import source_datasets  # pydicom: loaded only for DICOM exports
 
     src = job.src
@@ -144,7 +151,7 @@ def _dicom_sources(job: ExportJob, what: str) -> list[Any]:
                         "recorded or given", path=src.path, option="series")
     sources = source_datasets(src.series, src.volume if src.volume is not None else src.geometry,
                               series=src.series_uid)
-    from ctui.engine.io.dicomrefs import require_references  # refused when the images cannot be referenced
+    from ctui.engine.io.dicomrefs import require_references  # pydicom
 
     require_references(sources, what=what, path=src.series)
     return sources
@@ -173,11 +180,9 @@ def write_label_map(job: ExportJob) -> None:
 
 def write_mesh(job: ExportJob) -> None:
     """The objects' surfaces (each closed on its own) merged in one file, in patient mm."""
-    from ctui.engine.actions import defaults
     from ctui.engine.actions.mesh import label_meshes  # the mesh stack: numpy, scipy, numba
-    from ctui.engine.core.progress import scaled
-    from ctui.engine.io.meshes import save_mesh
-    from ctui.engine.mesh.meshtools import merge
+    from ctui.engine.io.meshes import save_mesh  # numpy
+    from ctui.engine.mesh.meshtools import merge  # numpy
 
     src, objs = job.src, job.objs
     meshes = {}
@@ -194,8 +199,8 @@ def write_mric(job: ExportJob) -> None:
     """Contours of every slice over the middle slice of the series (in its display window);
     the sidecar ``<name>.mric.json`` keeps the true voxel size."""
     from ctui.engine.core.borders import borders_for_mric  # numpy, OpenCV
-    from ctui.engine.core.windows import apply_window
-    from ctui.engine.io.mric import write_mric as write
+    from ctui.engine.core.windows import apply_window  # numpy
+    from ctui.engine.io.mric import write_mric as write  # numpy
 
     src = job.src
     nz, ny, nx = src.labels.shape
@@ -209,12 +214,6 @@ def write_mric(job: ExportJob) -> None:
 
 def write_csv(job: ExportJob) -> list[dict]:
     """One row of measurements per object (:data:`CSV_KEYS`); returns the rows."""
-    import csv
-    import io
-
-    from ctui.engine.core.atomic import write_text
-    from ctui.engine.core.progress import report
-    from ctui.engine.core.safetext import csv_cell
     from ctui.engine.measure.stats import object_stats  # numpy, scipy, the mesh stack
 
     g = job.src.geometry
