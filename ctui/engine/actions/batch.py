@@ -41,7 +41,14 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions.measure import measure_object
+from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.options import parse_pair
+from ctui.engine.actions.project import new_project, propagation_record, save_project
+from ctui.engine.actions.segment import SegmentOptions, segment
+from ctui.engine.io.meshes import save_mesh
+from ctui.engine.io.series import load
+from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
 from ctui.engine.core.atomic import check_output, check_outputs, write_text
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
@@ -188,10 +195,6 @@ def _read_text(p: Path, *, what: str) -> str:
 # =========================================================================== one job
 def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
     """(labels uint8, pipeline dict, propagation dict) of one object from the job's seed (the segment action)."""
-    from ctui.engine.actions.project import propagation_record
-    from ctui.engine.actions.segment import SegmentOptions, segment
-    from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
-
     try:
         pipeline = Pipeline([parse_filter_spec(s) for s in job.filters], domain="hu")
     except ValueError as exc:
@@ -220,12 +223,6 @@ def run_job(job: Job) -> dict:
 
 
 def _run(job: Job) -> dict:
-    from ctui.engine.actions.measure import measure_object
-    from ctui.engine.actions.opened import Opened
-    from ctui.engine.actions.project import new_project, save_project
-    from ctui.engine.io.meshes import save_mesh
-    from ctui.engine.io.series import load
-
     if not os.path.exists(job.series):
         raise CtuiError("no such series folder or file", path=job.series)
     volume = load(job.series)

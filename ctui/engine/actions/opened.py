@@ -21,8 +21,10 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
-from ctui.engine.io.imports import is_label_file, read_label_file
+from ctui.engine.io.imports import is_label_file, label_kind, read_label_file
+from ctui.engine.io.meshes import load_mesh
 from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
+from ctui.engine.io.series import load
 
 KINDS = ("series", "project", "labels", "mesh", "mric")
 
@@ -142,15 +144,11 @@ def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series:
         return Opened("labels", p, labels=imp.labels, geometry=imp.geometry, notes=list(imp.warnings),
                       project=Project(labels=imp.labels, objects=imp.objects), masks=imp.masks)
     if kind == "mesh":
-        from ctui.engine.io.meshes import load_mesh
-
         return Opened("mesh", p, mesh=load_mesh(p))
     if kind == "mric":
         return Opened("mric", p)
     if kind != "series":
         raise ValueError(f"unknown input kind {kind!r}")
-    from ctui.engine.io.series import load
-
     if spacing is not None:
         load_options["spacing"] = spacing
     return Opened("series", p, volume=load(p, **load_options))
@@ -164,8 +162,6 @@ def series_available(project: Project) -> bool:
 
 def load_source(project: Project, path: str) -> Volume:
     """The project's source series, checked against the project (shape, voxel hash)."""
-    from ctui.engine.io.series import load
-
     if not series_available(project):
         raise CtuiError(f"the source series {project.source_path!r} is missing", path=path)
     vol = load(project.source_path, **source_load_options(project))
@@ -224,8 +220,6 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     axis flips are placed; a CtuiError says how they differ otherwise); its
     segments / ROIs / values become objects with their names and colours (``project.objects``).
     """
-    from ctui.engine.io.series import load
-
     s, lp = os.fspath(series), os.fspath(labels)
     for q in (s, lp):
         if not q or not os.path.exists(q):
@@ -249,11 +243,9 @@ def _frame_of_reference(series: str, volume: Volume, labels: str) -> str:
     """The DICOM series' FrameOfReferenceUID when ``labels`` is an RTSTRUCT (its contours are
     checked against it), else "" (not read: a header pass over the series)."""
     try:
-        from ctui.engine.io.imports import label_kind
-
         if label_kind(labels) != "rtstruct":
             return ""
-        from ctui.engine.io.dicomseg import source_datasets
+        from ctui.engine.io.dicomseg import source_datasets  # pydicom: only for an RTSTRUCT over its series
 
         return str(source_datasets(series, volume)[0].get("FrameOfReferenceUID", "") or "")
     except (CtuiError, OSError, ValueError, IndexError):  # not a DICOM series, or not its own grid: no check
