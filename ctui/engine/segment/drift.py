@@ -337,14 +337,15 @@ def _rigid_shift(mask: np.ndarray, ref: np.ndarray, reach: int) -> np.ndarray:
         return np.zeros(2)
     y0, y1 = max(ys[0] - reach, 0), min(ys[-1] + reach + 1, mask.shape[0])
     x0, x1 = max(xs[0] - reach, 0), min(xs[-1] + reach + 1, mask.shape[1])
-    a = np.pad(mask[y0:y1, x0:x1].astype(np.float64), reach)
-    b = np.pad(ref[y0:y1, x0:x1].astype(np.float64), reach)
+    from scipy.signal import correlate
+
+    a = mask[y0:y1, x0:x1].astype(np.float64)
+    b = ref[y0:y1, x0:x1].astype(np.float64)
     n = 2 * reach + 1
-    score = np.empty((n, n))
-    for i, sy in enumerate(range(-reach, reach + 1)):
-        ay = np.roll(a, sy, axis=0)
-        for j, sx in enumerate(range(-reach, reach + 1)):
-            score[i, j] = float((np.roll(ay, sx, axis=1) * b).sum())
+    full = correlate(b, a, mode="full", method="fft")  # [k] = sum a(p - s) b(p), s = k - (shape - 1)
+    full = np.pad(full, reach, constant_values=-np.inf)  # shifts past the image: never the best
+    cy, cx = a.shape[0] - 1 + reach, a.shape[1] - 1 + reach
+    score = full[cy - reach:cy + reach + 1, cx - reach:cx + reach + 1]
     i, j = np.unravel_index(int(np.argmax(score)), score.shape)
     if score[i, j] <= score[reach, reach] * (1 + 1e-9):  # no better than staying: no shift
         i, j = reach, reach
@@ -353,8 +354,10 @@ def _rigid_shift(mask: np.ndarray, ref: np.ndarray, reach: int) -> np.ndarray:
         d = lo - 2 * mid + hi
         return 0.0 if d >= 0 else float(np.clip(0.5 * (lo - hi) / d, -0.5, 0.5))
 
-    fy = peak(score[i - 1, j], score[i, j], score[i + 1, j]) if 0 < i < n - 1 else 0.0
-    fx = peak(score[i, j - 1], score[i, j], score[i, j + 1]) if 0 < j < n - 1 else 0.0
+    fy = peak(score[i - 1, j], score[i, j], score[i + 1, j]) if 0 < i < n - 1 and np.isfinite(
+        score[i - 1:i + 2, j]).all() else 0.0
+    fx = peak(score[i, j - 1], score[i, j], score[i, j + 1]) if 0 < j < n - 1 and np.isfinite(
+        score[i, j - 1:j + 2]).all() else 0.0
     return np.array([j - reach + fx, i - reach + fy])
 
 
