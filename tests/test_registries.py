@@ -168,3 +168,27 @@ def test_drift_labels_must_match_the_series_geometry(tmp_path, sample_dir, capsy
     assert "other.nii.gz" in err and "voxel size" in err, err
     save_labels(tmp_path / "same.nii.gz", labels, vol)
     assert main(["drift", str(series), "--labels", str(tmp_path / "same.nii.gz")]) == 0
+
+
+def test_side_panel_shows_long_object_names_in_full():
+    """An object's name is not cut to 10 characters: a long one gets a line of its own."""
+    from ctui.screens.ws_keys import panel_text
+
+    s = _session("nifti")
+    s.seg.objects[1].name = "kidney_left_lower_pole"
+    s.seg.add_object("liver")
+
+    class Ws:  # what panel_text reads of the workspace
+        grid_mode = ortho_mode = False
+        _window_name = None
+
+        def __init__(self, session):
+            self.s = session
+
+        def _object_volumes(self):
+            return {1: 0.1}
+
+    text = panel_text(Ws(s)).plain
+    assert "kidney_left_lower_pole" in text and " liver " in text
+    row = next(line for line in text.splitlines() if "kidney_left_lower_pole" in line)
+    assert len(row) <= 36 and "ml" in text.splitlines()[text.splitlines().index(row) + 1]

@@ -409,4 +409,8 @@ def _objects_text(ws, t: Text) -> None:
         t.append("██", style=f"rgb({col[0]},{col[1]},{col[2]})")
         name = info.name if info is not None else f"object {i}"
         a = int(area[i]) if i < len(area) else 0
-        t.append(f" {name[:10]:<10} {a * px_mm2:7.0f}mm² {vols.get(i, 0.0):6.1f}ml\n")
+        stats = f"{a * px_mm2:7.0f}mm² {vols.get(i, 0.0):6.1f}ml"
+        if len(name) <= 10:
+            t.append(f" {name:<10} {stats}\n")
+        else:  # a long name gets a line of its own (the panel holds 36 columns), the figures under it
+            t.append(f" {name if len(name) <= 32 else name[:31] + '…'}\n{'':15}{stats}\n")
