@@ -193,7 +193,7 @@ class MouseMixin(ToolsMixin):
             self.refresh_view()
             return
         if s.box_corner is not None:
-            self._drag = ("box", iv, plane, s.zyx)
+            self._drag = ("box", iv, plane, s.zyx, s.roi_box)
         elif s.tool in ("brush", "eraser"):
             if self._editable():
                 try:
@@ -257,7 +257,7 @@ class MouseMixin(ToolsMixin):
             return
         drag[1].release_mouse()
         if drag[0] == "box":
-            self._finish_box(drag[2], drag[3], self.s.zyx)
+            self._finish_box(drag[2], drag[3], self.s.zyx, previous=drag[4])
         elif drag[0] == "paint":
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
@@ -360,15 +360,15 @@ class MouseMixin(ToolsMixin):
             self.set_status("Box: first corner set. Move and press y again, or drag the box with the mouse (Y: no box)")
             self.refresh_view()
             return
-        self._finish_box(s.plane, s.box_corner, s.zyx)
+        self._finish_box(s.plane, s.box_corner, s.zyx, previous=s.roi_box)
 
-    def _finish_box(self, plane: str, a, b) -> None:
+    def _finish_box(self, plane: str, a, b, *, previous) -> None:
+        """The box of corners ``a``, ``b`` drawn on ``plane``; a zero-size one restores ``previous``."""
         s = self.s
         s.box_corner = None
         pv = planes.plane_view(s.volume, plane)
-        old = s.roi_box if self._drag is None else None
         if a[pv.rows] == b[pv.rows] or a[pv.cols] == b[pv.cols]:
-            s.roi_box = old if old != s.roi_box else s.roi_box
+            s.roi_box = previous
             self.app.notify("The box has zero size (both corners on one row or column): box unchanged",
                             severity="warning", timeout=4)
             self.refresh_view()
