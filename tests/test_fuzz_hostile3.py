@@ -305,3 +305,164 @@ def test_stdout_closed(files):
     r = subprocess.run(f"{sys.executable} -m ctui info {files['series']} --json >&-", shell=True,
                        capture_output=False, stderr=subprocess.PIPE, text=True, timeout=120)
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+
+
+# ----------------------------------------------------------------- 11: sheared geometry
+def test_sheared_headers(tmp_path, capsys):
+    """A NIfTI sform and a MetaImage TransformMatrix with shear: the series loads with
+    orthonormal directions and a warning; a sheared label map is refused in one line."""
+    import nibabel as nib
+
+    from ctui.engine.io.series import load
+
+    a = np.zeros((10, 12, 14), np.int16)
+    a[2:8, 3:9, 4:10] = 500
+    aff = np.array([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1.0]])
+    nib.save(nib.Nifti1Image(a, aff), tmp_path / "s.nii.gz")
+    (tmp_path / "s.mhd").write_text("ObjectType = Image\nNDims = 3\nDimSize = 10 12 14\nElementType = MET_SHORT\n"
+                                    "ElementSpacing = 1 1 2\nTransformMatrix = 1 5 0 0 1 0 0 0 1\nElementDataFile = s.raw\n")
+    a.transpose(2, 1, 0).astype("<i2").tofile(tmp_path / "s.raw")
+    for name in ("s.nii.gz", "s.mhd"):
+        vol = load(tmp_path / name)
+        np.testing.assert_allclose(vol.direction.T @ vol.direction, np.eye(3), atol=1e-9)
+        assert any("right angles" in w for w in vol.warnings), name
+    nib.save(nib.Nifti1Image((a > 0).astype(np.uint8), aff), tmp_path / "lab.nii.gz")
+    for out in ("o.stl", "o.ply", "o.obj"):
+        assert "right angles" in _err(capsys, ["mesh", tmp_path / "lab.nii.gz", "--out", tmp_path / out])
+
+
+# ----------------------------------------------------------------- 12, 23: NIfTI voxel types, negative pixdim
+def test_nifti_complex_rgb_and_negative_pixdim(tmp_path):
+    import nibabel as nib
+
+    from ctui.engine.actions.info import describe_series
+    from ctui.engine.io.series import load
+
+    c = np.zeros((6, 5, 4), np.complex64)
+    c[1:4, 1:3, 1:3] = 3 + 4j
+    nib.save(nib.Nifti1Image(c, np.eye(4)), tmp_path / "c.nii.gz")
+    vol, d = describe_series(tmp_path / "c.nii.gz")
+    assert d["value_range"] == [0.0, 5.0] and any("magnitude" in w for w in vol.warnings)
+    rgb = np.zeros((6, 5, 4), dtype=[("R", "u1"), ("G", "u1"), ("B", "u1")])
+    rgb["R"], rgb["G"], rgb["B"] = 100, 200, 50
+    nib.save(nib.Nifti1Image(rgb, np.eye(4)), tmp_path / "rgb.nii.gz")
+    vol = load(tmp_path / "rgb.nii.gz")
+    assert abs(float(vol.data.max()) - (0.299 * 100 + 0.587 * 200 + 0.114 * 50)) < 1e-3
+    img = nib.Nifti1Image(np.zeros((6, 5, 4), np.int16), None)
+    img.header["pixdim"][1:4] = [-2, 1, 3]
+    img.header.set_qform(None, code=0)
+    img.header.set_sform(None, code=0)
+    nib.save(img, tmp_path / "neg.nii")
+    vol = load(tmp_path / "neg.nii")
+    assert vol.spacing == (3.0, 1.0, 2.0) and any("negative pixdim" in w for w in vol.warnings)
+
+
+# ----------------------------------------------------------------- 14: batch manifests
+def test_batch_hostile_manifests(files, tmp_path, capsys):
+    """/dev/zero, a FIFO, a field over 131,072 characters, a file:// scheduler: one line each;
+    a Latin-1 and a UTF-16 manifest run; a RESULTS.csv of binary garbage is rewritten; a
+    name starting with '=' is neutralised in RESULTS.csv."""
+    os.mkfifo(tmp_path / "fifo.csv")
+    (tmp_path / "big.csv").write_text("series,seed,range\n" + "x" * 140_000 + ",1,2\n")
+    for m in ("/dev/zero", tmp_path / "fifo.csv", tmp_path / "big.csv"):
+        _err(capsys, ["batch", m, "--out", tmp_path / "r.csv"])
+    row = f'{files["series"]},"{SEED}",200:400,=HYPERLINK("x")caf\u00e9\n'
+    (tmp_path / "lat.csv").write_bytes(("series,seed,range,name\n" + row).encode("latin-1"))
+    (tmp_path / "u16.csv").write_bytes(("series,seed,range,name\n" + row).encode("utf-16"))
+    assert "scheduler" in _err(capsys, ["batch", tmp_path / "lat.csv", "--out", tmp_path / "r.csv",
+                                        "--scheduler", "file:///etc/passwd"])
+    for m in ("lat.csv", "u16.csv"):
+        res = tmp_path / f"{m}.results.csv"
+        res.write_bytes(os.urandom(3000))
+        capsys.readouterr()
+        assert main(["batch", str(tmp_path / m), "--out", str(res), "--threads", "--workers", "1"]) == 0
+        import csv
+
+        rows = list(csv.reader(res.open(encoding="utf-8")))
+        assert rows[1][rows[0].index("status")] == "ok" and "caf\u00e9" in rows[1][1]
+        assert not any(c.startswith(("=", "+", "@")) for r in rows for c in r)
+
+
+# ----------------------------------------------------------------- 16: slow paths
+def test_measure_of_many_islands_is_linear(tmp_path):
+    """mesh_stats of 3,000 tetrahedra: per-component figures by bincount (was a pass over the
+    whole mesh per component); each island's volume is 1/6 mm^3."""
+    from ctui.engine.core.meshdata import Mesh
+    from ctui.engine.measure.stats import mesh_stats
+
+    n = 3000
+    base = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    off = np.stack(np.meshgrid(np.arange(15), np.arange(15), np.arange(15)), -1).reshape(-1, 3)[:n] * 3.0
+    m = Mesh(vertices=(base[None] + off[:, None]).reshape(-1, 3),
+             faces=(faces[None] + 4 * np.arange(n)[:, None, None]).reshape(-1, 3))
+    st = mesh_stats(m)
+    assert st["n_components"] == n and st["closed"]
+    assert abs(st["volume_mm3"] - n / 6) < 1e-6 and all(abs(c["volume_mm3"] - 1 / 6) < 1e-9 for c in st["components"])
+
+
+def test_info_of_a_folder_with_a_huge_sparse_file(tmp_path, capsys):
+    """A 20 GB sparse file of zeros is not parsed as DICOM to its end: one line, quickly."""
+    with open(tmp_path / "big.bin", "wb") as fh:
+        fh.truncate(20 << 30)
+    assert "nothing loadable" in _err(capsys, ["info", tmp_path])
+
+
+# ----------------------------------------------------------------- 17: CSV formula injection
+def test_export_csv_neutralises_formulas(files, tmp_path, capsys):
+    import zipfile
+
+    with zipfile.ZipFile(files["project"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    doc = json.loads(members["project.json"])
+    doc["objects"][0]["name"] = '=HYPERLINK("http://evil","x")'
+    members["project.json"] = json.dumps(doc).encode()
+    p = tmp_path / "evil.ctui"
+    with zipfile.ZipFile(p, "w") as zf:
+        for n, b in members.items():
+            zf.writestr(n, b)
+    assert main(["export", str(p), "--format", "csv", "--out", str(tmp_path / "o.csv")]) == 0
+    import csv
+
+    rows = list(csv.DictReader((tmp_path / "o.csv").open()))
+    assert rows[0]["name"] == "'" + doc["objects"][0]["name"] and float(rows[0]["volume_voxels_ml"]) > 4
+
+
+# ----------------------------------------------------------------- 19: degenerate meshes
+def test_meshes_without_area_are_refused(tmp_path, capsys):
+    import struct
+
+    b = b"ctui".ljust(80, b" ") + struct.pack("<I", 2)
+    for _ in range(2):
+        b += struct.pack("<12fH", 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 0)
+    (tmp_path / "d.stl").write_bytes(b)
+    (tmp_path / "e.stl").write_bytes(b"x" * 80 + struct.pack("<I", 0))
+    assert "degenerate" in _err(capsys, ["measure", tmp_path / "d.stl", "--json"])
+    assert "no triangles" in _err(capsys, ["measure", tmp_path / "e.stl", "--json"])
+
+
+# ----------------------------------------------------------------- 22: loader options everywhere
+def test_segment_and_drift_take_loader_options(files, tmp_path, capsys):
+    """A raw volume segmented with --shape/--dtype/--spacing (4.09 mL as from the DICOM
+    series); a cropped series segmented and drift-checked; a NIfTI CT meshed with --iso."""
+    import nibabel as nib
+
+    from ctui.engine.io.series import load
+
+    vol = load(files["series"])
+    vol.data.astype("<i2").tofile(tmp_path / "v.raw")
+    capsys.readouterr()
+    assert main(["segment", str(tmp_path / "v.raw"), "--shape", "16,48,48", "--dtype", "int16", "--spacing",
+                 ",".join(map(str, vol.spacing)), "--seed", SEED, "--range", "200:400", "--json"]) == 0
+    assert abs(json.loads(capsys.readouterr().out)["objects"][0]["volume_ml"] - 4.09) < 0.01
+    assert main(["segment", str(files["series"]), "--crop", "2,14,,,,", "--seed", "24,24,6", "--range", "200:400",
+                 "--project", str(tmp_path / "c.ctui")]) == 0
+    assert main(["drift", str(files["series"]), "--crop", "2,14,,,,", "--seed", "24,24,6", "--range", "200:400",
+                 "--json"]) == 0
+    ct = np.full((30, 30, 20), -1000, np.int16)
+    ct[5:25, 5:25, 5:15] = 500
+    nib.save(nib.Nifti1Image(ct, np.eye(4)), tmp_path / "ct.nii.gz")
+    capsys.readouterr()
+    assert main(["mesh", str(tmp_path / "ct.nii.gz"), "--iso", "-250", "--out", str(tmp_path / "ct.stl"),
+                 "--json"]) == 0
+    assert abs(json.loads(capsys.readouterr().out)["volume_ml"] - 4.0) < 0.1  # the 20x20x10 mm box
