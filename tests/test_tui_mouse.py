@@ -148,6 +148,11 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         box = s.roi_box
         await pilot.press("y", "y")
         assert s.roi_box == box
+        # by the mouse too: a drag out and back to where it started
+        await pilot.press("y")
+        a = cell_of_voxel(app, (5, 30, 30))
+        await drag(pilot, "#main", [a, (a[0] + 6, a[1] + 3), a])
+        assert s.roi_box == box and s.box_corner is None
         await pilot.press("Y")
         assert s.roi_box is None
         assert not app.internal_errors
