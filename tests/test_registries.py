@@ -192,3 +192,19 @@ def test_side_panel_shows_long_object_names_in_full():
     assert "kidney_left_lower_pole" in text and " liver " in text
     row = next(line for line in text.splitlines() if "kidney_left_lower_pole" in line)
     assert len(row) <= 36 and "ml" in text.splitlines()[text.splitlines().index(row) + 1]
+
+
+def test_cli_help_names_the_registries_it_cannot_import():
+    """``ctui --help`` may not import numpy, so the filter and DVR-preset names in the CLI's
+    help are text: they must be the engine's registries, all of them."""
+    import re
+
+    from ctui.commands.segment import FILTER_HELP
+    from ctui.engine.render.transfer import PRESETS
+    from ctui.engine.segment.filters import FILTERS
+
+    named = re.search(r"Names: ([a-z ]+)\.", FILTER_HELP).group(1).split()
+    assert sorted(named) == sorted(FILTERS)
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    preset_help = sub.choices["render"]._option_string_actions["--preset"].help
+    assert sorted(re.findall(r"(?:ct|mr)-[a-z-]+", preset_help)) == sorted(PRESETS)
