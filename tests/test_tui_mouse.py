@@ -127,6 +127,15 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         row = next(i for i, line in enumerate(lines) if "██" in line)  # object 1's line
         await pilot.click("#panel", offset=(6, row))
         assert s.current == 1
+        # an object with a long name takes two lines: a click on either selects it
+        s.seg.objects[2].name = "left kidney upper pole"
+        ws.update_panel()
+        lines = panel_text(ws).plain.split("\n")
+        row2 = next(i for i, line in enumerate(lines) if "left kidney upper pole" in line)
+        await pilot.click("#panel", offset=(20, row2 + 1))
+        assert s.current == 2
+        await pilot.click("#panel", offset=(6, row))
+        assert s.current == 1
         # go to x,y,z
         await pilot.press("g")
         await answer_prompt(pilot, "10,12,5")

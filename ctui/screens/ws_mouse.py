@@ -27,7 +27,7 @@ from textual.binding import Binding
 
 from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.segment import review
+from ctui.engine.actions.edit import review
 from ctui.screens import planes
 from ctui.screens.imageview import ImageView
 from ctui.screens.strip import ReviewStrip
@@ -277,6 +277,8 @@ class MouseMixin(ToolsMixin):
         from ctui.screens.ws_keys import panel_text
 
         lines = panel_text(self).plain.split("\n")
+        if 0 < row < len(lines) and "██" not in lines[row] and lines[row].startswith(" " * 8) and "██" in lines[row - 1]:
+            row -= 1  # the figures' line under an object with a long name
         if not 0 <= row < len(lines) or "██" not in lines[row]:
             return
         s = self.s
