@@ -18,10 +18,9 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
 from ctui.engine.actions.formats import output_name
-from ctui.engine.actions.measure import measure_object, save_sections
+from ctui.engine.actions.measure import find_steps, measure_object, save_sections
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.measure import sections
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.messages import JobDone, JobFailed, Status
@@ -253,7 +252,7 @@ class MeasureScreen(GuardMixin, Screen):
         if ok.size:
             lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
         try:
-            steps = sections.find_steps(np.array(sm), a)
+            steps = find_steps(np.array(sm), a)
             if steps:
                 lines += ["", "[b]steps[/b]"]
                 for st in steps[:6]:

@@ -26,9 +26,10 @@ import numpy as np
 from ctui.engine.segment.edit import MODES, SMOOTHING, Roi, in_roi, roi_slices
 from ctui.engine.segment.necks import DEFAULT_NECK_MM
 from ctui.engine.segment.selection import Segmentation, fill_range, neck_fill
+from ctui.engine.segment import review  # re-exported: the review strip and marks of the workspace
 
 __all__ = ["MODES", "SMOOTHING", "EditLimits", "Segmentation", "box_of_corners", "cut", "dab", "fill_slice", "island",
-           "parse_box", "parse_limits", "smooth"]
+           "parse_box", "parse_limits", "review", "smooth"]
 
 
 @dataclass
