@@ -319,3 +319,30 @@ async def test_shift_drag_pans_and_ortho_click_sets_plane():
         await pilot.click("#o-sagittal", offset=cell_of_voxel(app, target, "#o-sagittal", "sagittal"))
         assert s.plane == "sagittal" and s.x == x and _near(s.zyx, target), s.zyx
         assert not app.internal_errors
+
+
+async def test_roi_box_confines_fill_and_propagation():
+    """The contract with the segmentation panel: Session.roi_box confines the fill (Enter)
+    and the proposal (p) to the box's rows, columns and slices."""
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        s.range_ = (200.0, 400.0)
+        z = s.z
+        s.roi_box = ((z - 3, z + 3), (14, 30), (10, 24))
+        await pilot.press("enter")
+        lab = s.seg.labels == 1
+        zz, yy, xx = np.nonzero(lab)
+        assert lab.any() and yy.min() >= 14 and yy.max() <= 30 and xx.max() <= 24
+        await pilot.press("p")
+        from ctui.screens.testing import wait_for
+
+        await wait_for(pilot, lambda: ws._prop is None and ws.proposal is not None, what="the proposal")
+        got = ws.proposal.mask3d()
+        (z0, y0, x0), m = got
+        pz, py, px = np.nonzero(m)
+        assert (pz + z0).min() >= z - 3 and (pz + z0).max() <= z + 3
+        assert (py + y0).min() >= 14 and (py + y0).max() <= 30 and (px + x0).max() <= 24
+        assert not app.internal_errors
