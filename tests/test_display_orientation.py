@@ -136,3 +136,27 @@ def test_oblique_stack_gets_a_note():
         assert pv.letters == LETTERS[plane]
         assert "oblique" in pv.note
     assert planes.slice_plane(vol) == "sagittal"
+
+
+def test_nrrd_with_permuted_flipped_axes_shows_the_same_pixels(tmp_path):
+    """An NRRD (LPS space directions) storing the axes as (y, x, z) with y reversed."""
+    nrrd = pytest.importorskip("nrrd")
+    dcm = load(shared("ct_head_phantom_philips"), crop=(10, 18, 100, 420, 60, 460))
+    data = dcm.data[:, ::-1, :]  # y reversed: its first voxel is the last row
+    origin = np.asarray(dcm.index_to_mm((0, dcm.shape[1] - 1, 0)), float)
+    dirs = {v: dcm.direction[:, 2 - v] * dcm.spacing[v] for v in range(3)}
+    dirs[1] = -dirs[1]
+    order = (1, 2, 0)  # NRRD axes i, j, k = volume y, x, z
+    arr = np.transpose(data, order)  # [i, j, k]
+    header = {"space": "left-posterior-superior", "space directions": np.array([dirs[v] for v in order]),
+              "space origin": origin, "kinds": ["domain"] * 3}
+    path = tmp_path / "phantom.nrrd"
+    nrrd.write(str(path), np.ascontiguousarray(arr), header, index_order="F")
+    vol = load(path)
+    zyx_d = (dcm.shape[0] // 2, 140, 230)
+    zyx_n = tuple(int(round(v)) for v in vol.mm_to_index(dcm.index_to_mm(zyx_d)))
+    for plane in planes.PLANES:
+        pv = planes.plane_view(vol, plane)
+        assert pv.letters == LETTERS[plane]
+        a, b = _view_pixels(dcm, plane, zyx_d), _view_pixels(vol, plane, zyx_n)
+        assert a.std() > 5 and np.array_equal(a, b), plane
