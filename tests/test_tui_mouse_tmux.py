@@ -67,39 +67,46 @@ def tmux_session():
     subprocess.run(_tmux("kill-server"), capture_output=True, timeout=10, env=_env())
 
 
-def test_mouse_click_wheel_drag_in_tmux(tmux_session, tmp_path):
+# terminal size -> (a cell up-left of the image centre, the drag's row and columns)
+LAYOUTS = {(160, 50): ((40, 15), 30, range(40, 75, 5)), (80, 24): ((15, 8), 12, range(10, 34, 4))}
+
+
+@pytest.mark.parametrize("size", list(LAYOUTS), ids=lambda s: f"{s[0]}x{s[1]}")
+def test_mouse_click_wheel_drag_in_tmux(tmux_session, tmp_path, size):
     import numpy as np
 
     from ctui.engine.io.project import load_project
 
     env = _env(CTUI_AUTOSAVE_DIR=str(tmp_path / "autosave"), COLORTERM="truecolor")
     cmd = f"cd {tmp_path} && {sys.executable} -m ctui --graphics halfblock; echo CTUI-EXIT=$?; sleep 30"
-    subprocess.run(_tmux("new-session", "-d", "-s", tmux_session, "-x", "160", "-y", "50", cmd),
+    (cc, cr), drag_row, drag_cols = LAYOUTS[size]
+    subprocess.run(_tmux("new-session", "-d", "-s", tmux_session, "-x", str(size[0]), "-y", str(size[1]), cmd),
                    check=True, env=env, timeout=10)
     subprocess.run(_tmux("set-option", "-t", tmux_session, "mouse", "on"), capture_output=True, timeout=10, env=_env())
     screen = _wait(tmux_session, r"Slice \d+/")
     start = int(screen.split("Slice ")[1].split("/")[0])
     assert "Cursor x 64  y 64" in screen
-    # the sample (128x128) fills the main view's height (rows 2..47) left of the side panel
-    # (columns 1..~121): a click left of and above the centre moves the cursor there
-    _sgr(tmux_session, 0, 40, 15)
-    _sgr(tmux_session, 0, 40, 15, release=True)
+    # the sample (128x128) fills the main view's height left of the side panel: a click left
+    # of and above the centre moves the cursor there
+    _sgr(tmux_session, 0, cc, cr)
+    _sgr(tmux_session, 0, cc, cr, release=True)
     screen = _wait(tmux_session, r"Cursor x (\d+)  y (\d+)")
     x, y = (int(v) for v in re.search(r"Cursor x (\d+)  y (\d+)", screen).groups())
     assert x < 60 and y < 60, screen
     # the wheel: up one slice, then down two
-    _sgr(tmux_session, 64, 40, 15)
+    _sgr(tmux_session, 64, cc, cr)
     _wait(tmux_session, f"Slice {start + 1}/")
-    _sgr(tmux_session, 65, 40, 15)
-    _sgr(tmux_session, 65, 40, 15)
+    _sgr(tmux_session, 65, cc, cr)
+    _sgr(tmux_session, 65, cc, cr)
     _wait(tmux_session, f"Slice {start - 1}/")
     # brush down (b: a 29-px dab at the cursor), then a drag 30 columns to the right paints
     _keys(tmux_session, "b")
     _wait(tmux_session, "Brush down")
-    _sgr(tmux_session, 0, 40, 30)
-    for c in range(45, 75, 5):
-        _sgr(tmux_session, 32, c, 30)  # motion with the left button held
-    _sgr(tmux_session, 0, 70, 30, release=True)
+    cols = list(drag_cols)
+    _sgr(tmux_session, 0, cols[0], drag_row)
+    for c in cols[1:]:
+        _sgr(tmux_session, 32, c, drag_row)  # motion with the left button held
+    _sgr(tmux_session, 0, cols[-1], drag_row, release=True)
     _wait(tmux_session, "Painted along the drag")
     _keys(tmux_session, "b")
     _keys(tmux_session, "C-s")
