@@ -15,7 +15,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Static
+from textual.widgets import DataTable, Static
 
 from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.measure import find_steps, measure_object, save_sections
@@ -23,6 +23,7 @@ from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
@@ -101,7 +102,7 @@ class MeasureScreen(GuardMixin, Screen):
                 yield ImageView(id="ms-plot")
                 yield Static(id="ms-info")
             yield Static("", id="ms-status")
-        yield Footer()
+        yield KeyBar()  # wraps at 80 columns instead of cutting the last keys
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)

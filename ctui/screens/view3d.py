@@ -14,7 +14,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 
 from ctui.engine import render
 from ctui.engine.actions import defaults
@@ -26,6 +26,7 @@ from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 from ctui.engine.actions.render import centreline  # the function the fly-through of ctui render uses
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.session import safe_cwd
 
@@ -92,7 +93,7 @@ class View3DScreen(GuardMixin, Screen):
             yield ImageView(id="v3-view")
             yield Static(id="v3-info")
         yield Static("", id="v3-status")
-        yield Footer()
+        yield KeyBar()  # wraps at 80 columns instead of cutting the last keys
 
     def on_mount(self) -> None:
         if self.fixed_image is not None:
