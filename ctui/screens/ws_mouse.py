@@ -61,8 +61,7 @@ def _plane_of(ws, widget) -> str:
     if wid.startswith("o-"):
         return wid[2:]
     if wid.startswith("g-"):
-        sp = getattr(planes, "slice_plane", None)
-        return sp(ws.s.volume) if sp is not None else "axial"
+        return planes.slice_plane(ws.s.volume)
     return ws.s.plane
 
 
@@ -444,9 +443,8 @@ class MouseMixin(ToolsMixin):
         s = self.s
         s.z = int(z)
         s.clamp()
-        sp = getattr(planes, "slice_plane", None)
-        if self.proposal is not None and s.plane != (sp(s.volume) if sp else "axial") and not self.ortho_mode:
-            s.plane = sp(s.volume) if sp else "axial"
+        if not self.ortho_mode:  # the strip's axis is the file's slices: show them
+            s.plane = planes.slice_plane(s.volume)
         self.refresh_view()
         why = {m.z: m.why for m in self.review_marks()}.get(s.z)
         if why and self.proposal is not None:
