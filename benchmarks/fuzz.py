@@ -4,7 +4,8 @@ Runs the engine of tests/fuzz_cli.py (mutated ctui projects, NIfTI, NRRD, MRIC,
 meshes, DICOM, and real files from ../shared/data through `ctui info/measure/mesh`, each
 case in a fork with RLIMIT_AS capped and a 30 s alarm) on ONE core, and prints the
 figures: cases, tracebacks, runs over 30 s, allocations over the cap, exit-0 wrong
-results, multi-line/unnamed errors. Findings are saved under --out/findings/ with a
+results, multi-line/unnamed errors, non-regular outputs replaced and control characters
+reaching the terminal (issue 26's families: ``--families only`` runs them alone). Findings are saved under --out/findings/ with a
 README giving the reproducer command; --out/summary.json holds the counts. There is no
 peer tool to compare with: the figure to beat is zero findings.
 
@@ -35,7 +36,10 @@ def main() -> int:
     ap.add_argument("--out", default="/tmp/ctui-fuzz")
     ap.add_argument("--seed", type=int, default=1, help="random seed of the mutations (CI uses 0)")
     ap.add_argument("--report-every", type=int, default=250)
+    ap.add_argument("--families", choices=("all", "only", "none"), default="all",
+                    help="issue 26's hostile families (tests/fuzz_cli_families.py): with the other seeds, alone, or not")
     a = ap.parse_args()
+    os.environ["CTUI_FUZZ_FAMILIES"] = {"all": "1", "only": "only", "none": "0"}[a.families]
     from fuzz_cli import FINDINGS, campaign
 
     res = campaign(a.cases, Path(a.out), seed_value=a.seed, report_every=a.report_every,
@@ -46,6 +50,7 @@ def main() -> int:
     print(f"  clean: {c['ok']} exit 0 with a plausible result, {c['error']} one-line errors (exit 2)")
     print(f"  tracebacks {c['traceback']}, runs over {res['timeout_s']} s {c['slow']}, allocations over the "
           f"{res['cap_mb']} MiB cap {c['alloc']}, exit-0 wrong results {c['wrong']}, bad error messages {c['message']}")
+    print(f"  non-regular outputs replaced {c['replaced']}, control characters reaching the terminal {c['control']}")
     print(json.dumps({"cases": res["cases"], **{k: c[k] for k in FINDINGS}}))
     return 0 if not any(c[k] for k in FINDINGS) else 1
 

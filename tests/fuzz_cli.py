@@ -52,12 +52,13 @@ import tempfile
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from fuzz_cli_families import control_chars, family_seeds, layout_specials, mutate_family, specials_intact
 from fuzz_cli_mutators import hypothesis_inputs, mutate_seed
 
 HERE = Path(__file__).resolve().parent
@@ -79,6 +80,7 @@ class Seed:
     files: dict[str, bytes]
     argv: list[str]
     real: bool = False
+    specials: dict[str, str] = field(default_factory=dict)  # output name -> "fifo", "devnull-link"... (families)
 
 
 def _small_series(folder: Path) -> Path:
@@ -156,7 +158,19 @@ def make_seeds(work: Path) -> list[Seed]:
                 continue
             files[extra[1]] = q.read_bytes()
         seeds.append(Seed(name, kind, local, files, ["info", "{dir}/" + local, "--json"], real=True))
+    fam = os.environ.get("CTUI_FUZZ_FAMILIES", "1")  # "0": none, "only": the families alone
+    if fam == "only":
+        seeds = []
+    if fam != "0":  # issue 26's hostile families (fuzz_cli_families)
+        seeds += family_seeds(Seed, work, {"p.ctui": rd("p.ctui"), "s.dcm": (series / "slice008.dcm").read_bytes(),
+                                           "b.stl": rd("b.stl")}, series)
     return seeds
+
+
+#: family seeds whose unmutated form is not a valid run (an option placeholder, a FIFO output)
+NO_VALID_RUN = ("options", "outputs")
+FAMILY_KINDS = ("options", "outputs", "nrrd-detached", "dicom-fields", "seg-frames", "nifti-types", "mesh-degenerate",
+                "batch")
 
 
 # --------------------------------------------------------------------- oracles
@@ -225,8 +239,23 @@ def _declared_shape(kind: str, path: Path) -> tuple | None:
     return None
 
 
+def _finite_stl(p: Path) -> bool:
+    if not p.is_file():
+        return True  # judged below
+    b = p.read_bytes()
+    if len(b) < 84 or b[:5] == b"solid":
+        return True
+    n = struct.unpack_from("<I", b, 80)[0]
+    if len(b) != 84 + 50 * n:
+        return True  # judged below
+    tri = np.frombuffer(b, np.dtype([("n", "<3f4"), ("v", "<9f4"), ("a", "<u2")]), count=n, offset=84)
+    return bool(np.isfinite(tri["v"]).all())
+
+
 def oracle(seed: Seed, case_dir: Path, stdout: str) -> str | None:
     """None when an exit-0 result is plausible for the mutated input, else why not."""
+    if "--json" not in seed.argv:
+        return None  # text output: only the terminal rule (control characters) applies
     try:
         rep = json.loads(stdout)
     except ValueError as exc:
@@ -238,6 +267,8 @@ def oracle(seed: Seed, case_dir: Path, stdout: str) -> str | None:
         if any(w in low for w in ("volume", "voxels", "area", "triangles", "vertices")) and v < 0 and "warning" not in low:
             return f"negative {where} = {v}"
     cmd = seed.argv[0]
+    if cmd == "mesh" and (rep.get("volume_ml") is None or not _finite_stl(case_dir / "o.stl")):
+        return "mesh: no volume or non-finite vertices in the STL written"
     if cmd == "info":
         shape = rep.get("shape_zyx") or []
         sp = rep.get("spacing_zyx_mm") or []
@@ -319,6 +350,7 @@ def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None
     case_dir.mkdir(parents=True)
     for name, b in seed.files.items():
         (case_dir / name).write_bytes(data if name == seed.main else b)
+    layout_specials(case_dir, seed.specials)
     argv = [a.replace("{dir}", str(case_dir)) for a in seed.argv]
     cap = _vm_size() + CAP_MB * 2**20
     t0 = time.monotonic()
@@ -332,6 +364,12 @@ def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None
     cpu = usage.ru_utime + usage.ru_stime
     stdout = (case_dir / ".stdout").read_text(errors="replace")
     stderr = (case_dir / ".stderr").read_text(errors="replace")
+    broken = specials_intact(case_dir, seed.specials) if seed.specials else None
+    if broken:
+        return Outcome("replaced", -1, time.monotonic() - t0, broken)
+    ctl = control_chars(stdout) or (control_chars(stderr) if "Traceback" not in stderr else None)
+    if ctl:
+        return Outcome("control", -1, time.monotonic() - t0, f"a control character reached the terminal: {ctl}")
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig in (signal.SIGALRM, signal.SIGXCPU):
@@ -343,6 +381,8 @@ def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None
     if cpu > cpu_s:
         return Outcome("slow", rc, cpu, f"{cpu:.1f} s of CPU")
     dt = cpu  # the figure reported as a case's time: its CPU seconds (independent of the machine's load)
+    if seed.argv[0] == "batch" and rc == 1 and "Traceback" not in stderr:
+        rc = 0  # ctui batch: exit 1 says some jobs failed (each with its one-line error in RESULTS.csv)
     if "Traceback (most recent call last)" in stderr or rc not in (0, 2):
         last = [ln for ln in stderr.strip().splitlines() if ln.strip()][-3:]
         kind = "alloc" if "MemoryError" in stderr else "traceback"
@@ -353,7 +393,9 @@ def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None
             return Outcome("alloc", rc, dt, stderr.strip()[-300:])
         if len(lines) != 1 or not lines[0].startswith(f"ctui {seed.argv[0]}: "):
             return Outcome("message", rc, dt, repr(stderr[-400:]))
-        names = set(seed.files) | {case_dir.name, "o.stl"}
+        names = set(seed.files) | {case_dir.name, "o.stl"} | set(seed.specials)
+        names |= {a for a in seed.argv if a.startswith("--")}  # an option's fault names the option
+        names |= {a for a in seed.argv if "/" in a and "{dir}" not in a}  # or an input outside the case folder
         if not any(n in lines[0] for n in names):
             return Outcome("message", rc, dt, f"does not name the file: {lines[0][:300]}")
         return Outcome("error", rc, dt, lines[0][:300])
@@ -363,7 +405,7 @@ def run_case(seed: Seed, data: bytes, case_dir: Path, *, target: Callable | None
     return Outcome("ok", rc, dt)
 
 
-FINDINGS = ("traceback", "message", "slow", "alloc", "wrong")
+FINDINGS = ("traceback", "message", "slow", "alloc", "wrong", "replaced", "control")
 
 
 def warm_up(seeds: list[Seed], work: Path) -> None:
@@ -376,7 +418,8 @@ def warm_up(seeds: list[Seed], work: Path) -> None:
 
     import ctui
 
-    for mod in ("pydicom", "nibabel", "nrrd", "trimesh", "scipy.ndimage", "skimage.measure", "PIL.Image"):
+    for mod in ("pydicom", "nibabel", "nrrd", "trimesh", "scipy.ndimage", "skimage.measure", "PIL.Image", "highdicom",
+                "cv2"):
         try:
             importlib.import_module(mod)
         except Exception:  # noqa: BLE001
@@ -409,7 +452,7 @@ def campaign(n_cases: int, out: Path, *, seed_value: int = 0, log: Callable[[str
     slowest = 0.0
     t0 = time.monotonic()
     # every seed unmutated first: they must all give exit 0 and pass the oracle
-    plan = [(s, s.files[s.main], "valid") for s in seeds]
+    plan = [(s, s.files[s.main], "valid") for s in seeds if s.kind not in NO_VALID_RUN]
     plan += hypothesis_inputs(seeds, max(0, int(hypothesis_share * (n_cases - len(plan)))))
     i = 0
     while i < n_cases:
@@ -417,7 +460,10 @@ def campaign(n_cases: int, out: Path, *, seed_value: int = 0, log: Callable[[str
             s, data, how = plan.pop(0)
         else:
             s = seeds[i % len(seeds)]
-            data, how = mutate_seed(s, rng)
+            if s.kind in FAMILY_KINDS:
+                s, data, how = mutate_family(s, rng)
+            else:
+                data, how = mutate_seed(s, rng)
         res = run_case(s, data, work / "case")
         if how == "valid" and res.kind != "ok":
             res = Outcome("wrong" if res.kind == "error" else res.kind, res.rc, res.seconds,

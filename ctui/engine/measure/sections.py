@@ -237,8 +237,11 @@ def sections_along_path(
                          batch=batch, timings=timings)
     _, total = path_spline(path_mm)
     if at_s is None:
-        if step_mm <= 0:
+        if not step_mm > 0:
             raise CtuiError(f"step must be positive, got {step_mm}")
+        if total / step_mm > MAX_SECTIONS:  # bounded work: a path of 1e6 mm at 0.5 mm ran for minutes
+            raise CtuiError(f"a path of {total:.0f} mm at a step of {step_mm:g} mm gives {total / step_mm:.0f} "
+                            f"sections (at most {MAX_SECTIONS}): give a larger --step or a shorter --path")
         s = np.arange(0.0, total + 1e-9, step_mm)
     else:
         s = np.asarray(at_s, dtype=np.float64)
@@ -256,6 +259,9 @@ def sections_along_path(
         classify_sections(rows, field)
         timings["flags"] = timings.get("flags", 0.0) + time.perf_counter() - tf
     return rows
+
+
+MAX_SECTIONS = 20_000  # sections one path may have
 
 
 # ------------------------------------------------------------------ steps
