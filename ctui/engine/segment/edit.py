@@ -377,9 +377,13 @@ class EditMixin:
         if z0 > z1:
             raise CtuiError(f"slices {zr[0]}..{zr[1]} lie outside the volume (slices 0..{nz - 1})")
         cut = region if inside else ~region
-        bb: Box = (slice(z0, z1 + 1), slice(0, ny), slice(0, nx))
+        ob = self.object_bbox(object_id)  # type: ignore[attr-defined]
+        if ob is None or z1 < ob[0].start or z0 >= ob[0].stop:
+            return 0
+        # the undo step stores only the object's box on these slices
+        bb: Box = (slice(max(z0, ob[0].start), min(z1 + 1, ob[0].stop)), ob[1], ob[2])
         cur = self.labels[bb]
-        gone = (cur == object_id) & cut[None]
+        gone = (cur == object_id) & cut[ob[1], ob[2]][None]
         n = int(np.count_nonzero(gone))
         if n:
             self.apply_region(bb, np.where(gone, np.uint8(0), cur),
