@@ -219,7 +219,7 @@ class EditMixin:
                    ("scissors_in_all", "Scissors: erase inside the box (or polygon), all slices"),
                    ("scissors_out_box", "Scissors: erase outside the box (or polygon), its slices"),
                    ("scissors_out_all", "Scissors: erase outside the box (or polygon), all slices"),
-                   ("polygon_point", "Scissors polygon: a point at the cursor (P; the scissors then use it)"),
+                   ("scissors_point", "Scissors polygon: a point at the cursor (P; the scissors then use it)"),
                    ("smooth", "Smooth: median / opening / closing, size in mm"),
                    ("box_corner", "ROI box: a corner at the cursor (y)"), ("box_clear", "ROI box off (Y)"),
                    ("edit_mode", "Mode add / replace / subtract (R)"),

@@ -52,7 +52,7 @@ MOUSE_BINDINGS = [
     Binding("left_curly_bracket", "mark(-1)", "Previous marked slice of the proposal", show=False),
     Binding("C", "cut_here", "Cut the proposal at this slice", show=False),
     Binding("A", "accept_to_here", "Accept the proposal from the seed to here", show=False),
-    Binding("P", "polygon_point", "Scissors polygon: a point at the cursor (then clicks add points)", show=False),
+    Binding("P", "scissors_point", "Scissors polygon: a point at the cursor (then clicks add points)", show=False),
 ]
 
 

@@ -61,7 +61,7 @@ class ToolsMixin:
                    f"Scissors ({'inside' if inside else 'outside'} the {what}, {where}): "
                    + "{removed} voxels of object {obj} erased (u undoes)")
 
-    def action_polygon_point(self) -> None:
+    def action_scissors_point(self) -> None:
         """P: a polygon point at the cursor (the file's slice plane); clicks then add points too."""
         s = self.s
         if not s.polygon_mode:
