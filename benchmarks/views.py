@@ -59,7 +59,7 @@ async def views_of(path: Path, out: Path, n: int) -> list[str]:
     from ctui.screens.app import CtuiApp
     from ctui.screens.testing import wait_workspace
 
-    graphics.use_graphics("halfblock") if hasattr(graphics, "use_graphics") else setattr(graphics, "_chosen", "halfblock")
+    graphics.use_graphics("halfblock")
     os.environ.setdefault("CTUI_AUTOSAVE_DIR", str(out / "autosave"))
     app = CtuiApp(str(path), autosave_s=1e9)
     lines = []
