@@ -113,7 +113,9 @@ def test_tui_enter_fills_as_ctui_segment_does(kind):
     n, reason, _ = edit.fill_slice(seg, image, x, y, z, object_id=1, mode="add", low=lo, high=hi,
                                    spacing_yx=tuple(vol.spacing[1:]))
     assert not reason and n > 0
-    cli, _ = _seed_fill(image, (x, y, z), (lo, hi), SegmentOptions(), tuple(vol.spacing[1:]))
+    # Enter's fixed 5 mm neck is the seed slice of `ctui segment --neck 5` (S and p use the automatic width)
+    cli = _seed_fill(vol, Pipeline(), Segmentation(vol.shape), 1, (x, y, z), (lo, hi),
+                     SegmentOptions(neck_mm=5.0, fill_holes=False)).mask
     tui = seg.labels[z] == 1
     assert np.array_equal(tui, cli)
     truth = case.truth[z]

@@ -1,29 +1,26 @@
-"""The segment action: seeds (and background seeds) + an HU range -> objects, as ``ctui segment`` and the TUI do it.
+"""The segment action: seeds (and background seeds) + a range -> objects, as ``ctui segment`` and the TUI do it.
 
-:func:`segment` validates every seed first (a seed off the volume, out of its range, or
-a background seed inside a foreground seed's own region raises one-line
-:class:`CtuiError` before anything is written: nothing is lost), then for each
-foreground seed, in order (object ids 1, 2, ...):
+:func:`segment` validates every seed first (a seed off the volume or the box, out of its
+range, or a background seed inside a foreground seed's own region raises one-line
+:class:`CtuiError` before anything is written: nothing is lost). For each seed it then
+decides, from the data, what the user did not give (:mod:`ctui.engine.segment.seeding`):
 
-* ``method="fill"`` (default): threshold fill of the seed slice, cut at necks narrower
-  than ``neck_mm`` (:mod:`ctui.engine.segment.necks`), propagated slice by slice or in
-  3D (``mode``) with the neck-cutting leak guard; with background seeds the object is
-  then split at its narrowest place between the seed and any background seed it
-  reached (:func:`ctui.engine.segment.grow.compete`);
-* ``method="grow"``: competitive region growing inside the range from the seed and the
-  background seeds (:func:`ctui.engine.segment.grow.grow`);
-* ``method="levelset"``: the fill above, then a threshold level set with a curvature
-  term (:func:`ctui.engine.segment.grow.levelset`), cut to the foreground's share when
-  background seeds are given.
+* the range, when none is given: the seed's neighbourhood, median +- 2 robust sd;
+* the leak guard's neck width, unless ``neck_mm`` forces one: a sweep of widths on a box
+  around the seed, keeping the widest result before the volume jumps
+  (:mod:`ctui.engine.segment.autoneck`); the result says what it chose and where it cut;
 
-Then ``keep_largest`` / ``min_island`` clean-ups, and ``interpolate`` fills the empty
-slices between key slices. Each object is one or a few undo steps of the
-:class:`Segmentation`. Slices are numbered from 0 (the lowest along the slice normal),
-in the CLI and the TUI alike. Coordinates: seeds are (x, y, z) = (column, row, slice).
+and runs the method by name from the registry :data:`ctui.engine.segment.methods.METHODS`
+(``fill`` default, ``grow``, ``levelset``), then the clean-ups (``keep_largest``,
+``min_island``, ``interpolate``). Results that are probably wrong (collapsed, many times
+the size the seed suggests, a guard that cut nothing, a background seed that cannot act)
+carry warnings; an empty result raises. Each object is one or a few undo steps of the
+:class:`Segmentation`. Slices are numbered from 0 (the lowest along the slice normal), in
+the CLI and the TUI alike. Coordinates: seeds are (x, y, z) = (column, row, slice).
 
-Memory: the fill works on crops; 3D mode, ``grow`` and ``levelset`` hold one bool
-in-range volume (1 byte a voxel) plus crop-sized work arrays, checked against the
-memory available before they are allocated.
+Memory: the fill works on crops and the sweep on a box of at most 300 mm; 3D mode and
+``grow`` without the guard hold one bool in-range volume (1 byte a voxel) plus crop-sized
+work arrays, checked against the memory available before they are allocated.
 """
 
 from __future__ import annotations
@@ -35,15 +32,12 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.core.limits import check_allocation
-from ctui.engine.core.progress import Cancelled, Progress, report
-from ctui.engine.segment import grow as _grow
-from ctui.engine.segment.fill3d import fill3d_seeds
-from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_3d
-from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.core.geometry import Geometry
+from ctui.engine.core.progress import Progress, report
+from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
-from ctui.engine.segment.propagate import PropagationSettings, propagate_object
+from ctui.engine.segment.methods import METHODS, Job, inrange_volume  # noqa: F401 - inrange_volume: API
+from ctui.engine.segment.propagate import PropagationSettings
 from ctui.engine.segment.seeding import RangeChoice, auto_width, seed_range, seed_voxels
 from ctui.engine.segment.selection import (
     Segmentation,
@@ -54,7 +48,6 @@ from ctui.engine.segment.selection import (
     seeded_components,
 )
 
-METHODS = ("fill", "grow", "levelset")
 Seed = tuple[int, int, int]
 #: A range (low, high), a tolerance (seed value +- t), or None: from the seed's neighbourhood.
 Threshold = tuple[float, float] | float | None
@@ -295,7 +288,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     for i, (seed, th) in enumerate(zip(fg, ths)):  # validate everything before the first change
         report(progress, 0, 1, f"seed {i + 1}: range and leak guard")
         fills.append(_seed_fill(volume, pipe, seg, free[i], seed, th, opts))
-    notes = _check_background(volume, pipe, fg, bg, fills)
+    notes = _check_background(volume, pipe, fg, bg, fills, same_region_ok=opts.method == "grow")
     results, settings = [], []
     for i, (seed, start) in enumerate(zip(fg, fills)):
         oid = free[i]
@@ -361,7 +354,6 @@ def _neck_report(opts: SegmentOptions, start: _Start) -> dict[str, Any]:
 
 def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, start: _Start,
          bg: list[Seed], opts: SegmentOptions, progress: Progress | None) -> tuple[ObjectResult, dict[str, Any]]:
-    x, y, z = seed
     res = ObjectResult(id=oid, seed=seed, range=start.rng, neck=_neck_report(opts, start),
                        auto_range=None if start.auto_range is None else start.auto_range.to_dict())
     s = _settings(opts, start, volume.data.shape)
@@ -372,47 +364,26 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
                           "method": opts.method, "neck": res.neck, "fill_holes": opts.fill_holes})
     if bg:
         info.settings["background"] = [list(b) for b in bg]
-    if opts.method == "grow":
-        _grow_object(volume, pipe, seg, oid, seed, bg, s, spacing, progress)  # type: ignore[arg-type]
-        res.stops = {"grow": "competition with the background seeds at the edges" if bg else "in-range region"}
-    else:
-        seg.apply_mask(start.mask, oid, offset=(z, 0, 0), overwrite=opts.overwrite,
-                       label=f"fill object {oid} at ({x}, {y}, {z})")
-
-        def cb(ev: Any) -> bool:
-            try:
-                report(progress, ev.done, max(ev.total, 1) * (2 if opts.method == "levelset" else 1),
-                       f"slice {ev.z}")
-            except Cancelled:
-                return False
-            return True
-
-        region = start.neck.region if start.neck is not None else None
-        prop = propagate_object(seg, volume, pipe, oid, z, s, progress=cb if progress is not None else None,
-                                region=region)
-        if prop.cancelled:
-            seg.undo()
-            raise Cancelled()
-        prop.accept(seg)
-        res.stops, res.necks, res.cuts = dict(prop.stops), list(prop.necks), list(prop.cuts)
-        res.warnings.extend(prop.warnings())
-        if prop.settings.get("neck_status") == "thin" and start.width > 0:
-            res.warnings.append(f"the neck width {start.width:g} mm is wider than the object around the seed, so "
-                                "the leak guard cut nothing: use the automatic width or a smaller one")
-        if bg:
-            _split_background(seg, oid, seed, bg, spacing, opts.connectivity)  # type: ignore[arg-type]
-        if opts.method == "levelset":
-            report(progress, 1, 2, "level set")
-            _levelset_object(volume, pipe, seg, oid, bg, s, opts, spacing)  # type: ignore[arg-type]
+    job = Job(volume=volume, pipe=pipe, seg=seg, oid=oid, seed=seed, start=start.mask, settings=s, background=bg,
+              region=start.neck.region if start.neck is not None else None, curvature=opts.curvature,
+              progress=progress)
+    METHODS[opts.method].run(job)
+    res.stops, res.necks, res.cuts = dict(job.stops), list(job.necks), list(job.cuts)
+    res.warnings.extend(job.warnings)
+    if job.neck_status == "thin" and start.width > 0:
+        res.warnings.append(f"the neck width {start.width:g} mm is wider than the object around the seed, so "
+                            "the leak guard cut nothing: use the automatic width or a smaller one")
     _clean(seg, oid, opts, spacing)  # type: ignore[arg-type]
     info.settings["propagation"] = res.stops
     return res, s.to_dict()
 
 
-def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed], fills: list[_Start]) -> list[str]:
-    """Refuse a background seed inside a seed's own slice object; warn about one that cannot act."""
+def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed], fills: list[_Start], *,
+                      same_region_ok: bool = False) -> list[str]:
+    """Refuse a background seed inside a seed's own slice object (unless the method shares a region along
+    its edges: ``grow``); warn about one that cannot act."""
     notes = []
-    for seed, start in zip(fg, fills):
+    for seed, start in zip(fg, fills if not same_region_ok else []):
         for b in bg:
             if b[2] == seed[2] and start.mask[b[1], b[0]]:
                 raise CtuiError(f"background seed {b[0]},{b[1]},{b[2]} lies inside the region of seed "
@@ -452,119 +423,6 @@ def _clean(seg: Segmentation, oid: int, opts: SegmentOptions, spacing: tuple[flo
         seg.remove_islands(oid, opts.min_island)
     if opts.interpolate:
         seg.fill_between_slices(oid, slices=opts.slices, spacing=spacing)
-
-
-def inrange_volume(volume: Any, pipe: Pipeline, low: float, high: float, *, slices: tuple[int, int] | None = None,
-                   labels: np.ndarray | None = None, object_id: int = 0,
-                   progress: Progress | None = None) -> np.ndarray:
-    """bool (nz, ny, nx): the pipeline's final view in [low, high], slice by slice (1 byte a voxel);
-    voxels of other objects in ``labels`` and slices outside ``slices`` are False."""
-    nz, ny, nx = volume.data.shape
-    check_allocation(nz * ny * nx, what="the in-range mask")
-    out = np.zeros((nz, ny, nx), bool)
-    z0, z1 = (0, nz - 1) if slices is None else (max(slices[0], 0), min(slices[1], nz - 1))
-    window = pipe.window_for(volume)
-    for z in range(z0, z1 + 1):
-        img = pipe.prepare(volume.data[z], window) if not pipe.active_steps() else pipe.final_region(
-            volume, z, 0, ny, 0, nx, window=window)
-        out[z] = in_range(img, low, high).view(bool)
-        if labels is not None:
-            lab = labels[z]
-            if lab.any():
-                out[z] &= (lab == 0) | (lab == object_id)
-        if z % 16 == 0:
-            report(progress, z - z0, z1 - z0 + 1, f"threshold slice {z}")
-    return out
-
-
-def _grow_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, bg: list[Seed],
-                 s: PropagationSettings, spacing: tuple[float, float, float], progress: Progress | None) -> None:
-    inr = inrange_volume(volume, pipe, s.low, s.high, slices=s.slices, labels=None if s.overwrite else seg.labels,
-                         object_id=oid, progress=_grow_progress(progress, 0.0, 0.5))
-    x, y, z = seed
-    fg = np.array([[z, y, x]])
-    bgz = np.array([[b[2], b[1], b[0]] for b in bg], np.int64).reshape(-1, 3)
-    got = _grow.candidate(inr, np.concatenate([fg, bgz]), spacing, s.connectivity)
-    del inr  # only the candidate's box from here on
-    if got is None:
-        return
-    box, region = got
-    org = np.array([b.start for b in box])
-    report(progress, 0.6, 1.0, "competition" if bg else "necks")
-    if bg:
-        m = _grow.compete(region, fg - org, _grow.inside_seeds(bgz - org, region.shape), spacing=spacing,
-                          connectivity=s.connectivity)
-    else:  # nothing to compete with: cut the necks instead
-        m = fill3d_seeds(region, fg - org, connectivity=s.connectivity)
-        if s.neck_mm > 0:
-            m, _status = cut_necks_3d(m, fg - org, neck_mm=s.neck_mm, spacing=spacing, connectivity=s.connectivity,
-                                      inplace=True)
-    del region
-    off, m = _grow.tight(tuple(int(v) for v in org), m)  # type: ignore[arg-type]
-    seg.apply_mask(m, oid, offset=off, overwrite=s.overwrite, label=f"grow object {oid} from ({x}, {y}, {z})")
-
-
-def _grow_progress(progress: Progress | None, a: float, b: float) -> Progress | None:
-    if progress is None:
-        return None
-
-    def sub(done: float, total: float, message: str = "") -> bool | None:
-        return progress(a + (b - a) * (done / total if total else 1.0), 1.0, message)
-
-    return sub
-
-
-def _split_background(seg: Segmentation, oid: int, seed: Seed, bg: list[Seed], spacing: tuple[float, float, float],
-                      connectivity: int) -> None:
-    """Cut the object at its narrowest place between the seed and the background seeds it reached."""
-    box = seg.object_bbox(oid)
-    if box is None:
-        return
-    origin = np.array([b.start for b in box])
-    region = seg.labels[box] == oid
-    inside = [b for b in bg if all(box[k].start <= v < box[k].stop for k, v in enumerate((b[2], b[1], b[0])))
-              and region[tuple(np.array([b[2], b[1], b[0]]) - origin)]]
-    if not inside:
-        return
-    x, y, z = seed
-    fgz = np.array([[z, y, x]]) - origin
-    bgz = np.array([[b[2], b[1], b[0]] for b in inside]) - origin
-    share = _grow.compete(region, fgz, bgz, spacing=spacing, connectivity=connectivity)
-    seg.apply_mask(region & ~share, oid, offset=tuple(int(v) for v in origin), mode="subtract",  # type: ignore[arg-type]
-                   label=f"cut object {oid} at the background seeds")
-
-
-def _levelset_object(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, bg: list[Seed],
-                     s: PropagationSettings, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:
-    box = seg.object_bbox(oid)
-    if box is None:
-        return
-    margin = [max(1, int(np.ceil(4.0 / sp))) for sp in spacing]
-    nz, ny, nx = seg.labels.shape
-    big = tuple(slice(max(b.start - m, 0), min(b.stop + m, n)) for b, m, n in zip(box, margin, (nz, ny, nx)))
-    origin = np.array([b.start for b in big])
-    window = pipe.window_for(volume)
-    check_allocation(int(np.prod([b.stop - b.start for b in big])) * 20, what="the level set of the object's box")
-    if not pipe.active_steps() and pipe.domain == "hu":
-        image = volume.data[big]  # the series values themselves: a view, no copy
-    else:
-        image = np.empty(tuple(b.stop - b.start for b in big), np.float32)  # filled slice by slice: one copy
-        for k, z in enumerate(range(big[0].start, big[0].stop)):
-            image[k] = pipe.final_region(volume, z, big[1].start, big[1].stop, big[2].start, big[2].stop,
-                                         window=window)
-    init = seg.labels[big] == oid
-    if (init.sum(axis=(1, 2)) > 0).sum() < 3:
-        return  # the level set needs a body at least 3 slices thick
-    bgz = np.array([[b[2], b[1], b[0]] for b in bg]).reshape(-1, 3) - origin
-    off, m = _grow.levelset(image, init, low=s.low, high=s.high, spacing=spacing, background=bgz,
-                            curvature=opts.curvature, margin_mm=4.0, connectivity=s.connectivity)
-    full = np.zeros(init.shape, bool)
-    full[off[0]:off[0] + m.shape[0], off[1]:off[1] + m.shape[1], off[2]:off[2] + m.shape[2]] = m
-    if s.slices is not None:
-        zs = np.arange(big[0].start, big[0].stop)
-        full[(zs < s.slices[0]) | (zs > s.slices[1])] = init[(zs < s.slices[0]) | (zs > s.slices[1])]
-    seg.apply_mask(full, oid, offset=tuple(int(v) for v in origin), mode="replace", axis=0,  # type: ignore[arg-type]
-                   overwrite=s.overwrite, label=f"level set of object {oid}")
 
 
 def edit_objects(segmentation: Segmentation, object_ids: Sequence[int] | None = None, *,

@@ -1,0 +1,218 @@
+"""Benchmark: one seed, one organ, on real CT against reference labels, beside the peers.
+
+Data: ``../shared/data/totalseg_example`` (TotalSegmentator's test CTs, reference labels
+made by its validated model): ``ct_abdomen_3mm`` (kidney right 2, kidney left 3, spleen 1,
+liver 5) and ``ct_aorta_1p5mm`` (its aorta mask). Each organ is seeded at its deepest
+point (maximum of the distance map of its reference label, the volume's border counting
+as outside). "range" is the organ's own 5-95th percentile HU range.
+
+Rows (same seed for all):
+
+* ``ctui auto``       ctui segment defaults, no range (range from the seed's neighbourhood), slice / 3d
+* ``ctui range``      ctui segment defaults with the organ's range, slice / 3d
+* ``ctui neck5``      the previous default (fixed 5 mm neck) with the range, slice / 3d
+* ``ctui grow+bg``    ctui segment --method grow with the range and background seeds
+* ``sitk connected``  SimpleITK ConnectedThreshold, seed + range
+* ``sitk confidence`` SimpleITK ConfidenceConnected, seed (multiplier 2.5, radius 2, 4 iterations)
+* ``skimage rw``      scikit-image random_walker on the in-range region with the same background seeds
+* ``skimage ws``      scikit-image watershed on the smoothed gradient with the same markers, inside the range
+
+Background seeds (grow, rw, ws): the deepest points of the largest in-range regions that a
+threshold fill from the seed reaches beyond the organ (its reference dilated by 2 voxels):
+a user's clicks in the neighbours the fill leaks into, at most 4.
+
+Columns: Dice, volume ratio (result / reference), HD95 (mm), seconds. ``--speed`` adds the
+slice-mode kidney timing on a 300 x 512 x 512 series (automatic width vs --neck 5).
+Run: python3 benchmarks/organs.py [--speed] [--no-peers]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ctui.engine.actions.opened import open_input  # noqa: E402
+from ctui.engine.actions.segment import SegmentOptions, segment  # noqa: E402
+from ctui.engine.io.series import load  # noqa: E402
+
+DATA = ROOT.parent / "shared" / "data" / "totalseg_example"
+
+
+def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
+    dt = ndimage.distance_transform_edt(np.pad(mask, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
+    z, y, x = np.unravel_index(int(np.argmax(dt)), mask.shape)
+    return int(x), int(y), int(z)
+
+
+def dice(a: np.ndarray, b: np.ndarray) -> float:
+    s = np.count_nonzero(a) + np.count_nonzero(b)
+    return 2.0 * np.count_nonzero(a & b) / s if s else 1.0
+
+
+def hd95(a: np.ndarray, b: np.ndarray, spacing) -> float:
+    if not a.any() or not b.any():
+        return float("inf")
+    sa = a & ~ndimage.binary_erosion(a)
+    sb = b & ~ndimage.binary_erosion(b)
+    da = ndimage.distance_transform_edt(~sb, sampling=spacing)[sa]
+    db = ndimage.distance_transform_edt(~sa, sampling=spacing)[sb]
+    return float(np.percentile(np.concatenate([da, db]), 95))
+
+
+def background_seeds(vol, ref: np.ndarray, seed, lo: float, hi: float, n: int = 4) -> list[tuple[int, int, int]]:
+    """(x, y, z) at the deepest points of the largest in-range regions the seed's fill reaches beyond the organ."""
+    x, y, z = seed
+    inr = (vol.data >= lo) & (vol.data <= hi)
+    lab, _ = ndimage.label(inr, structure=np.ones((3, 3, 3)))
+    comp = lab == lab[z, y, x]
+    beyond = comp & ~ndimage.binary_dilation(ref, iterations=2)
+    parts, k = ndimage.label(beyond)
+    if not k:
+        return []
+    sizes = np.bincount(parts.ravel())[1:]
+    out = []
+    for i in np.argsort(-sizes)[:n]:
+        out.append(deepest(parts == i + 1, vol.spacing))
+    return out
+
+
+def ctui_run(vol, seed, rng, **opts):
+    res = segment(vol, [seed], [rng] if rng is not None else [], **({"background": opts.pop("background")}
+                                                                      if "background" in opts else {}),
+                  options=SegmentOptions(**opts))
+    return res.segmentation.labels == res.objects[0].id
+
+
+def sitk_image(vol):
+    import SimpleITK as sitk
+
+    img = sitk.GetImageFromArray(vol.data.astype(np.float32))
+    img.SetSpacing(tuple(float(s) for s in vol.spacing[::-1]))
+    return img
+
+
+def sitk_connected(vol, seed, rng):
+    import SimpleITK as sitk
+
+    out = sitk.ConnectedThreshold(sitk_image(vol), seedList=[tuple(int(v) for v in seed)], lower=float(rng[0]),
+                                  upper=float(rng[1]))
+    return sitk.GetArrayFromImage(out) > 0
+
+
+def sitk_confidence(vol, seed, _rng):
+    import SimpleITK as sitk
+
+    out = sitk.ConfidenceConnected(sitk_image(vol), seedList=[tuple(int(v) for v in seed)], numberOfIterations=4,
+                                   multiplier=2.5, initialNeighborhoodRadius=2, replaceValue=1)
+    return sitk.GetArrayFromImage(out) > 0
+
+
+def _markers(vol, seed, bg, rng):
+    inr = (vol.data >= rng[0]) & (vol.data <= rng[1])
+    markers = np.zeros(vol.data.shape, np.int32)
+    for x, y, z in bg:
+        markers[z, y, x] = 2
+    x, y, z = seed
+    markers[max(z - 1, 0):z + 2, max(y - 1, 0):y + 2, max(x - 1, 0):x + 2] = 1
+    return inr, markers
+
+
+def skimage_rw(vol, seed, rng, bg):
+    from skimage.segmentation import random_walker
+
+    inr, markers = _markers(vol, seed, bg, rng)
+    markers[~inr & (markers == 0)] = -1  # out of range: not part of the graph
+    img = vol.data.astype(np.float32)
+    img = (img - img[inr].mean()) / max(float(img[inr].std()), 1e-6)
+    lab = random_walker(img, markers, beta=130, mode="cg_j", tol=1e-3, spacing=tuple(vol.spacing))
+    return lab == 1
+
+
+def skimage_ws(vol, seed, rng, bg):
+    from skimage.segmentation import watershed
+
+    inr, markers = _markers(vol, seed, bg, rng)
+    grad = ndimage.gaussian_gradient_magnitude(vol.data.astype(np.float32), sigma=1.0)
+    lab = watershed(grad, markers, mask=inr)
+    return lab == 1
+
+
+def cases():
+    vol = load(DATA / "ct_abdomen_3mm.nii.gz")
+    labels = open_input(DATA / "ct_abdomen_3mm_labels.nii.gz").labels
+    for name, lab in (("kidney right", 2), ("kidney left", 3), ("spleen", 1), ("liver", 5)):
+        yield name, vol, labels == lab
+    avol = load(DATA / "ct_aorta_1p5mm.nii.gz")
+    yield "aorta", avol, open_input(DATA / "ct_aorta_1p5mm_aorta.nii.gz").labels > 0
+
+
+def row(name: str, method: str, got: np.ndarray, ref: np.ndarray, spacing, secs: float) -> str:
+    return (f"{name:13s} {method:22s} {dice(got, ref):6.3f} {got.sum() / ref.sum():6.2f} "
+            f"{hd95(got, ref, spacing):7.1f} {secs:6.2f}")
+
+
+def timed(f, *a, **k):
+    t = time.perf_counter()
+    out = f(*a, **k)
+    return out, time.perf_counter() - t
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--no-peers", action="store_true", help="ctui rows only")
+    ap.add_argument("--speed", action="store_true", help="also time a slice-mode kidney on 300 x 512 x 512")
+    args = ap.parse_args()
+    if not DATA.is_dir():
+        print(f"skipped: {DATA} is missing")
+        return 0
+    print(f"{'organ':13s} {'method':22s} {'Dice':>6s} {'vol x':>6s} {'HD95':>7s} {'s':>6s}")
+    for name, vol, ref in cases():
+        seed = deepest(ref, vol.spacing)
+        rng = tuple(float(v) for v in np.percentile(vol.data[ref], [5, 95]))
+        bg = background_seeds(vol, ref, seed, *rng)
+        for mode in ("slice", "3d"):
+            for label, r, extra in (("ctui auto", None, {}), ("ctui range", rng, {}), ("ctui neck5", rng, {"neck_mm": 5.0})):
+                got, t = timed(ctui_run, vol, seed, r, mode=mode, **extra)
+                print(row(name, f"{label} {mode}", got, ref, vol.spacing, t))
+        got, t = timed(ctui_run, vol, seed, rng, method="grow", background=bg)
+        print(row(name, f"ctui grow+bg({len(bg)})", got, ref, vol.spacing, t))
+        if args.no_peers:
+            continue
+        for label, f in (("sitk connected", sitk_connected), ("sitk confidence", sitk_confidence)):
+            got, t = timed(f, vol, seed, rng)
+            print(row(name, label, got, ref, vol.spacing, t))
+        for label, f in (("skimage rw+bg", skimage_rw), ("skimage ws+bg", skimage_ws)):
+            got, t = timed(f, vol, seed, rng, bg)
+            print(row(name, label, got, ref, vol.spacing, t))
+        sys.stdout.flush()
+    if args.speed:
+        speed()
+    return 0
+
+
+def speed(repeat: int = 3) -> None:
+    """Slice-mode kidney on the 300 x 512 x 512 series of benchmarks/segment_methods.py: automatic width vs 5 mm."""
+    from benchmarks.segment_methods import make_series
+
+    vol, kidney, seed, _bg = make_series()
+    for label, neck in (("--neck 5", 5.0), ("automatic", None)):
+        ts = []
+        for _ in range(repeat):
+            t = time.perf_counter()
+            res = segment(vol, [seed], [(150.0, 260.0)], options=SegmentOptions(neck_mm=neck))
+            ts.append(time.perf_counter() - t)
+        got = res.segmentation.labels == 1
+        print(f"speed: slice-mode kidney on 300x512x512, {label:10s}: median {sorted(ts)[len(ts) // 2]:.3f} s, "
+              f"Dice vs the phantom kidney {dice(got, kidney):.3f}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
