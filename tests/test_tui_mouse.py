@@ -164,6 +164,15 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         assert s.roi_box == box and s.box_corner is None
         await pilot.press("Y")
         assert s.roi_box is None
+        # typed corners (as ctui segment/edit --box); a zero-size one is refused
+        await pilot.press("t")
+        await choose(pilot, "box_typed")
+        await answer_prompt(pilot, "5,6,2,20,30,9")
+        assert s.roi_box == ((2, 9), (6, 30), (5, 20))
+        await pilot.press("t")
+        await choose(pilot, "box_typed")
+        await answer_prompt(pilot, "5,6,2,5,30,9")
+        assert s.roi_box == ((2, 9), (6, 30), (5, 20))
         assert not app.internal_errors
 
 

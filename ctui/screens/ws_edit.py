@@ -221,7 +221,8 @@ class EditMixin:
                    ("scissors_out_all", "Scissors: erase outside the box (or polygon), all slices"),
                    ("scissors_point", "Scissors polygon: a point at the cursor (P; the scissors then use it)"),
                    ("smooth", "Smooth: median / opening / closing, size in mm"),
-                   ("box_corner", "ROI box: a corner at the cursor (y)"), ("box_clear", "ROI box off (Y)"),
+                   ("box_corner", "ROI box: a corner at the cursor (y)"),
+                   ("box_typed", "ROI box: type its corners X0,Y0,Z0,X1,Y1,Z1"), ("box_clear", "ROI box off (Y)"),
                    ("edit_mode", "Mode add / replace / subtract (R)"),
                    ("limits", "Limits: slice range and HU range (i)"), ("stop_slice", "Stop at this slice (s)")]
 

@@ -107,3 +107,27 @@ class ToolsMixin:
                        "(-{removed} +{added} voxels; u undoes)")
 
         self.app.push_screen(PromptScreen(f"Smooth object {s.current}: median|opening|closing and a size in mm", "median 3"), done)
+
+    def action_box_typed(self) -> None:
+        """The ROI box typed as two corners X0,Y0,Z0,X1,Y1,Z1 (as ``ctui segment/edit --box``)."""
+        from ctui.screens.dialogs import PromptScreen
+
+        s = self.s
+
+        def done(val: str | None) -> None:
+            if not val or not val.strip():
+                return
+            try:
+                s.roi_box = et.parse_box(val.strip(), s.shape)
+            except CtuiError as exc:
+                self.app.notify(f"{exc} (box unchanged)", severity="warning")
+                return
+            (z0, z1), (y0, y1), (x0, x1) = s.roi_box
+            self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1} (Y removes it)")
+            self.refresh_view()
+
+        cur = ""
+        if s.roi_box is not None:
+            (z0, z1), (y0, y1), (x0, x1) = s.roi_box
+            cur = f"{x0},{y0},{z0},{x1},{y1},{z1}"
+        self.app.push_screen(PromptScreen("ROI box: two corners X0,Y0,Z0,X1,Y1,Z1 (X0,Y0,X1,Y1: every slice)", cur), done)
