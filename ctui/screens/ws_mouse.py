@@ -162,6 +162,9 @@ class MouseMixin(ToolsMixin):
         if iv is None:
             return
         if event.button == 2 or (event.button == 1 and (event.shift or event.meta)):
+            if self.s.zoom <= 1:
+                self.set_status("Zoom in first (+ or Ctrl+wheel) to pan")
+                return
             self._drag = ("pan", iv, event.screen_x, event.screen_y, self.pan_center or self._view_center())
             iv.capture_mouse()
             return
