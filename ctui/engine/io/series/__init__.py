@@ -211,6 +211,12 @@ def load(
                                 f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
         else:
             base = p.parent
+            if headers_only and shape is None and _is_volume_file(p) and p.is_file():
+                from ctui.engine.io.series.sampled import inspect_volume_file  # large NIfTI/NRRD: sample slices
+
+                sampled = inspect_volume_file(p, _load_volume_file, spacing=spacing, **common)
+                if sampled is not None:
+                    return _with_series(sampled)
             vol = _load_one_file(p, shape=shape, dtype=dtype, spacing=spacing, offset=offset, skipped=skipped,
                                  common=common)
             if vol is not None:

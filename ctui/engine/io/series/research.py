@@ -120,6 +120,10 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
                    f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in zero)}: 1 mm used instead; give "
                    f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements"]
     warnings += bad
+    voff = int(getattr(img.dataobj, "offset", 352))  # (img.header's vox_offset is reset by nibabel)
+    if str(path).lower().endswith((".nii", ".nii.gz")) and voff < 348:
+        warnings.append(f"the NIfTI header's vox_offset {voff} lies inside its 348-byte header: the first voxels "
+                        "read are header bytes")
     sp, direction = _geometry_from_matrix(m)
     try:
         pix = _raw_pixdim(nib, path, hdr)
@@ -162,17 +166,18 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
             raise LoadError(f"NIfTI of {dt} voxels is not a scalar volume", path=path)
     out_dt = np.dtype(np.float32) if scaled or dt.kind in "fcV" else dt.newbyteorder("=")
     oshape = plan.out_shape(full)
-    check_memory(int(np.prod(full)) * max(dt.itemsize, out_dt.itemsize) + int(np.prod(oshape)) * out_dt.itemsize,
+    # the proxy is sliced (crop, downsample, the first of several volumes): a gzip stream is
+    # decompressed as it is read, never held whole (ctui info samples slices this way)
+    check_memory(int(np.prod(oshape)) * (max(dt.itemsize, out_dt.itemsize) + out_dt.itemsize),
                  shape=oshape, path=path, limit=memory_limit)
+    idx = (plan.x, plan.y) + ((plan.z,) if len(shape) > 2 else ()) + (0,) * max(0, len(shape) - 3)
     try:
-        arr = np.asanyarray(img.dataobj)
+        arr = np.asanyarray(img.dataobj[idx])
     except Exception as exc:
         raise LoadError(f"cannot read the NIfTI data ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})", path=path) from None
     if arr.ndim == 2:
         arr = arr[:, :, None]
-    while arr.ndim > 3:
-        arr = arr[..., 0]
-    data = arr.T[plan.z, plan.y, plan.x]  # (i, j, k) Fortran -> (k, j, i) C-contiguous view
+    data = arr.T  # (i, j, k) Fortran -> (k, j, i), already cropped
     if data.dtype.kind == "c":
         data = np.abs(data)
     elif data.dtype.fields is not None:  # RGB(A) records
