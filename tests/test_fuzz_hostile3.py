@@ -466,3 +466,33 @@ def test_segment_and_drift_take_loader_options(files, tmp_path, capsys):
     assert main(["mesh", str(tmp_path / "ct.nii.gz"), "--iso", "-250", "--out", str(tmp_path / "ct.stl"),
                  "--json"]) == 0
     assert abs(json.loads(capsys.readouterr().out)["volume_ml"] - 4.0) < 0.1  # the 20x20x10 mm box
+
+
+# ----------------------------------------------------------------- 15: info samples large volume files
+def test_info_samples_a_huge_compressed_nifti(tmp_path):
+    """A small .nii.gz declaring 2000x2000x1000 uint8 (and vox_offset 0): info reads the
+    header and the first slice only (sampled range, a warning), well under the memory the
+    volume would take; a 94 MB .nii is sampled at 3 slices."""
+    import nibabel as nib
+
+    from ctui.engine.actions.info import describe_series
+
+    h = nib.Nifti1Image(np.zeros((2, 2, 2), np.uint8), np.eye(4)).header
+    h.set_data_shape((2000, 2000, 1000))
+    with gzip.open(tmp_path / "huge.nii.gz", "wb") as fh:
+        fh.write(h.binaryblock + bytes(4))
+        for _ in range(8):
+            fh.write(bytes(8 << 20))
+    import tracemalloc
+
+    tracemalloc.start()
+    vol, d = describe_series(tmp_path / "huge.nii.gz")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert d["shape_zyx"] == [1000, 2000, 2000] and d["value_range_sampled"] and d["sampled_slices"] == 1
+    assert peak < 200 << 20 and any("vox_offset" in w for w in vol.warnings)
+    a = (np.arange(300 * 300 * 600) % 997).astype(np.int16).reshape(300, 300, 600)
+    nib.save(nib.Nifti1Image(a, np.eye(4)), tmp_path / "big.nii")
+    vol, d = describe_series(tmp_path / "big.nii")
+    assert d["shape_zyx"] == [600, 300, 300] and d["sampled_slices"] == 3 and d["value_range"][1] <= 996
+    assert not any("vox_offset" in w for w in vol.warnings)
