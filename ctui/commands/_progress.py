@@ -38,6 +38,7 @@ def progress_bar(args: Any, description: str, *, delay: float = 0.3) -> Iterator
                    TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[note]}"),
                    console=console, transient=True)
     task = bar.add_task(description, total=1.0, note="")
+    from ctui.engine.core.safetext import printable  # object names in the notes came from files
     delay = float(os.environ.get("CTUI_PROGRESS_DELAY", delay))  # tests: 0 draws at the first report
     t0 = time.monotonic()
     started = False
@@ -48,7 +49,7 @@ def progress_bar(args: Any, description: str, *, delay: float = 0.3) -> Iterator
             bar.start()
             started = True
         frac = (float(done) / float(total)) if total else 0.0
-        bar.update(task, completed=min(max(frac, 0.0), 1.0), note=message or "")
+        bar.update(task, completed=min(max(frac, 0.0), 1.0), note=printable(message or "").replace("[", "\\["))
 
     try:
         yield callback
