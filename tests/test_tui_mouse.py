@@ -355,3 +355,25 @@ async def test_roi_box_confines_fill_and_propagation():
         assert (pz + z0).min() >= z - 3 and (pz + z0).max() <= z + 3
         assert (py + y0).min() >= 14 and (py + y0).max() <= 30 and (px + x0).max() <= 24
         assert not app.internal_errors
+
+
+@pytest.mark.parametrize("mode", ["sixel", "kitty"])
+async def test_click_and_drag_in_pixel_graphics_modes(monkeypatch, mode):
+    """In sixel/kitty modes the widget under the mouse is the view's image child: clicks and
+    drags still reach the view (the cell -> pixel scale is the terminal's cell size)."""
+    monkeypatch.setattr(graphics, "_chosen", mode)
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        assert app.workspace.main_view.mode == mode
+        z = s.z
+        await pilot.click("#main", offset=cell_of_voxel(app, (z, 10, 35)))
+        assert _near(s.zyx, (z, 10, 35))
+        s.tool, s.brush = "brush", 1.0
+        await drag(pilot, "#main", [cell_of_voxel(app, (z, 30, x)) for x in (5, 20)])
+        lab = s.seg.labels[z] == 1
+        ys, xs = np.nonzero(lab)
+        assert int(lab.sum()) == 3 * (int(xs.max()) - int(xs.min()) - 1) + 2 and xs.max() - xs.min() >= 14
+        assert not app.internal_errors

@@ -145,7 +145,10 @@ class MouseMixin(ToolsMixin):
             return getattr(event, "widget", None)
 
     def _image_view(self, event) -> ImageView | None:
+        """The slice view under the mouse (in sixel/kitty modes the widget there is its image child)."""
         w = self._under(event)
+        while w is not None and w is not self and not isinstance(w, ImageView):
+            w = w.parent
         if isinstance(w, ImageView) and w.id not in (None, "o-3d"):
             return w
         return None
