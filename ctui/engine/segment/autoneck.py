@@ -74,8 +74,18 @@ class NeckChoice:
                 "reason": self.reason, "leak_ratio": round(self.leak_ratio, 3)}
 
 
-def _resample_factors(spacing: tuple[float, float, float]) -> tuple[int, int, int]:
-    return tuple(max(1, int(round(SWEEP_MM / s))) if s < SWEEP_MM else 1 for s in spacing)  # type: ignore[return-value]
+SWEEP_VOXELS = 1_000_000  # the sweep's grid is made coarser until the box holds at most this many voxels
+
+
+def _resample_factors(spacing: tuple[float, float, float], shape: tuple[int, ...] | None = None) -> tuple[int, int, int]:
+    """Integer factors that bring the voxels to about SWEEP_MM (never finer than the series), coarser
+    when the box would hold more than SWEEP_VOXELS voxels."""
+    target = SWEEP_MM
+    while True:
+        f = tuple(max(1, int(round(target / s))) if s < target else 1 for s in spacing)
+        if shape is None or np.prod([-(-n // k) for n, k in zip(shape, f)]) <= SWEEP_VOXELS or target > 8:
+            return f  # type: ignore[return-value]
+        target *= 1.25
 
 
 def coarse(mask: np.ndarray, factors: tuple[int, int, int]) -> np.ndarray:
@@ -100,7 +110,7 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     thresholds); see the module docstring for the rule. Returns :class:`NeckChoice`.
     """
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3)
-    f = _resample_factors(spacing)
+    f = _resample_factors(spacing, candidate.shape)
     sp = tuple(float(s) * k for s, k in zip(spacing, f))
     cand = fill_holes_2d(coarse(candidate, f))
     cs = seeds // np.array(f)
@@ -109,6 +119,9 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     if not len(cs):
         return NeckChoice(0.0, reason="the seed's region is too small to sweep")
     cand = fill3d_seeds(cand, cs, connectivity=8)
+    box = _bbox3(cand)
+    cand = np.ascontiguousarray(cand[box])  # the sweep works on the region's own box
+    cs = cs - np.array([b.start for b in box])
     dt = ndimage.distance_transform_edt(cand, sampling=sp)
     depth = _local_depth(dt, cs, sp)
     radii = _radii(dt, cand, depth * max_fraction, min(sp))
@@ -133,9 +146,20 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
                           reason="no leak: the volume does not drop as the neck width grows")
     r = used[j]
     kept = _opened(cand, dt, cs, r, sp)
-    region = Region(factors=f, mask=morph_ball(kept, max(sp), sp, erode=False)) if kept is not None else None
+    region = None
+    if kept is not None:
+        full = np.zeros(tuple(-(-n // k) for n, k in zip(candidate.shape, f)), bool)
+        full[box] = kept
+        region = Region(factors=f, mask=morph_ball(full, max(sp), sp, erode=False))
     return NeckChoice(2.0 * r, depth_mm=depth, radii_mm=used, volumes=vols, leak_ratio=ratio, region=region,
                       reason=f"the volume drops {ratio:.1f}x between necks of {2 * used[j - 1]:.1f} and {2 * r:.1f} mm")
+
+
+def _bbox3(m: np.ndarray) -> tuple[slice, slice, slice]:
+    zs = np.flatnonzero(m.any(axis=(1, 2)))
+    ys = np.flatnonzero(m.any(axis=(0, 2)))
+    xs = np.flatnonzero(m.any(axis=(0, 1)))
+    return slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1)
 
 
 @dataclass
@@ -201,9 +225,18 @@ def _opened(cand: np.ndarray, dt: np.ndarray, seeds: np.ndarray, r: float,
     if not len(hit):
         return None
     kept = fill3d_seeds(core, hit, connectivity=8)
-    back = morph_ball(kept, r, sp, erode=False)
-    back &= cand
-    return fill3d_seeds(back, hit, connectivity=8)
+    box = _grown_box(kept, r, sp)  # the reconstruction stays within r of the kept core: work on its box
+    back = morph_ball(np.ascontiguousarray(kept[box]), r, sp, erode=False)
+    back &= cand[box]
+    got = np.zeros(cand.shape, bool)
+    got[box] = fill3d_seeds(back, hit - np.array([b.start for b in box]), connectivity=8)
+    return got
+
+
+def _grown_box(m: np.ndarray, r: float, sp: tuple[float, float, float]) -> tuple[slice, slice, slice]:
+    b = _bbox3(m)
+    k = [int(math.ceil(r / s)) + 1 for s in sp]
+    return tuple(slice(max(x.start - kk, 0), min(x.stop + kk, n)) for x, kk, n in zip(b, k, m.shape))  # type: ignore[return-value]
 
 
 def _core_seeds(core: np.ndarray, dt: np.ndarray, seeds: np.ndarray, r: float,
