@@ -217,8 +217,19 @@ class MouseMixin(ToolsMixin):
         self.refresh_view()
 
     def on_mouse_move(self, event) -> None:
+        """Drag steps are coalesced: the moves queued while one is drawn collapse into the latest
+        (a stroke joins the positions with a line, so no pixel of the path is skipped)."""
+        if self._drag is None:
+            return
+        pending = getattr(self, "_move_pending", None)
+        self._move_pending = event
+        if pending is None:
+            self.call_later(self._drag_step)
+
+    def _drag_step(self) -> None:
+        event, self._move_pending = getattr(self, "_move_pending", None), None
         drag = self._drag
-        if drag is None:
+        if drag is None or event is None:
             return
         if drag[0] == "pan":
             self._pan_drag(event)
@@ -257,6 +268,8 @@ class MouseMixin(ToolsMixin):
         self.refresh_view()
 
     def on_mouse_up(self, event) -> None:
+        if self._drag is not None and getattr(self, "_move_pending", None) is not None:
+            self._drag_step()  # the last queued move first
         drag, self._drag = self._drag, None
         if drag is None:
             return
