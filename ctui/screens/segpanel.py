@@ -26,13 +26,15 @@ def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, 
     """(SegmentOptions, thresholds) for the session: the panel's choices, the propagation mode (``m`` in the
     panel), the slice limits (``i``), the ROI box and the background seeds' owner is the caller."""
     o = dict(getattr(session, "segment_options", {}) or {})
-    rng = o.get("range", "auto")
-    if rng == "auto":
-        th: list = [None]
-    elif rng == "given" and session.range_ is not None:
+    rng = o.get("range", "given")
+    info = session.seg.objects.get(session.current) if session.seg is not None else None
+    st = dict(getattr(info, "settings", {}) or {})
+    if rng == "given" and "low" in st and "high" in st:  # the range the object was filled with (Enter, S)
+        th: list = [(float(st["low"]), float(st["high"]))]
+    elif rng == "given" and session.range_ is not None:  # the range typed with T
         th = [tuple(session.range_)]
-    elif rng == "given":
-        th = [float(session.tolerance)]
+    elif rng in ("auto", "given"):  # nothing given: from the seed's neighbourhood
+        th = [None]
     else:
         th = [rng]
     lim = session.limits.slices
@@ -49,8 +51,8 @@ def describe(session: Any) -> str:
     """One line of the current segmentation settings, for the side panel and messages."""
     o = getattr(session, "segment_options", {}) or {}
     neck = o.get("neck")
-    rng = o.get("range", "auto")
-    rtxt = "auto" if rng == "auto" else ("fill's" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
+    rng = o.get("range", "given")
+    rtxt = "auto" if rng == "auto" else ("the fill's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
     bg = len(getattr(session, "background_seeds", []) or [])
     return (f"{o.get('method', 'fill')} {session.prop_mode}, neck {'auto' if neck is None else f'{neck:g} mm'}, "
             f"range {rtxt}{', holes filled' if o.get('fill_holes', True) else ''}"
@@ -77,7 +79,7 @@ class SegmentPanel(ModalScreen):
 
     def compose(self) -> ComposeResult:
         o = dict(getattr(self.s, "segment_options", {}) or {})
-        rng = o.get("range", "auto")
+        rng = o.get("range", "given")
         rtxt = rng if isinstance(rng, str) else f"{rng[0]:g}:{rng[1]:g}"
         neck = o.get("neck")
         with Vertical():
@@ -94,7 +96,7 @@ class SegmentPanel(ModalScreen):
                 yield Input("auto" if neck is None else f"{neck:g}", id="neck", placeholder="auto, 0 (off) or mm")
             with Horizontal():
                 yield Label("Range")
-                yield Input(rtxt, id="range", placeholder="auto, given (the fill's), or LO:HI")
+                yield Input(rtxt, id="range", placeholder="given (the fill's or T's; else auto), auto, or LO:HI")
             with Horizontal():
                 yield Label("Min island (vox)")
                 yield Input(str(int(o.get("min_island", 0))), id="min_island", placeholder="0 = keep all")
@@ -148,7 +150,7 @@ def parse_panel(neck: str, rng: str, min_island: str) -> dict[str, Any]:
             raise CtuiError(f"neck {neck!r}: give a width from 0 to 1000 mm")
     r = rng.strip().lower()
     if r in ("", "auto", "given"):
-        out["range"] = r or "auto"
+        out["range"] = r or "given"
     else:
         lo, sep, hi = r.partition(":")
         try:
