@@ -367,6 +367,7 @@ def panel_text(ws) -> Text:
     dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
     t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
+    _seed_text(ws, t)
     pen = f" {s.tool} down" if s.tool else ""
     t.append(f"Mode {s.edit_mode}  brush {s.brush:g} mm{pen}\n")
     if s.click_fills:
@@ -387,6 +388,39 @@ def panel_text(ws) -> Text:
     if s.dirty:
         t.append("\n● unsaved changes", style="yellow")
     return t
+
+
+_BARS = " ▁▂▃▄▅▆▇█"
+
+
+def _seed_text(ws, t: Text) -> None:
+    """The segmentation settings (G) and the range S would use at the cursor, with the neighbourhood's
+    histogram (a sparkline, the range's part bright)."""
+    from ctui.engine.actions.segment import suggest_range
+    from ctui.screens.segpanel import describe
+
+    s = ws.s
+    t.append("Segment ", style="bold")
+    t.append(f"{describe(s)}\n", style="dim")
+    key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
+    cache = getattr(ws, "seed_range_cache", None)
+    if cache is None or cache[0] != key:
+        try:
+            with s._lock:
+                rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
+        except Exception:  # off the image, a filter error: the views report it
+            rc = None
+        cache = (key, rc)
+        ws.seed_range_cache = cache
+    rc = cache[1]
+    if rc is None:
+        return
+    t.append(f"Seed range here {rc.low:.0f}..{rc.high:.0f} ", style="bold")
+    top = max(rc.hist) or 1
+    for h, a, b in zip(rc.hist, rc.edges[:-1], rc.edges[1:]):
+        inside = rc.low <= 0.5 * (a + b) <= rc.high
+        t.append(_BARS[min(8, round(8 * h / top))], style="green" if inside else "dim")
+    t.append("\n")
 
 
 def _objects_text(ws, t: Text) -> None:

@@ -378,6 +378,13 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
     return res, s.to_dict()
 
 
+def suggest_range(volume: Any, seed: Sequence[int], *, pipeline: Pipeline | None = None) -> RangeChoice:
+    """The range a seed (x, y, z) would get with no range given (its neighbourhood's median +- 2 robust sd,
+    in the pipeline's domain) and the neighbourhood's histogram: what the TUI shows before a fill."""
+    x, y, z = _check_seed(seed, tuple(volume.data.shape), "seed")
+    return seed_range(volume, pipeline or Pipeline(), (x, y, z))
+
+
 def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed], fills: list[_Start], *,
                       same_region_ok: bool = False) -> list[str]:
     """Refuse a background seed inside a seed's own slice object (unless the method shares a region along
