@@ -14,6 +14,9 @@ organ, from the workspace at the middle slice:
    wheel notches over the view to the seed's slice + a click on it, or ``g`` + typed
    ``x,y,z`` + Enter (then Enter fills); with ``z`` (click fills, pressed once for the
    session) the click fills as Enter does;
+   with ``--box``, before the fill: ``y`` and one mouse drag on the seed's slice draw the ROI
+   box around the organ (its reference extent in the slice plane + 2 voxels, as a person
+   draws it by eye; the box spans every slice), which confines the fill and the propagation;
 3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
 4. with ``--review``: ``}`` to each marked slice of the review strip and ``C`` where the
    proposal leaves the reference there (the person's eye, played by the reference);
@@ -23,7 +26,7 @@ Then Ctrl+S and Enter (the default name). Events are counted as the Pilot sends 
 The seeds come from the reference labels (the deepest point); the seed positions and the
 mouse cells go through ``ctui.screens.planes`` (the display is in the patient's frame).
 
-    python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range]
+    python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
 """
 
 from __future__ import annotations
@@ -116,8 +119,22 @@ async def _review(c: Counter, ws, truth_mask: np.ndarray) -> None:
             return
 
 
+async def _box(c: Counter, app, truth_mask: np.ndarray, z: int) -> None:
+    """``y`` and a drag between two corners of the organ's extent (+2 voxels) on slice ``z``."""
+    from ctui.screens.testing import cell_of_voxel, drag
+
+    s = app.session
+    ys, xs = np.nonzero(truth_mask.any(axis=0))
+    ny, nx = s.shape[1:]
+    a = (z, max(int(ys.min()) - 2, 0), max(int(xs.min()) - 2, 0))
+    b = (z, min(int(ys.max()) + 2, ny - 1), min(int(xs.max()) + 2, nx - 1))
+    await c.press("y")
+    c.n += 1  # one drag
+    await drag(c.pilot, "#main", [cell_of_voxel(app, a), cell_of_voxel(app, b)])
+
+
 async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, first: bool, review: bool,
-                 rng: tuple[float, float] | None) -> dict:
+                 rng: tuple[float, float] | None, box: bool = False) -> dict:
     from ctui.screens.testing import answer_prompt, cell_of_voxel
 
     ws, s = app.workspace, app.session
@@ -137,6 +154,8 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         while s.z != z:
             await c.wheel("#main", up=z > s.z)
         await pilot.pause()
+        if box:
+            await _box(c, app, truth_mask, z)
         await c.click("#main", cell_of_voxel(app, (z, y, x)))
         if not s.click_fills:
             await c.press("enter")
@@ -144,7 +163,11 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         await c.press("g")
         c.n += len(typed) + 1
         await answer_prompt(pilot, typed)
-        await c.press("enter")
+        if box:  # the drag moved the cursor: click the seed again (it fills when z is on)
+            await _box(c, app, truth_mask, z)
+            await c.click("#main", cell_of_voxel(app, (z, y, x)))
+        if not (box and s.click_fills):
+            await c.press("enter")
     filled = s.seg.voxels(s.current)
     await c.press("p")
     got = await _wait_proposal(pilot, ws)
@@ -158,7 +181,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
 
 
 async def session(size: tuple[int, int], image: Path, labels: Path, *, review: bool, use_range: bool,
-                  out_dir: Path) -> dict:
+                  out_dir: Path, box: bool = False) -> dict:
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
     from ctui.screens.testing import wait_for, wait_workspace
@@ -180,7 +203,8 @@ async def session(size: tuple[int, int], image: Path, labels: Path, *, review: b
             if use_range:
                 vals = s.volume.data[truth == k]
                 rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95)))
-            rows.append(await _organ(c, app, name, seeds[name], truth == k, first=i == 0, review=review, rng=rng))
+            rows.append(await _organ(c, app, name, seeds[name], truth == k, first=i == 0, review=review, rng=rng,
+                                     box=box))
         n_save = c.n
         await c.press("ctrl+s")
         await pilot.pause()
@@ -209,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default=str(DATA), help="the totalseg_example folder")
     ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
     ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
+    ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
     args = ap.parse_args(argv)
     data = Path(args.data)
     image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
@@ -218,11 +243,13 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
+          f"{'ROI box drawn; ' if args.box else ''}"
           "defaults otherwise")
     print(f"{'size':>7} {'organ':<12} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
-            res = asyncio.run(session(size, image, labels, review=args.review, use_range=args.range, out_dir=Path(tmp)))
+            res = asyncio.run(session(size, image, labels, review=args.review, use_range=args.range, out_dir=Path(tmp),
+                                      box=args.box))
         for r in res["organs"]:
             print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}"
