@@ -85,3 +85,20 @@ def test_marks_on_an_accepted_object():
     zs = [m.z for m in review.marks(st)]
     assert 15 in zs and 16 in zs and all(z >= 15 for z in zs)
     assert review.of_labels(seg.labels, 1).start_slice == 15  # default: the largest slice
+
+
+def test_a_leak_on_the_seed_slice_is_marked():
+    """The seed slice filled the whole body (a leak every other slice grew from): marked."""
+    ny = nx = 50
+    sq = np.zeros((ny, nx), bool)
+    sq[10:20, 10:20] = True
+    body = np.zeros((ny, nx), bool)
+    body[5:45, 5:45] = True
+    p = Proposal(object_id=1, start_slice=10, shape=(20, ny, nx))
+    for z in range(7, 14):
+        p.masks[z] = (0, 0, body.copy() if z == 10 else sq.copy())
+    p.areas = {z: int(e[2].sum()) for z, e in p.masks.items()}
+    by_z = {m.z: m for m in review.marks(p)}
+    assert by_z[10].kind == "seed" and "1600 px" in by_z[10].why
+    p.masks[10] = (0, 0, sq.copy())
+    assert 10 not in {m.z for m in review.marks(p)}

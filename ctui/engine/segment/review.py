@@ -12,7 +12,9 @@ the seed's side):
 * ``jump``: the area changes by more than ``area_jump`` (a fraction, 0.5 = +-50 %) and by
   more than ``min_px`` pixels: a leak into a neighbour, or the fill losing the organ;
 * ``shift``: the centroid moves by more than ``shift_frac`` of the previous slice's
-  equivalent radius (and more than one pixel): the fill jumped to another structure.
+  equivalent radius (and more than one pixel): the fill jumped to another structure;
+* ``seed``: the seed slice itself is out of line, larger than both neighbours by more than
+  ``area_jump`` (the fill leaked on the slice every other slice grew from).
 """
 
 from __future__ import annotations
@@ -109,6 +111,11 @@ def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: 
                     if moved_mm > shift_frac * radius_mm and moved_mm > max(dy, dx):
                         out.append(Mark(z, "shift", f"centre moved {moved_mm:.1f} mm"))
             prev, z = z, z + step
+    if s in entries:
+        a_s = int(entries[s][2].sum())
+        nb = [int(entries[z][2].sum()) for z in (s - 1, s + 1) if z in entries]
+        if nb and a_s > (1 + area_jump) * max(nb) and a_s - max(nb) > min_px:
+            out.append(Mark(s, "seed", f"the seed slice holds {a_s} px, its neighbours {' and '.join(map(str, nb))} px"))
     merged: dict[int, Mark] = {}
     for m in out:
         merged[m.z] = Mark(m.z, "jump+shift", f"{merged[m.z].why}; {m.why}") if m.z in merged else m
