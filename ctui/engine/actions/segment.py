@@ -309,6 +309,10 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         r.cuts = [{"slice": c["slice"], "voxels": c["voxels"],
                    "mm": [round(float(v), 1) for v in geo.index_to_mm((c["slice"], c["y"], c["x"]))]} for c in r.cuts]
         r.warnings.extend(_sanity(r, start, spacing, opts))
+        info = seg.objects.get(r.id)
+        if info is not None:  # what the guard chose and where it cut goes into the project with the object
+            info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]
+            info.settings["range_source"] = "auto" if r.auto_range is not None else "given"
     empty = [r for r in results if r.voxels == 0]
     if empty:
         for r in empty:
