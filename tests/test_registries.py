@@ -39,9 +39,11 @@ def _session(fmt: str, source: str = "/data/ct.nii.gz"):
 def test_cli_choices_are_the_engine_registries():
     assert _choices("export", "--format") == tuple(FORMATS)
     assert _choices("render", "--mode") == MODES
-    from ctui.engine.actions.segment import METHODS
+    from ctui.engine.actions import batch
+    from ctui.engine.segment.methods import METHODS
 
-    assert _choices("segment", "--method") == tuple(METHODS)
+    assert _choices("segment", "--method") == tuple(METHODS) == _choices("drift", "--method")
+    assert batch.METHODS is METHODS  # the manifest's method column
 
 
 def test_tui_menus_are_the_engine_registries():
@@ -208,3 +210,41 @@ def test_cli_help_names_the_registries_it_cannot_import():
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     preset_help = sub.choices["render"]._option_string_actions["--preset"].help
     assert set(re.findall(r"(?:ct|mr)-[a-z-]+", preset_help)) == set(PRESETS)
+
+
+async def test_a_registered_segmentation_method_reaches_the_cli_the_tui_panel_and_the_action(capsys):
+    """One function and one register() call: ``ctui segment --method`` accepts and lists it,
+    the TUI's segmentation panel offers it, and the segment action runs it."""
+    from textual.app import App
+    from textual.widgets import Select
+
+    from ctui.engine.actions.segment import SegmentOptions, segment
+    from ctui.engine.segment import methods
+    from ctui.screens.segpanel import SegmentPanel
+
+    def seed_slice_only(job):  # the seed slice's object, not propagated
+        mask = np.zeros(job.seg.labels.shape, bool)
+        mask[job.seed[2]] = job.start
+        job.seg.paint(mask, job.oid)
+
+    methods.register("seedslice", seed_slice_only, "the seed slice's object only (a test method)")
+    try:
+        assert "seedslice" in _choices("segment", "--method")
+        with pytest.raises(SystemExit):
+            main(["segment", "--help"])
+        assert "seedslice: the seed slice's object only" in " ".join(capsys.readouterr().out.split())
+        s = _session("nifti")
+        res = segment(s.volume, [(8, 7, 2)], [(200.0, 400.0)], options=SegmentOptions(method="seedslice"))
+        lab = res.segmentation.labels
+        assert (lab[2] == 1).sum() == 7 * 8 and not lab[3].any()  # the block is on slices 2-3: only 2 taken
+
+        class Host(App):
+            def on_mount(self) -> None:
+                self.push_screen(SegmentPanel(s))
+
+        async with Host().run_test() as pilot:
+            await pilot.pause()
+            offered = [v for _, v in pilot.app.screen.query_one("#method", Select)._options]
+        assert offered == list(methods.METHODS)
+    finally:
+        methods.METHODS.pop("seedslice", None)

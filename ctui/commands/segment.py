@@ -21,6 +21,38 @@ FILTER_HELP = (
 )
 
 
+class _MethodChoices:
+    """The segmentation methods (the engine's registry, ``actions.segment.METHODS``) as
+    argparse choices, read when argparse checks or shows them: building the parser for
+    ``ctui --help`` must not import numpy."""
+
+    @staticmethod
+    def _names() -> tuple[str, ...]:
+        from ctui.engine.actions.segment import METHODS  # numpy and the segmentation stack
+
+        return tuple(METHODS)
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names()
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+
+class _MethodHelp(str):
+    """Help text that lists each registered method with its line of help when argparse
+    formats it (``help % params``), so the registry is read only for ``--help``."""
+
+    def __mod__(self, params):  # type: ignore[override]
+        from ctui.engine.actions.segment import METHODS
+
+        return f"{self}: " + "; ".join(f"{m.name}: {m.help}" + (" (default)" if m.name == params.get("default") else "")
+                                       for m in METHODS.values())
+
+
 class _ThresholdAction(argparse.Action):
     """Keeps --range and --tolerance in one ordered list so the n-th pairs with the n-th --seed."""
 
@@ -38,10 +70,8 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--background", action="append", default=[], metavar="X,Y,Z",
                    help="background seed: a voxel of a neighbour with the same values that the object must not "
                         "reach (column, row, slice from 0); repeatable, shared by every object")
-    p.add_argument("--method", choices=("fill", "grow", "levelset"), default="fill",
-                   help="fill: threshold fill + propagation with the neck-cutting leak guard (default); "
-                        "grow: competitive region growing from --seed and --background inside the range; "
-                        "levelset: the fill refined by a threshold level set with a curvature term")
+    p.add_argument("--method", choices=_MethodChoices(), default="fill", metavar="METHOD",  # metavar: not read now
+                   help=_MethodHelp("segmentation method"))
     p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI|auto",
                    help="in-range values LO..HI inclusive (HU for CT in the default hu domain); "
                         "one per --seed, or one for all; auto (or no --range/--tolerance): from the seed's "

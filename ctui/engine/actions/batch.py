@@ -45,7 +45,7 @@ from ctui.engine.actions.measure import measure_object
 from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.options import parse_pair
 from ctui.engine.actions.project import new_project, propagation_record, save_project
-from ctui.engine.actions.segment import SegmentOptions, segment
+from ctui.engine.actions.segment import METHODS, SegmentOptions, segment
 from ctui.engine.io.meshes import save_mesh
 from ctui.engine.io.series import load
 from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
@@ -59,7 +59,6 @@ WRITE_EVERY_S = 2.0  # RESULTS.csv rewritten (atomically) at most this often whi
 RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
                   "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
                   "slices", "project", "mesh", "seconds", "cpu_seconds")
-METHODS = ("fill", "grow", "levelset")
 #: thread-count variables set to 1 in local worker processes: N workers use N cores, not N x all
 SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 MODES = ("slice", "3d")
