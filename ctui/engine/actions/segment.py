@@ -417,6 +417,9 @@ def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: Se
     if 0 < r.voxels < max(27, seed_px // 4):
         out.append(f"the object collapsed to {r.voxels} voxels (its seed slice had {seed_px} px): widen the range, "
                    "move the seed deeper into the object, or check the background seeds")
+    if start.neck is not None and start.width <= 0 and not start.neck.reason.startswith("no leak"):
+        out.append(f"the leak guard is off for this object ({start.neck.reason}): check it for leaks, or force "
+                   "a neck width")
     depth = start.neck.depth_mm if start.neck is not None else 0.0
     if depth > 0:
         ball_ml = 4.0 / 3.0 * np.pi * depth ** 3 / 1000.0
