@@ -44,6 +44,10 @@ def test_cli_choices_are_the_engine_registries():
 
     assert _choices("segment", "--method") == tuple(METHODS) == _choices("drift", "--method")
     assert batch.METHODS is METHODS  # the manifest's method column
+    from ctui.engine.actions import defaults
+    from ctui.screens import view3d
+
+    assert _choices("mesh", "--method") == defaults.MESH_METHODS == view3d.METHODS  # the 3D view's c cycle
 
 
 def test_tui_menus_are_the_engine_registries():

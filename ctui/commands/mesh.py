@@ -21,6 +21,7 @@ from ctui.commands._args import number
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.info import add_load_options
+    from ctui.engine.actions import defaults  # plain constants: cheap for --help
 
     p = subparsers.add_parser(
         "mesh",
@@ -31,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", metavar="INPUT", help="series path, .ctui project, label file or .mric file")
     p.add_argument("--out", required=True, metavar="FILE", help="output mesh: .stl, .ply or .obj")
-    p.add_argument("--method", choices=("marching-cubes", "contours"), default=None,
+    p.add_argument("--method", choices=defaults.MESH_METHODS, default=None,
                    help="marching-cubes (default for series and projects) or contours (default for .mric)")
     p.add_argument("--iso", type=number("--iso"), metavar="VALUE", help="iso value for a series (HU for CT)")
     p.add_argument("--object", type=number("--object", 0, 65535, integer=True), metavar="N", help="object id in a project / label file (default: all)")

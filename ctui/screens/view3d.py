@@ -30,7 +30,7 @@ from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.session import safe_cwd
 
-METHODS = ("marching-cubes", "contours")
+METHODS = defaults.MESH_METHODS  # the surface methods the c key cycles through
 
 
 def build_meshes(session, method: str, *, progress=None) -> dict:

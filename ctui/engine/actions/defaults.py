@@ -13,8 +13,10 @@ SECTION_AREA = "pv"
 #: Thin-slab averaging of each section along the path (mm; 0 = single planes).
 SECTION_AVERAGE_MM = 0.0
 
-#: Object surfaces: "marching-cubes" (smoothed signed distance) or "contours".
-MESH_METHOD = "marching-cubes"
+#: Object surfaces: "marching-cubes" (smoothed signed distance) or "contours" (connected
+#: slice contours); the CLI's --method, the 3D view's c cycle and mesh_objects read the list.
+MESH_METHODS = ("marching-cubes", "contours")
+MESH_METHOD = MESH_METHODS[0]
 #: Contour tiling: "dp" (minimum area) or "greedy".
 CONTOUR_TILING = "dp"
 #: Taubin smoothing iterations after meshing (0 = none).

@@ -158,8 +158,8 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
                             spacing=spacing if not p.lower().endswith(".mric") else None, **load_options)
     kind = opened.kind
     method = method or ("contours" if kind == "mric" else defaults.MESH_METHOD)
-    if method not in ("marching-cubes", "contours"):
-        raise CtuiError(f"unknown method {method!r} (marching-cubes or contours)")
+    if method not in defaults.MESH_METHODS:
+        raise CtuiError(f"unknown surface method {method!r} ({' or '.join(defaults.MESH_METHODS)})", option="method")
     res = MeshResult({}, Mesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)), kind, method,
                      notes=list(opened.notes))
     if kind == "mric":
