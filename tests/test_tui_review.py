@@ -71,7 +71,7 @@ async def test_strip_jumps_cut_and_accept_to_here():
         await pilot.press("left_curly_bracket")
         assert s.z == 15
         # a click on the strip's column of slice 12 goes there
-        col = next(c for c, (a, b) in enumerate(columns(30, strip.size.width)) if a <= 12 <= b)
+        col = next(c for c, (a, b) in enumerate(strip._cols()) if a <= 12 <= b)
         await pilot.click("#strip", offset=(col, 0))
         assert s.z == 12
         # C at slice 14: the leak is cut off

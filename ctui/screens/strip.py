@@ -60,18 +60,23 @@ class ReviewStrip(Widget):
         self.marked: set[int] = set()
         self.cursor = 0
         self.seed: int | None = None
+        self.hint = ""
 
-    def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None) -> None:
+    def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None, hint: str = "") -> None:
+        """``hint``: a short text drawn right of the bars when it fits (e.g. the keys)."""
         self.profile = profile
         self.marked = set(int(z) for z in marked)
         self.cursor = int(cursor)
         self.seed = seed
+        self.hint = hint
         self.refresh()
 
     def _cols(self) -> list[tuple[int, int]]:
+        """The bars' columns: the width less room for the text on the right (on 64 columns or more)."""
         if self.profile is None:
             return []
-        return columns(len(self.profile), self.size.width)
+        w = self.size.width
+        return columns(len(self.profile), w - 34 if w >= 64 else w)
 
     def slice_at(self, col: int) -> int | None:
         """The slice a click on column ``col`` goes to (a marked slice in it first)."""
@@ -102,5 +107,10 @@ class ReviewStrip(Widget):
                     segs.append(Segment("s", _SEED))
                 else:
                     segs.append(Segment(" ", _DIM))
-        strip = Strip(segs, len(segs))
-        return strip.extend_cell_length(width, _DIM)
+        free = width - len(segs) - 2
+        text = self.hint if y == 1 else (f"slice {self.cursor}: {int(self.profile[self.cursor])} px"
+                                         if 0 <= self.cursor < len(self.profile) else "")
+        if text and free >= 12:
+            segs.append(Segment("  " + text[:free], _DIM))
+        strip = Strip(segs)
+        return strip.extend_cell_length(width, _DIM).crop(0, width)

@@ -455,7 +455,10 @@ class MouseMixin(ToolsMixin):
             return
         seed_area = int(self._seed_mask(p).sum()) if p is not None else 0
         prof = review.profile(src, self.s.shape[0], seed_area=seed_area)
-        strip.set_data(prof, [m.z for m in self.review_marks()], self.s.z, src.start_slice)
+        marks = [m.z for m in self.review_marks()]
+        keys = "} { marks, C cut, A accept to here" if p is not None else "} { marks"
+        hint = f"{len(marks)} mark{'s' if len(marks) != 1 else ''}: {keys}" if marks else ("no marks" if p is not None else "")
+        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}")
         strip.set_class(True, "on")
 
     def _go_slice(self, z: int) -> None:
