@@ -252,3 +252,22 @@ async def test_a_registered_segmentation_method_reaches_the_cli_the_tui_panel_an
         assert offered == list(methods.METHODS)
     finally:
         methods.METHODS.pop("seedslice", None)
+
+
+def test_tui_outputs_refuse_the_source_folder(tmp_path):
+    """The slice-view PNG (the one TUI export not written by actions.export) passes the same
+    output check as every other export: never inside the series folder."""
+    from ctui.screens.export import run_export
+
+    series = tmp_path / "series"
+    series.mkdir()
+
+    class Ws:
+        s = _session("dicom", str(series))
+        main_view = None  # never reached: the check comes first
+
+    with pytest.raises(CtuiError, match="inside the input folder"):
+        run_export(Ws(), "image", str(series / "slice.png"))
+    with pytest.raises(CtuiError, match="inside the input folder"):
+        run_export(Ws(), "nifti", str(series / "labels.nii.gz"))
+    assert list(series.iterdir()) == []

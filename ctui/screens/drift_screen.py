@@ -13,6 +13,7 @@ from textual.widgets import Footer, Label, Static
 from ctui.engine.actions import drift
 from ctui.engine.actions.drift import drift_check
 from ctui.engine.actions.formats import output_name
+from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
@@ -173,6 +174,7 @@ class DriftScreen(GuardMixin, Screen):
     @work(thread=True, group="drift-save")
     def _save(self, path: str) -> None:
         try:
+            check_output(path, inputs=[self.s.source_path, self.s.project_path], label="the plot")
             drift.plot_drift(self.report, path)
         except Exception as exc:
             self.app.notify(f"Plot not saved: {exc}", severity="error")

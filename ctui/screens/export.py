@@ -11,6 +11,7 @@ import numpy as np
 
 from ctui.engine.actions.export import ExportResult, available_formats, export
 from ctui.engine.actions.formats import FORMATS, output_name
+from ctui.engine.core.atomic import check_output
 from ctui.screens.projects import opened_of
 from ctui.screens.session import safe_cwd
 from ctui.screens.ws_jobs import run_job
@@ -76,6 +77,7 @@ def export_image(rgb: np.ndarray, path: str):
 def run_export(ws, kind: str, path: str) -> str:
     """Do one export (called in a worker thread); returns a message."""
     if kind == IMAGE[0]:
+        check_output(path, inputs=[ws.s.source_path, ws.s.project_path], label="the image")  # as every export
         rgb = ws.main_view.rgb
         if rgb is None:
             raise ValueError("no image shown")

@@ -20,6 +20,7 @@ from ctui.engine import render
 from ctui.engine.actions import defaults
 from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.mesh import label_meshes
+from ctui.engine.core.atomic import check_output
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
@@ -318,6 +319,7 @@ class View3DScreen(GuardMixin, Screen):
     def _save_worker(self, what: str, path: str, write) -> None:
         self.post_message(Status(f"Writing {what} {path} ..."))
         try:
+            check_output(path, inputs=[self.s.source_path, self.s.project_path], label=f"the {what}")
             write(path)
         except Exception as exc:
             self.post_message(JobFailed(f"{what.capitalize()} not saved", str(exc)))
