@@ -294,12 +294,12 @@ class BatchResult:
 
 
 def _client(scheduler: str | None, workers: int | None, processes: bool) -> tuple[Any, Any]:
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster  # dask: seconds to import, only for a batch run
 
     if scheduler:
         if not str(scheduler).startswith(("tcp://", "tls://", "ucx://", "ws://", "wss://", "inproc://")):
-            raise CtuiError(f"--scheduler {scheduler!r}: want the address of a running Dask scheduler, "
-                            "tcp://HOST:PORT")
+            raise CtuiError(f"scheduler {scheduler!r}: want the address of a running Dask scheduler, "
+                            "tcp://HOST:PORT", option="scheduler")
         try:
             return Client(scheduler, timeout="20s"), None
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
