@@ -12,14 +12,17 @@ organ, from the workspace at the middle slice:
 1. (second organ) ``n``: a new object;
 2. to the seed (the organ's deepest voxel, as issue 21's benchmark seeds): the cheaper of
    wheel notches over the view to the seed's slice + a click on it, or ``g`` + typed
-   ``x,y,z`` + Enter (then Enter fills); with ``z`` (click fills, pressed once for the
+   ``x,y,z`` + Enter (then Enter fills); typed when a cell spans 1.5 voxels or more (at 80x24
+   a click lands 1-2 voxels off, and a seed at an organ's edge changes the result); with ``z`` (click fills, pressed once for the
    session) the click fills as Enter does;
    with ``--box``, before the fill: ``y`` and one mouse drag on the seed's slice draw the ROI
    box around the organ (its reference extent in the slice plane + 2 voxels, as a person
    draws it by eye; the box spans every slice), which confines the fill and the propagation;
 3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
-4. with ``--review``: ``}`` to each marked slice of the review strip and ``C`` where the
-   proposal leaves the reference there (the person's eye, played by the reference);
+4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): ``x``,
+   the ROI box (``y`` + a drag), a click back on the seed and ``p`` again; then ``}`` to each
+   marked slice and ``C`` where the proposal leaves the reference there (the person's eye,
+   played by the reference);
 5. ``a``: accept.
 
 Then Ctrl+S and Enter (the default name). Events are counted as the Pilot sends them.
@@ -148,7 +151,9 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         await answer_prompt(pilot, f"{rng[0]:g}:{rng[1]:g}")
     z, y, x = seed
     typed = f"{x},{y},{z}"
-    if abs(z - s.z) + 1 <= len(typed) + 3:  # wheel to the slice, click there (fills)
+    vm = ws.main_view.view_map
+    coarse = vm is None or max(1.0 / vm.sx, 2.0 / vm.sy) > 1.5  # a cell spans 1.5 voxels or more: type it
+    if not coarse and abs(z - s.z) + 1 <= len(typed) + 3:  # wheel to the slice, click there (fills)
         if not s.click_fills:
             await c.press("z")
         while s.z != z:
@@ -171,12 +176,26 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     filled = s.seg.voxels(s.current)
     await c.press("p")
     got = await _wait_proposal(pilot, ws)
+    if got and review and any(m.kind == "seed" for m in ws.review_marks()):
+        # the strip marks the seed slice itself: the fill leaked there. Reject, box the organ,
+        # segment again (the box confines the fill and the propagation)
+        await c.press("x")
+        await _box(c, app, truth_mask, z)
+        await c.click("#main", cell_of_voxel(app, (z, y, x)))  # back on the seed (no fill: z is off here)
+        if s.click_fills:
+            await c.press("u")  # the click filled: undo it, p segments from the object's seed
+        await c.press("p")
+        got = await _wait_proposal(pilot, ws)
     if got and review:
         await _review(c, ws, truth_mask)
+    failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
     if got:
         await c.press("a")
     await pilot.pause()
-    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_fill": filled, "proposal": got,
+    info = s.seg.objects.get(s.current)
+    used = tuple(info.seeds[-1]) if info is not None and info.seeds else None
+    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": used, "seed_fill": filled, "proposal": got,
+            "failed": failed,
             "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx}
 
 
@@ -253,7 +272,8 @@ def main(argv: list[str] | None = None) -> int:
         for r in res["organs"]:
             print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}"
-                  f"{'' if r['proposal'] else '  (no proposal)'}")
+                  f"{'' if r['seed_used'] in (None, r['seed_xyz']) else ' (clicked ' + ','.join(map(str, r['seed_used'])) + ')'}"
+                  f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:120] + ')'}")
         print(f"{'':>7} save: {res['save_events']} events; session wall time {res['wall_s']:.1f} s"
               f"{'; errors: ' + str(res['errors']) if res['errors'] else ''}")
     print("issue 22 baseline (keyboard only, by hand): one kidney 433 keys / 8.4 min; kidney + spleen 959 keys / 9.9 min")
