@@ -29,7 +29,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.errors import CtuiError, FormatError
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -118,6 +118,21 @@ def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 0.2) -> int
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
           (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"))
+
+
+def regular_source(path: str | os.PathLike, *, what: str) -> os.stat_result:
+    """``os.stat`` of an input file, checked before opening it (opening a FIFO would block):
+    a one-line FormatError when it cannot be read, is a folder (not ``what``) or is not a
+    regular file."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise FormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise FormatError(f"{path}: is a folder, not {what}")
+    if not stat.S_ISREG(st.st_mode):
+        raise FormatError(f"{path}: not a regular file")
+    return st
 
 
 def regular_target(path: str | os.PathLike) -> Path:

@@ -27,12 +27,11 @@ cannot make ctui allocate more than the file can justify.
 from __future__ import annotations
 
 import os
-import stat
 from pathlib import Path
 
 import numpy as np
 
-from ctui.engine.core.atomic import atomic_path
+from ctui.engine.core.atomic import atomic_path, regular_source
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.volume import Volume
@@ -178,15 +177,7 @@ def _save_nrrd(p: Path, labels: np.ndarray, volume: Volume, *, seg: bool, names:
 
 # --------------------------------------------------------------------------- loading
 def _stat_regular(p: Path) -> os.stat_result:
-    try:
-        st = os.stat(p)
-    except OSError as exc:
-        raise FormatError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise FormatError(f"{p}: is a folder, not a label-map file")
-    if not stat.S_ISREG(st.st_mode):
-        raise FormatError(f"{p}: not a regular file")
-    return st
+    return regular_source(p, what="a label-map file")
 
 
 def _geometry_volume(p: Path, data_xyz: np.ndarray, affine_lps: np.ndarray, fmt: str) -> tuple[np.ndarray, Volume]:

@@ -46,7 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ctui.engine.core.atomic import atomic_write
+from ctui.engine.core.atomic import atomic_write, regular_source
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.limits import check_allocation
 
@@ -372,16 +372,7 @@ def read_regular_file(path: Path, limit: int, *, what: str) -> bytes:
     Checks the file type before opening it (opening a FIFO would block) and never
     reads more than ``limit + 1`` bytes.
     """
-    import stat
-
-    try:
-        st = os.stat(path)
-    except OSError as exc:
-        raise FormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise FormatError(f"{path}: is a folder, not {what}")
-    if not stat.S_ISREG(st.st_mode):
-        raise FormatError(f"{path}: not a regular file")
+    st = regular_source(path, what=what)
     if st.st_size > limit:
         raise FormatError(f"{path}: {st.st_size} bytes is too large for {what}")
     # the bytes and the arrays decoded from them, against the process's memory limits

@@ -34,7 +34,6 @@ import io
 import json
 import os
 import re
-import stat
 import weakref
 import zipfile
 from dataclasses import dataclass, field
@@ -43,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from ctui.engine.core.atomic import atomic_write
+from ctui.engine.core.atomic import atomic_write, regular_source
 from ctui.engine.core.errors import FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
@@ -265,14 +264,7 @@ def load_project(path: str | os.PathLike) -> Project:
         version, or labels inconsistent with project.json.
     """
     p = Path(path)
-    try:
-        st = os.stat(p)
-    except OSError as exc:
-        raise FormatError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise FormatError(f"{p}: is a folder, not a ctui project")
-    if not stat.S_ISREG(st.st_mode):
-        raise FormatError(f"{p}: not a regular file")
+    st = regular_source(p, what="a ctui project")
     try:
         with open(p, "rb") as fh:
             head = fh.read(4)
