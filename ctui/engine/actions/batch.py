@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions.measure import measure_object
-from ctui.engine.actions.opened import Opened
+from ctui.engine.actions.opened import Opened, existing_path
 from ctui.engine.actions.options import parse_pair
 from ctui.engine.actions.project import new_project, propagation_record, save_project
 from ctui.engine.actions.segment import METHODS, SegmentOptions, segment
@@ -222,9 +222,7 @@ def run_job(job: Job) -> dict:
 
 
 def _run(job: Job) -> dict:
-    if not os.path.exists(job.series):
-        raise CtuiError("no such series folder or file", path=job.series)
-    volume = load(job.series)
+    volume = load(existing_path(job.series, "series folder or file"))
     labels, pipeline, propagation = _segment(volume, job)
     project = new_project(volume, source_path=job.series, labels=labels, pipeline=pipeline, propagation=propagation,
                           objects=[{"id": 1, "name": job.name, "color": [230, 60, 60], "seeds": [list(job.seed)]}])

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions.formats import FORMATS, ExportFormat, unsupported
-from ctui.engine.actions.opened import Opened, input_kind, open_project
+from ctui.engine.actions.opened import Opened, existing_path, input_kind, open_project
 from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
@@ -86,9 +86,7 @@ def _objects(labels: np.ndarray, recorded: Sequence[dict] | None) -> list[dict]:
 
 
 def _load_series(series: str, series_uid: str | None) -> Any:
-    if not os.path.exists(series):
-        raise CtuiError("no such series folder or file", path=series)
-    return load(series, **({"series": series_uid} if series_uid else {}))
+    return load(existing_path(series, "series folder or file"), **({"series": series_uid} if series_uid else {}))
 
 
 def export_source(source: str | os.PathLike | Opened, *, series: str | os.PathLike | None = None,
@@ -96,9 +94,7 @@ def export_source(source: str | os.PathLike | Opened, *, series: str | os.PathLi
     """The labels, geometry and objects an export works on (see the module docstring)."""
     if isinstance(source, Opened):
         return _from_opened(source, series, series_uid)
-    p = os.fspath(source)
-    if not os.path.exists(p):
-        raise CtuiError("no such file", path=p)
+    p = existing_path(source, "file")
     if input_kind(p) == "project":
         return _from_opened(open_project(p, with_series=None, require_labels=True), series, series_uid)
     if not is_label_file(p):

@@ -11,7 +11,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ctui.engine.actions import defaults
-from ctui.engine.actions.opened import Opened, input_kind, open_input
+from ctui.engine.actions.opened import Opened, existing_path, input_kind, open_input
 from ctui.engine.core.atomic import check_outputs
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
@@ -112,9 +112,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     if isinstance(source, Opened):
         opened = source
     else:
-        p = os.fspath(source)
-        if not os.path.exists(p):
-            raise CtuiError("no such file", path=p)
+        p = existing_path(source, "file")
         if os.path.isdir(p):
             raise CtuiError("is a folder; give a .ctui project, a label file or a mesh", path=p)
         if input_kind(p) not in ("project", "labels", "mesh"):

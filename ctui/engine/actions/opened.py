@@ -118,6 +118,14 @@ class Opened:
         return d
 
 
+def existing_path(path: str | os.PathLike, what: str = "file or folder") -> str:
+    """``path`` as a string, or a one-line CtuiError "no such <what>" when nothing is there."""
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise CtuiError(f"no such {what}", path=p)
+    return p
+
+
 def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series: bool | None = None,
                require_labels: bool = False, spacing: Any = None, labels: str | os.PathLike | None = None,
                **load_options: Any) -> Opened:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ctui.engine.actions import defaults
 from ctui.engine.actions.mesh import label_meshes
-from ctui.engine.actions.opened import Opened, input_kind, open_input, open_project, series_available
+from ctui.engine.actions.opened import Opened, existing_path, input_kind, open_input, open_project, series_available
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.rendermodes import SURFACE_MODES, VOLUME_MODES
 from ctui.engine.io.project import load_project
@@ -223,9 +223,7 @@ def render_view(source: str | os.PathLike | Opened, *, out: str | os.PathLike,
     if isinstance(source, Opened):
         opened = source
     else:
-        src = os.fspath(source)
-        if not os.path.exists(src):
-            raise CtuiError("no such file or folder", path=src)
+        src = existing_path(source)
         need = scene_options.get("slice_plane") is not None or scene_options.get("mode") in VOLUME_MODES
         opened = _open(src, need_volume=need, load_options=load_options or {})
     scene, mode = build_scene(opened, **scene_options)
