@@ -20,7 +20,7 @@ organ, from the workspace at the middle slice:
    draws it by eye; the box spans every slice), which confines the fill and the propagation;
 3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
 4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): ``x``,
-   the ROI box (``y`` + a drag), a click back on the seed and ``p`` again; then ``}`` to each
+   the ROI box (``y`` + a drag; the cursor stays on the seed) and ``p`` again; then ``}`` to each
    marked slice and ``C`` where the proposal leaves the reference there (the person's eye,
    played by the reference);
 5. ``a``: accept.
@@ -168,11 +168,9 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         await c.press("g")
         c.n += len(typed) + 1
         await answer_prompt(pilot, typed)
-        if box:  # the drag moved the cursor: click the seed again (it fills when z is on)
+        if box:  # the box drag leaves the cursor on the seed
             await _box(c, app, truth_mask, z)
-            await c.click("#main", cell_of_voxel(app, (z, y, x)))
-        if not (box and s.click_fills):
-            await c.press("enter")
+        await c.press("enter")
     filled = s.seg.voxels(s.current)
     await c.press("p")
     got = await _wait_proposal(pilot, ws)
@@ -181,9 +179,6 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         # segment again (the box confines the fill and the propagation)
         await c.press("x")
         await _box(c, app, truth_mask, z)
-        await c.click("#main", cell_of_voxel(app, (z, y, x)))  # back on the seed (no fill: z is off here)
-        if s.click_fills:
-            await c.press("u")  # the click filled: undo it, p segments from the object's seed
         await c.press("p")
         got = await _wait_proposal(pilot, ws)
     if got and review:

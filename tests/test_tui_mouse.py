@@ -143,7 +143,7 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         # y then a drag: the ROI box (all slices: drawn in one axial slice)
         await pilot.press("y")
         await drag(pilot, "#main", [cell_of_voxel(app, (5, 10, 10)), cell_of_voxel(app, (5, 20, 20))])
-        assert s.roi_box is not None
+        assert s.roi_box is not None and s.zyx == (5, 12, 10)  # the cursor stays while the box is drawn
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
         assert (z0, z1) == (0, s.shape[0] - 1) and _near((y0, x0, y1, x1), (10, 10, 20, 20))
         # a big brush dab at the box corner paints only inside it

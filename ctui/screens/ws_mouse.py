@@ -8,8 +8,8 @@ left click                     the cursor (and the crosshair of the other planes
                                there; with ``z`` (click fills) on, it fills as Enter; with
                                the brush/eraser down (b / E) it paints a dab
 left drag                      brush/eraser down: paints (erases) along the drag; after
-                               ``y`` (box): the ROI box from press to release; else the
-                               cursor follows
+                               ``y`` (box): the ROI box from press to release (the
+                               cursor stays); else the cursor follows
 right click, Ctrl+click        place (or remove) a background seed
 Shift/Alt drag, middle drag    pan (when zoomed in)
 wheel / Ctrl+wheel             next/previous slice / zoom
@@ -121,6 +121,7 @@ class MouseMixin(ToolsMixin):
     ``action_fill``, ``dab``, ``stroke``, ``_editable`` and ``proposal``."""
 
     _drag: tuple | None = None
+    _box_end: tuple[int, int, int] | None = None  # the voxel under the mouse while a box is dragged
 
     # ------------------------------------------------------------------ where the mouse is
     def _voxel_at(self, widget: ImageView, event, *, inside: bool = True):
@@ -190,6 +191,11 @@ class MouseMixin(ToolsMixin):
     def _click(self, iv: ImageView, plane: str, zyx) -> None:
         s = self.s
         s.plane = plane
+        if s.box_corner is not None:  # drawing the box: the cursor (the seed, say) stays where it is
+            self._box_end = zyx
+            self._drag = ("box", iv, plane, zyx, s.roi_box)
+            iv.capture_mouse()
+            return
         s.z, s.y, s.x = zyx
         s.clamp()
         if s.polygon_mode and planes.plane_view(s.volume, plane).normal == 0:
@@ -197,9 +203,7 @@ class MouseMixin(ToolsMixin):
             self.set_status(f"Polygon: {len(s.polygon)} point(s); t then Scissors cuts, Y clears")
             self.refresh_view()
             return
-        if s.box_corner is not None:
-            self._drag = ("box", iv, plane, s.zyx, s.roi_box)
-        elif s.tool in ("brush", "eraser"):
+        if s.tool in ("brush", "eraser"):
             if self._editable():
                 try:
                     self.dab(s.tool)
@@ -239,6 +243,13 @@ class MouseMixin(ToolsMixin):
             return
         _plane, zyx = got
         s = self.s
+        if drag[0] == "box":
+            if zyx != self._box_end:
+                self._box_end = zyx
+                pv = planes.plane_view(s.volume, drag[2])
+                s.roi_box = _corner_box(drag[3], zyx, pv.normal, s.shape, s.limits.slices)
+                self.refresh_view()
+            return
         if zyx == s.zyx:
             return
         before = s.zyx
@@ -246,9 +257,6 @@ class MouseMixin(ToolsMixin):
         s.clamp()
         if drag[0] == "paint" and self._prop is None:
             self.stroke(before, s.zyx)
-        elif drag[0] == "box":
-            pv = planes.plane_view(s.volume, drag[2])
-            s.roi_box = _corner_box(drag[3], s.zyx, pv.normal, s.shape, s.limits.slices)
         self.refresh_view()
 
     def _pan_drag(self, event) -> None:
@@ -275,7 +283,7 @@ class MouseMixin(ToolsMixin):
             return
         drag[1].release_mouse()
         if drag[0] == "box":
-            self._finish_box(drag[2], drag[3], self.s.zyx, previous=drag[4])
+            self._finish_box(drag[2], drag[3], self._box_end, previous=drag[4])
         elif drag[0] == "paint":
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
