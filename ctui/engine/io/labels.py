@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ctui.engine.core.atomic import atomic_path, regular_source
+from ctui.engine.core.colors import object_color_float
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.volume import Volume
@@ -133,8 +134,6 @@ def nrrd_geometry(volume: Volume) -> dict:
 
 def _segment_fields(labels: np.ndarray, names: dict[int, str]) -> dict[str, str]:
     from scipy import ndimage
-
-    from ctui.engine.core.colors import object_color_float
 
     ids = [int(i) for i in np.unique(labels) if i != 0]
     fields: dict[str, str] = {

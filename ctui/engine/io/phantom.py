@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.atomic import atomic_write, write_text
 from ctui.engine.core.volume import Volume
 
 SAMPLE_DIR = Path(__file__).resolve().parents[3] / "sample_data" / "phantom"
@@ -393,8 +394,6 @@ def write_series(
     from pydicom.dataset import FileMetaDataset
     from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian
 
-    from ctui.engine.core.atomic import atomic_write
-
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     nz, ny, nx = volume.shape
@@ -463,8 +462,6 @@ def write_demo(outdir: str | os.PathLike, **opts: Any) -> Path:
 
     ``opts`` go to :func:`make_phantom`. Returns ``outdir`` as a Path.
     """
-    from ctui.engine.core.atomic import write_text
-
     volume, truth = make_phantom(**opts)
     out = Path(outdir)
     paths = write_series(out, volume, seed=int(opts.get("seed", 0)))

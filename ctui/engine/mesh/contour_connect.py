@@ -59,6 +59,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ctui.engine.core.borders import object_borders
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.mesh import contour_tiling
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
@@ -570,6 +571,4 @@ def _flip_double_rungs(faces: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 def mask_contours(mask: np.ndarray) -> list[list[Any]]:
     """Per-slice borders of a 3D mask (SEG's :func:`ctui.engine.core.borders.object_borders`)."""
-    from ctui.engine.core.borders import object_borders
-
     return object_borders(np.asarray(mask).astype(np.uint8), 1)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.windows import auto_window
 from ctui.engine.render import shaders
 from ctui.engine.render.camera import CameraSetup, look_at, ortho, setup_camera, light_position
 from ctui.engine.render.gpu_objects import MeshGPU, Targets, vertex_normals  # noqa: F401 - vertex_normals: public here too
@@ -367,8 +368,6 @@ class GLEngine:
     def _window_norm(self, scene: Scene, g: VolumeGPU) -> tuple[float, float]:
         win = scene.options.window or scene.volume.window
         if win is None:
-            from ctui.engine.core.windows import auto_window
-
             win = auto_window(scene.volume.data, modality=scene.volume.modality)
         c, wd = float(win[0]), max(float(win[1]), 1e-6)
         return g.norm(c - wd / 2.0), g.norm(c + wd / 2.0)

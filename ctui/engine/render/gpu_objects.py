@@ -8,6 +8,8 @@ import weakref
 
 import numpy as np
 
+from ctui.engine.core.meshdata import face_areas, signed_volume_mm3
+
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32 for a triangle mesh."""
@@ -45,8 +47,6 @@ class MeshGPU:
         self.vao_v = ctx.vertex_array(progs["surface_v"], [(self.vbo, "3f 3f", "in_pos", "in_normal")], self.ibo)
         self.vao_depth = ctx.vertex_array(progs["depth"], [(self.vbo, "3f 12x", "in_pos")], self.ibo)
         self.nbytes = inter.nbytes + f.nbytes
-        from ctui.engine.core.meshdata import face_areas
-
         self.mean_area = float(face_areas(v, f).mean()) if len(f) else 0.0
         self.cull = cull_mode(v, f)
         from ctui.engine.render.scene import mesh_bounds
@@ -74,8 +74,6 @@ def cull_mode(v: np.ndarray, f: np.ndarray) -> str | None:
         return None  # a directed edge used twice: inconsistent or non-manifold
     if not np.array_equal(fwd, np.sort(b * n + a)):
         return None  # an edge without its twin: open surface
-    from ctui.engine.core.meshdata import signed_volume_mm3
-
     vol = signed_volume_mm3(v, f)
     return "back" if vol > 0 else "front"
 

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.colors import object_color_float
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
@@ -192,8 +193,6 @@ class SceneMesh:
         if self.color is not None:
             return tuple(float(c) for c in self.color)  # type: ignore[return-value]
         if self.mesh.object_id:
-            from ctui.engine.core.colors import object_color_float
-
             return object_color_float(self.mesh.object_id)
         return (0.89, 0.85, 0.77)
 

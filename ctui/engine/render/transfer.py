@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ctui.engine.core.errors import CtuiError
+
 PRESETS: dict[str, dict] = {
     "ct-bone": {
         "units": "HU",
@@ -48,8 +50,6 @@ def resolve_preset(name: str) -> str:
     key = str(name).lower().replace("_", "-")
     key = ALIASES.get(key, key)
     if key not in PRESETS:
-        from ctui.engine.core.errors import CtuiError
-
         raise CtuiError(f"unknown transfer-function preset {name!r} (choose from {', '.join(PRESETS)})")
     return key
 

@@ -51,6 +51,9 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.atomic import atomic_path
+from ctui.engine.core.colors import object_color_float
+
 
 @dataclass
 class ObjectDrift:
@@ -473,13 +476,9 @@ def plot_drift(report: DriftReport, path: Any, *, title: str | None = None) -> N
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
-    from ctui.engine.core.atomic import atomic_path
-
     data = report.plot_data()
     fig = Figure(figsize=(8, 7), dpi=100)
     axx, axy, axd = fig.subplots(3, 1, sharex=True)
-    from ctui.engine.core.colors import object_color_float
-
     for o in data["objects"]:
         col = object_color_float(o["id"])
         z = np.array(o["z"])

@@ -41,6 +41,8 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.colors import MAX_OBJECTS, object_color
+from ctui.engine.core.windows import apply_window, auto_window
 from ctui.engine.segment import filters as _filters
 
 DOMAINS = ("hu", "window8")
@@ -96,8 +98,6 @@ def to_display(image: np.ndarray, *, domain: str, window: tuple[float, float]) -
     """A domain image as uint8 for display (window applied in the "hu" domain)."""
     if domain == "window8" or image.dtype == np.uint8:
         return image
-    from ctui.engine.core.windows import apply_window
-
     return apply_window(image, window)
 
 
@@ -107,8 +107,6 @@ _LUT: np.ndarray | None = None
 def _color_lut() -> np.ndarray:
     global _LUT
     if _LUT is None:
-        from ctui.engine.core.colors import MAX_OBJECTS, object_color
-
         lut = np.zeros((256, 3), dtype=np.float32)
         for i in range(1, 256):
             lut[i] = object_color((i - 1) % MAX_OBJECTS + 1)
@@ -233,16 +231,12 @@ class Pipeline:
             return self.window
         w = getattr(volume, "window", None)
         if w is None:
-            from ctui.engine.core.windows import auto_window
-
             w = auto_window(volume.data, modality=getattr(volume, "modality", "OT"))
         return (float(w[0]), float(w[1]))
 
     def prepare(self, image: np.ndarray, window: tuple[float, float]) -> np.ndarray:
         """A raw 2D slice (any dtype) in the pipeline's domain (float32 or uint8)."""
         if self.domain == "window8":
-            from ctui.engine.core.windows import apply_window
-
             return apply_window(image, window)
         return image if image.dtype == np.float32 else image.astype(np.float32)
 

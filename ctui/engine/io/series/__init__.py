@@ -40,6 +40,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.volume import Volume
+from ctui.engine.core.windows import auto_window, ct_hint, looks_like_ct
 from ctui.engine.io.series._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_key
 
 __all__ = ["load", "inspect", "scan", "estimate", "LoadError"]
@@ -369,8 +370,6 @@ def _recognise_ct(vol: Volume) -> None:
     (NIfTI descrip/intent_name, NRRD content) and its values reach below -500, or when
     its values look like Hounsfield units (air near -1000, soft tissue near 0): it then
     gets modality "CT" (HU shown, CT window presets) and the CT default window."""
-    from ctui.engine.core.windows import auto_window, ct_hint, looks_like_ct
-
     if str(vol.modality or "OT").upper() not in ("OT", "") or vol.data.size == 0 or vol.data.dtype.kind not in "if":
         return
     hint = ct_hint(vol.meta.get("content_hint", ""))

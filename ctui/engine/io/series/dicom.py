@@ -57,6 +57,7 @@ import numpy as np
 
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
+from ctui.engine.core.windows import auto_window
 from ctui.engine.io.series._common import Plan, check_memory, make_plan, rel, run_parallel, scrub_obj, to_grey
 from ctui.engine.io.series._common import _safe
 from ctui.engine.io.series.dicom_geometry import GridPlan, _dominant, _geometry, apply_grid, plan_grid
@@ -391,8 +392,6 @@ def _volume(out: np.ndarray, prep: Prepared, grid: GridPlan, zsel: list[int], *,
     dz = grid.dz if grid.positions is not None or prep.dz_user else prep.geo["dz"] * zs
     window = f0.window
     if window is None:
-        from ctui.engine.core.windows import auto_window
-
         window = auto_window(out if sample is None else sample, modality=f0.modality)
     if f0.photometric == "MONOCHROME1":
         warnings.append("MONOCHROME1 image (displayed inverted by its modality: white = low values): the values "

@@ -19,6 +19,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.volume import Volume
+from ctui.engine.core.windows import auto_window
 
 SAMPLE_ABOVE = 64 << 20  # declared bytes above which info samples slices
 COMPRESSED_REACH = 256 << 20  # decompressed bytes a sampled slice of a compressed file may lie beyond
@@ -79,8 +80,6 @@ def inspect_volume_file(p: Path, load_file: Callable[..., Volume], *, spacing: A
         ok.append(z)
     if first is None:
         return None
-    from ctui.engine.core.windows import auto_window
-
     sample = np.concatenate(samples)
     fin = sample[np.isfinite(sample)]
     placeholder = np.broadcast_to(np.zeros((), first.data.dtype), (nz, ny, nx))
