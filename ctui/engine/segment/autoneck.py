@@ -43,11 +43,12 @@ from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import disc, fill_holes_2d, morph_ball, seeded_components
 
 JUMP = 1.1  # a drop of V(r) by more than this factor from one radius to the next is a leak going
-MAX_FRACTION = 0.6  # radii up to this fraction of the local depth (larger ones cut the organ itself)
+MAX_FRACTION = 0.55  # radii up to this fraction of the local depth (larger ones cut the organ itself)
 DEPTH_REACH_MM = 10.0  # the local depth is the deepest in-range point within this distance of the seed
 SWEEP_MM = 2.0  # the sweep's voxel size (mm; the series' own when coarser)
 BOX_MM = 150.0  # half-size of the sweep's box around the seed (mm)
 MAX_RADII = 14
+LEAK_BALLS = 0.5  # the smallest piece a leak takes, in balls of the local depth
 HOLE_MM2 = 200.0  # largest hole filled (mm^2 a slice): noise and vessels, not the renal sinus (Dice best on the kidneys)
 
 
@@ -136,10 +137,14 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     if not vols:
         return NeckChoice(0.0, depth_mm=depth, reason="the region is thinner than the narrowest width swept")
     drops = [vols[i - 1] / vols[i] for i in range(1, len(vols))]
-    bar = max(jump, math.sqrt(max(drops, default=1.0)))  # a drop of this size is a leak going, not organ shrinking
+    # a leak going takes a piece of at least LEAK_BALLS balls of the local depth (a rim or a cap rounded off
+    # by the opening is smaller), and drops the volume by at least ``bar``
+    ball = 4.0 / 3.0 * math.pi * depth ** 3 / float(np.prod(sp))
+    big = [vols[i - 1] - vols[i] >= LEAK_BALLS * ball for i in range(1, len(vols))]
+    bar = max(jump, math.sqrt(max([d for d, b in zip(drops, big) if b], default=1.0)))
     j, ratio = 0, 1.0
     for i in range(1, len(vols)):
-        if drops[i - 1] >= bar:
+        if big[i - 1] and drops[i - 1] >= bar:
             j, ratio = i, drops[i - 1]
     if j == 0:
         return NeckChoice(0.0, depth_mm=depth, radii_mm=used, volumes=vols,
