@@ -39,6 +39,31 @@ def _face_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return (n / ln).astype(np.float32)
 
 
+def _write_stl_records(fh, v: np.ndarray, f: np.ndarray, chunk: int = 1 << 16) -> None:
+    """Binary STL records (unit face normal, 3 vertices, attribute 0) of faces ``f`` (m, 3)
+    on vertices ``v`` (n, 3) float32, in chunks of faces (temporaries ~3 MB). Normals in
+    float32 from coordinate rows (contiguous gathers, no np.cross): 1.4 M faces 0.29 -> 0.08 s."""
+    vt = np.ascontiguousarray(v.T)
+    for s0 in range(0, len(f), chunk):
+        fc = f[s0:s0 + chunk]
+        rec = np.empty(len(fc), _STL_DTYPE)
+        rec["v"] = v[fc]
+        ax, ay, az = (vt[k][fc[:, 0]] for k in range(3))
+        ux, uy, uz = (vt[k][fc[:, 1]] - c for k, c in zip(range(3), (ax, ay, az)))
+        wx, wy, wz = (vt[k][fc[:, 2]] - c for k, c in zip(range(3), (ax, ay, az)))
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        ln = np.sqrt(nx * nx + ny * ny + nz * nz)
+        ln[ln == 0] = 1.0
+        n = rec["normal"]
+        n[:, 0] = nx / ln
+        n[:, 1] = ny / ln
+        n[:, 2] = nz / ln
+        rec["attr"] = 0
+        fh.write(memoryview(rec).cast("B"))
+
+
 def _fmt(path: Path) -> str:
     ext = path.suffix.lower()
     if ext not in FORMATS:
@@ -78,13 +103,7 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, *, ascii: bool = False) -> Pa
             with atomic_write(p, "wb") as fh:
                 fh.write(STL_HEADER)
                 fh.write(np.uint32(len(f)).tobytes())
-                # in chunks of faces: the temporaries stay small (1.4 M faces: 254 -> ~30 MB)
-                for s0 in range(0, len(f), 1 << 17):
-                    fc = f[s0:s0 + (1 << 17)]
-                    rec = np.zeros(len(fc), _STL_DTYPE)
-                    rec["normal"] = _face_normals(v, fc)
-                    rec["v"] = v[fc]
-                    fh.write(memoryview(rec).cast("B"))
+                _write_stl_records(fh, v, f)
         return p
     import trimesh
 

@@ -71,9 +71,12 @@ def face_components(mesh: Mesh) -> tuple[int, np.ndarray]:
     g = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
     ncomp, vlab = connected_components(g, directed=False)
     flab = vlab[f[:, 0]]
-    # renumber to the components that own faces
-    uniq, flab = np.unique(flab, return_inverse=True)
-    return int(len(uniq)), flab.astype(np.int64)
+    # renumber to the components that own faces, in the same order (a table, not a sort:
+    # np.unique's argsort of the labels was half of this function on a 1.4 M-face CT surface)
+    owns = np.zeros(ncomp, bool)
+    owns[flab] = True
+    renum = np.cumsum(owns, dtype=np.int64) - 1
+    return int(renum[-1]) + 1, renum[flab]
 
 
 def components(mesh: Mesh) -> list[Mesh]:
