@@ -39,6 +39,7 @@ from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
+from ctui.engine.io.dicomrefs import require_references
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
 RTSTRUCT_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.481.3"
@@ -233,7 +234,6 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     import highdicom as hd
 
     from ctui import __version__
-    from ctui.engine.io.dicomrefs import require_references
 
     require_references(sources, what="DICOM-SEG", path=path)  # never invents the UIDs it points at
     lab = np.asarray(labels)

@@ -36,6 +36,7 @@ import numpy as np
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
+from ctui.engine.io.labels import load_labels
 
 LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd")
@@ -299,8 +300,6 @@ def _frame_warnings(c: Any, frame_of_reference: str) -> list[str]:
 
 
 def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
-    from ctui.engine.io.labels import load_labels
-
     lab, vol = load_labels(p)
     geom = Geometry.of(vol)
     if grid is not None:

@@ -47,6 +47,7 @@ from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
+from ctui.engine.io.dicomrefs import require_references
 from ctui.engine.io.dicomseg import (
     RTSTRUCT_SOP_CLASS,
     TYPE2_IDENTIFIERS,
@@ -257,8 +258,6 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     if len(sources) != lab.shape[0]:
         raise CtuiError(f"RTSTRUCT needs one source image per slice ({len(sources)} images, {lab.shape[0]} slices); "
                         "a multi-frame source is not supported for RTSTRUCT: export DICOM-SEG")
-    from ctui.engine.io.dicomrefs import require_references
-
     require_references(sources, what="RTSTRUCT")  # never invents a UID for the images it points at
     src = sources[0]
     ds = pydicom.Dataset()

@@ -64,6 +64,7 @@ from ctui.engine.core.meshdata import Mesh
 from ctui.engine.mesh import contour_tiling
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
 from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
+from ctui.engine.mesh.surface import _fix_handedness, affine_from
 
 __all__ = ["connect_contours", "offset_pixel_boundary", "resample_loop", "tile_dp", "tile_greedy", "tile_many"]
 
@@ -439,8 +440,6 @@ def connect_contours(
     Mesh
         Closed, welded, outward-oriented triangle mesh in patient mm (object_id 0).
     """
-    from ctui.engine.mesh.surface import _fix_handedness, affine_from
-
     if method not in ("dp", "greedy"):
         raise ValueError(f"unknown tiling method {method!r} (use 'dp' or 'greedy')")
     aff = affine_from(spacing, origin, direction)

@@ -9,6 +9,7 @@ import weakref
 import numpy as np
 
 from ctui.engine.core.meshdata import face_areas, signed_volume_mm3
+from ctui.engine.render.scene import mesh_bounds
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -49,8 +50,6 @@ class MeshGPU:
         self.nbytes = inter.nbytes + f.nbytes
         self.mean_area = float(face_areas(v, f).mean()) if len(f) else 0.0
         self.cull = cull_mode(v, f)
-        from ctui.engine.render.scene import mesh_bounds
-
         self.lo, self.hi = mesh_bounds(mesh)
         self.ref = weakref.ref(mesh.vertices) if isinstance(mesh.vertices, np.ndarray) else None
         self.fref = weakref.ref(mesh.faces) if isinstance(mesh.faces, np.ndarray) else None

@@ -11,6 +11,7 @@ import numpy as np
 from ctui.engine.core.atomic import atomic_write, write_bytes
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.limits import check_allocation
+from ctui.engine.render.context import get_renderer
 from ctui.engine.render.scene import Camera, Scene
 
 
@@ -53,8 +54,6 @@ def turntable_frames(scene: Scene, n: int, size: tuple[int, int], *, renderer=No
                      start: float | None = None, degrees: float = 360.0) -> list[np.ndarray]:
     """``n`` images with the camera's azimuth stepped by degrees/n (all frames queued at
     once on the render thread)."""
-    from ctui.engine.render.context import get_renderer
-
     n = int(n)
     if n < 1:
         raise CtuiError(f"turntable needs at least 1 frame, got {n}")
@@ -169,8 +168,6 @@ def flythrough_frames(scene: Scene, path_mm: np.ndarray, n_frames: int = 60, siz
 
     ``endoscope_light``: light mostly from the camera (head light 0.8, the movable
     light dimmed to 30%, no shadows), as an endoscope's own lamp."""
-    from ctui.engine.render.context import get_renderer
-
     check_frames(int(n_frames), size)
     r = renderer or get_renderer()
     futs = []
