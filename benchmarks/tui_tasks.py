@@ -11,9 +11,10 @@ organ, from the workspace at the middle slice:
 
 1. (second organ) ``n``: a new object;
 2. to the seed (the organ's deepest voxel, as issue 21's benchmark seeds): the cheaper of
-   wheel notches over the view to the seed's slice + a click on it, or ``g`` + typed
-   ``x,y,z`` + Enter (then Enter fills); typed when a cell spans 1.5 voxels or more (at 80x24
-   a click lands 1-2 voxels off, and a seed at an organ's edge changes the result); with ``z`` (click fills, pressed once for the
+   wheel notches over the view to the seed's slice, Ctrl+wheel on the seed until a cell spans
+   under 1.5 voxels (a coarser click lands 1-2 voxels off, and a seed at an organ's edge
+   changes the result) and a click on it, or ``g`` + typed ``x,y,z`` + Enter (then Enter
+   fills); zoomed out again (``-``) after the organ; with ``z`` (click fills, pressed once for the
    session) the click fills as Enter does;
    with ``--box``, before the fill: ``y`` and one mouse drag on the seed's slice draw the ROI
    box around the organ (its reference extent in the slice plane + 2 voxels, as a person
@@ -95,6 +96,12 @@ class Counter:
         self.n += 1
         await wheel(self.pilot, widget, up=up)
 
+    async def wheel_at(self, widget: str, offset, *, control: bool = False) -> None:
+        from ctui.screens.testing import wheel
+
+        self.n += 1
+        await wheel(self.pilot, widget, offset, up=True, control=control)
+
 
 async def _wait_proposal(pilot, ws, timeout: float = 300.0) -> bool:
     end = time.monotonic() + timeout
@@ -152,8 +159,11 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     z, y, x = seed
     typed = f"{x},{y},{z}"
     vm = ws.main_view.view_map
-    coarse = vm is None or max(1.0 / vm.sx, 2.0 / vm.sy) > 1.5  # a cell spans 1.5 voxels or more: type it
-    if not coarse and abs(z - s.z) + 1 <= len(typed) + 3:  # wheel to the slice, click there (fills)
+    zooms = 0  # Ctrl+wheel notches (x2 each) until a cell spans under 1.5 voxels: the click lands on the seed
+    while vm is not None and max(1.0 / vm.sx, 2.0 / vm.sy) / 2 ** zooms > 1.5:
+        zooms += 1
+    mouse_cost = abs(z - s.z) + zooms + 1 + (0 if s.click_fills else 1)
+    if vm is not None and mouse_cost <= len(typed) + 3:  # wheel to the slice, zoom on the seed, click (fills)
         if not s.click_fills:
             await c.press("z")
         while s.z != z:
@@ -161,6 +171,9 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         await pilot.pause()
         if box:
             await _box(c, app, truth_mask, z)
+        for _ in range(zooms):
+            await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
+            await pilot.pause()
         await c.click("#main", cell_of_voxel(app, (z, y, x)))
         if not s.click_fills:
             await c.press("enter")
@@ -186,6 +199,8 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
     if got:
         await c.press("a")
+    while s.zoom > 1:  # back to the whole slice for the next organ
+        await c.press("minus")
     await pilot.pause()
     info = s.seg.objects.get(s.current)
     used = tuple(info.seeds[-1]) if info is not None and info.seeds else None

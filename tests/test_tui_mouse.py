@@ -72,8 +72,13 @@ async def test_click_seed_outside_and_wheel():
         await wheel(pilot, "#main", up=False)
         await wheel(pilot, "#main", up=False)
         assert s.z == z - 1
-        await wheel(pilot, "#main", up=True, control=True)
-        assert s.zoom == 2.0
+        at = (s.z, 12, 14)
+        await wheel(pilot, "#main", cell_of_voxel(app, at), up=True, control=True)
+        assert s.zoom == 2.0 and _near(s.zyx, at)  # zoomed in on the pointer: the cursor is there
+        await pilot.pause()
+        cx, cy = app.workspace.main_view.view_map.to_display(*app.workspace.main_view.cursor)
+        w, h = app.workspace.main_view.size
+        assert 0 < cx < w and 0 < cy < 2 * h  # and in view
         assert not app.internal_errors
 
 

@@ -12,7 +12,8 @@ left drag                      brush/eraser down: paints (erases) along the drag
                                cursor stays); else the cursor follows
 right click, Ctrl+click        place (or remove) a background seed
 Shift/Alt drag, middle drag    pan (when zoomed in)
-wheel / Ctrl+wheel             next/previous slice / zoom
+wheel / Ctrl+wheel             next/previous slice / zoom (in: on the pointer, the
+                               cursor goes there)
 click on the side panel        select that object
 click on the review strip      go to that slice
 =============================  ==========================================================
@@ -36,7 +37,8 @@ from ctui.screens.ws_tools import ToolsMixin
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): click = cursor (z: click fills; "
               "brush down: a dab), drag = paint/erase with the brush down, the ROI box after y; right click or "
-              "Ctrl+click = background seed; Shift/Alt or middle drag = pan; wheel = slices, Ctrl+wheel = zoom; "
+              "Ctrl+click = background seed; Shift/Alt or middle drag = pan; wheel = slices, Ctrl+wheel = zoom "
+              "(in: on the pointer); "
               "click an object in the side panel to select it, the review strip to go to a slice. "
               "g takes a slice, x,y or x,y,z.\n")
 SEED_COLOR = (0, 230, 255)
@@ -330,7 +332,12 @@ class MouseMixin(ToolsMixin):
         iv = self._image_view(event)
         if iv is None:
             return
-        if event.ctrl:
+        if event.ctrl:  # zoom in on the pointer: the cursor goes there and the view centres on it
+            got = self._voxel_at(iv, event) if d > 0 else None
+            if got is not None:
+                self.s.plane = got[0]
+                self.s.z, self.s.y, self.s.x = got[1]
+                self.pan_center = None
             self.action_zoom(d)
             return
         plane = _plane_of(self, iv)
