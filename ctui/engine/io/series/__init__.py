@@ -41,7 +41,7 @@ from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window, ct_hint, looks_like_ct
-from ctui.engine.io.series._common import IMAGE_SUFFIXES, fmt_bytes, list_files, make_plan, natural_key
+from ctui.engine.io.series._common import IMAGE_SUFFIXES, available_memory, fmt_bytes, list_files, make_plan, natural_key, rel
 
 __all__ = ["load", "inspect", "scan", "estimate", "LoadError"]
 
@@ -360,8 +360,6 @@ def inspect(path: str | os.PathLike | Sequence[str | os.PathLike], **options: An
 
 
 def _rel(p: Path, base: Path | None) -> str:
-    from ctui.engine.io.series._common import rel
-
     return rel(p, base)
 
 
@@ -483,8 +481,6 @@ def estimate(path: Any, **opts: Any) -> dict[str, Any]:
     Options as :func:`load` (series, shape, dtype, crop, downsample); the dtype assumed
     for DICOM is 2 bytes per voxel (int16 HU), 4 for float data.
     """
-    from ctui.engine.io.series._common import available_memory
-
     info = scan(path, shape=opts.get("shape"), dtype=opts.get("dtype"), spacing=opts.get("spacing"))
     if not info:
         raise LoadError("nothing loadable found", path=path)

@@ -79,6 +79,7 @@ from ctui.engine.io.series.dicom_pixels import (
     _out_dtype,
     codec_message,
 )
+from ctui.engine.io.series.stacks import parse_spacing
 
 __all__ = ["Frame", "Series", "read_header", "read_headers", "series_summary", "pick_series", "load_series",
            "codec_message", "MAX_COMPRESSION", "_ordered_series"]
@@ -199,8 +200,6 @@ def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     zs, ys, xs = plan.steps()
     dz_user = None
     if spacing is not None:
-        from ctui.engine.io.series.stacks import parse_spacing
-
         dz_user = parse_spacing(spacing, path)[0] * zs
     out_shape = plan.out_shape(full_shape)
     grid = plan_grid(geo, zsel, dy=dy * ys, dx=dx * xs, ny=out_shape[1], nx=out_shape[2], dz_user=dz_user,

@@ -23,6 +23,8 @@ from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import check_memory, checked_axes, make_plan
 from ctui.engine.io.series.nrrd_data import HEADER_LIMIT, header_end, read_payload, regular_file
+from ctui.engine.io.series.raw import load_raw
+from ctui.engine.io.series.stacks import parse_spacing
 
 _LPS_FROM_RAS = np.diag([-1.0, -1.0, 1.0])
 
@@ -135,8 +137,6 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
                         f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in neg)}: the voxel size of its affine "
                         f"({', '.join(f'{v:g}' for v in sp[::-1])} mm, x y z) is used")
     if spacing is not None:
-        from ctui.engine.io.series.stacks import parse_spacing
-
         sp = parse_spacing(spacing, path)
     full = (nz, ny, nx)
     plan = make_plan(full, crop=crop, downsample=downsample, path=path)
@@ -147,8 +147,6 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
         inter is None or inter == 0.0 or not np.isfinite(inter))
     compressed = str(path).lower().endswith(".gz")
     if not compressed and not scaled and dt.kind in "uif" and len(shape) <= 4 and hasattr(proxy, "offset"):
-        from ctui.engine.io.series.raw import load_raw
-
         off = int(getattr(proxy, "offset", hdr.get_data_offset()))
         if getattr(proxy, "order", "F") != "F":
             raise LoadError("NIfTI data not in Fortran order", path=path)
@@ -239,15 +237,11 @@ def _load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progres
     if "space directions" not in hdr and "spacings" not in hdr:
         warnings.append("default spacing 1 mm: the NRRD header gives no spacing")
     if spacing is not None:
-        from ctui.engine.io.series.stacks import parse_spacing
-
         sp = parse_spacing(spacing, path)
     encoding = str(hdr.get("encoding", "raw")).lower()
     datafile = hdr.get("data file") or hdr.get("datafile")
     full = (nz, ny, nx)
     if encoding == "raw" and int(hdr.get("line skip", 0) or 0) == 0:
-        from ctui.engine.io.series.raw import load_raw
-
         skip = int(hdr.get("byte skip", 0) or 0)
         if datafile is None:
             # attached: data right after the header's blank line
