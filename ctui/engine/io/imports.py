@@ -93,7 +93,7 @@ def label_kind(path: str | os.PathLike) -> str:
     except Exception as exc:  # noqa: BLE001 - pydicom raises many types (struct.error...) on foreign/broken files
         raise FormatError(f"not a label file: expected DICOM-SEG, RTSTRUCT, .nii, .nii.gz or .nrrd "
                           f"({' '.join(str(exc).split())[:120]})", path=p) from None
-    from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, SEG_SOP_CLASS
+    from ctui.engine.io.dicomseg import RTSTRUCT_SOP_CLASS, SEG_SOP_CLASS  # DICOM label readers
 
     uid, modality = str(ds.get("SOPClassUID", "")), str(ds.get("Modality", ""))
     if uid == SEG_SOP_CLASS or modality == "SEG":
@@ -231,7 +231,7 @@ def assemble(mask_of: Callable[[int], np.ndarray], numbers: Sequence[int], names
 
 # =========================================================================== readers
 def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
-    from ctui.engine.io.dicomseg import read_seg
+    from ctui.engine.io.dicomseg import read_seg  # DICOM label readers: loaded for a DICOM-SEG/RTSTRUCT only
 
     c = read_seg(p)
     geom = grid if grid is not None else c.geometry
@@ -246,7 +246,7 @@ def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
 
 
 def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "") -> ImportedLabels:
-    from ctui.engine.io.rtstruct import read_rtstruct, roi_mask
+    from ctui.engine.io.rtstruct import read_rtstruct, roi_mask  # DICOM label readers
 
     if grid is None:
         raise CtuiError("an RTSTRUCT holds contours only: open it as labels over the series it was drawn on",

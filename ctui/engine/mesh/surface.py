@@ -83,7 +83,7 @@ def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.
         (outside = values <= level), unit normals float32 (n, 3) from the gradient.
         Vertices are shared between cells (one per crossed voxel edge).
     """
-    from ctui.engine.mesh.marching import marching_cubes
+    from ctui.engine.mesh.marching import marching_cubes  # numba kernels
 
     aff = affine_from(spacing, origin, direction)
     data = np.asarray(data)
@@ -133,7 +133,7 @@ def _mask_mesh_crop(crop: np.ndarray, offset_zyx: Sequence[int], spacing: Sequen
                     smooth: bool, sigma_mm: float | None, interpolate_z: int | None,
                     target_mm3: float | None) -> Mesh:
     """Mesh of a binary crop (already padded with background) placed at ``offset_zyx``."""
-    from ctui.engine.mesh.marching import marching_cubes
+    from ctui.engine.mesh.marching import marching_cubes  # numba kernels
 
     sp = np.asarray(spacing, dtype=np.float64)
     oz, oy, ox = (float(o) for o in offset_zyx)
@@ -277,8 +277,8 @@ def _object_mesh(arr: np.ndarray, box: tuple[slice, ...], label: int | None, spa
 
 def _terraced(lab: np.ndarray, aff: np.ndarray, objects: Sequence[int] | None, note: str = "") -> dict[int, Mesh]:
     """Terraced surfaces of ``objects`` (all when None) from one multi-label pass."""
-    from ctui.engine.mesh.meshtools import vertex_normals
-    from ctui.engine.mesh.multilabel import multilabel_marching_cubes
+    from ctui.engine.mesh.meshtools import vertex_normals  # numba kernels
+    from ctui.engine.mesh.multilabel import multilabel_marching_cubes  # numba kernels
 
     out = {}
     for k, (v, f) in sorted(multilabel_marching_cubes(lab, affine=aff, objects=objects).items()):

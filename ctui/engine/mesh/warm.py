@@ -20,7 +20,7 @@ _done = False
 
 
 def _marching(dtype) -> None:
-    from ctui.engine.mesh.marching import _marching_cubes_compiled, _threshold
+    from ctui.engine.mesh.marching import _marching_cubes_compiled, _threshold  # numba kernels
 
     d = np.zeros((4, 4, 4), dtype)
     d[1:3, 1:3, 1:3] = 2
@@ -29,7 +29,7 @@ def _marching(dtype) -> None:
 
 
 def _multilabel() -> None:
-    from ctui.engine.mesh.multilabel import multilabel_marching_cubes
+    from ctui.engine.mesh.multilabel import multilabel_marching_cubes  # numba kernels
 
     lab = np.zeros((4, 4, 4), np.uint8)
     lab[1:3, 1:3, 1:3] = 1
@@ -37,14 +37,14 @@ def _multilabel() -> None:
 
 
 def _normals() -> None:
-    from ctui.engine.mesh.meshtools import _vertex_normals
+    from ctui.engine.mesh.meshtools import _vertex_normals  # numba kernels
 
     _vertex_normals(np.eye(3), np.array([[0, 1, 2]], np.int64))
 
 
 def _contours() -> None:
     # the kernels themselves: connect_contours would tile a small stack in plain Python
-    from ctui.engine.mesh.contour_tiling import _tile_range
+    from ctui.engine.mesh.contour_tiling import _tile_range  # numba kernels
 
     t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     ring = np.ascontiguousarray(np.stack([np.cos(t), np.sin(t), np.zeros(12)], axis=1))

@@ -91,7 +91,7 @@ class Renderer:
     def _loop(self) -> None:
         try:
             ctx = create_context()
-            from ctui.engine.render.gl import GLEngine
+            from ctui.engine.render.gl import GLEngine  # the GL engine: built on the render thread with the first frame
 
             self.engine = GLEngine(ctx)
             self.info = {"renderer": ctx.info.get("GL_RENDERER", "?"), "version": ctx.info.get("GL_VERSION", "?"),

@@ -58,14 +58,14 @@ def _is_volume_file(p: Path) -> bool:
 def _load_volume_file(p: Path, **kw: Any) -> Volume:
     name = p.name.lower()
     if name.endswith((".nii", ".nii.gz")):
-        from ctui.engine.io.series.research import load_nifti
+        from ctui.engine.io.series.research import load_nifti  # loaded with its format
 
         return load_nifti(p, **kw)
     if name.endswith((".nrrd", ".nhdr")):
-        from ctui.engine.io.series.research import load_nrrd
+        from ctui.engine.io.series.research import load_nrrd  # loaded with its format
 
         return load_nrrd(p, **kw)
-    from ctui.engine.io.series.metaimage import load_mhd
+    from ctui.engine.io.series.metaimage import load_mhd  # loaded with its format
 
     return load_mhd(p, **kw)
 
@@ -267,13 +267,13 @@ def _load_files(kind: str, files: list[Path], *, single: Path | None, base: Path
                 common: dict[str, Any]) -> Volume:
     """Files classified as raw data, an image stack or one volume file ("mhd")."""
     if kind == "raw":
-        from ctui.engine.io.series.raw import load_raw
+        from ctui.engine.io.series.raw import load_raw  # loaded with its format
 
         one = len(files) == 1 and not (single and single.is_dir())
         return load_raw(files[0] if one else (single or files[0]), None if one else files, shape=shape, dtype=dtype,
                         spacing=spacing, offset=offset, base=base, skipped=skipped, **common)
     if kind == "images":
-        from ctui.engine.io.series.stacks import load_images
+        from ctui.engine.io.series.stacks import load_images  # loaded with its format
 
         imgs = [f for f in files if f.suffix.lower() in IMAGE_SUFFIXES]
         for f in files:
@@ -297,12 +297,12 @@ def _load_one_file(p: Path, *, shape: Any, dtype: Any, spacing: Any, offset: Any
     if _is_volume_file(p) and shape is None:
         return _load_volume_file(p, skipped=skipped, spacing=spacing, **common)
     if shape is not None:
-        from ctui.engine.io.series.raw import load_raw
+        from ctui.engine.io.series.raw import load_raw  # loaded with its format
 
         return load_raw(p, None, shape=shape, dtype=dtype, spacing=spacing, offset=offset, base=p.parent,
                         skipped=skipped, **common)
     if p.suffix.lower() in IMAGE_SUFFIXES:
-        from ctui.engine.io.series.stacks import load_images
+        from ctui.engine.io.series.stacks import load_images  # loaded with its format
 
         return load_images([p], path=p, base=p.parent, skipped=skipped, spacing=spacing, **common)
     return None
@@ -312,7 +312,7 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
                 series: Any, spacing: Any, resample: bool, headers_only: bool, progress: Any,
                 common: dict[str, Any]) -> Volume:
     """The DICOM part of :func:`load`: headers, series choice, then decode (or inspect)."""
-    from ctui.engine.io.series import dicom
+    from ctui.engine.io.series import dicom  # the DICOM loader (a dozen modules) loads when DICOM files are met
 
     n_files = len(files)
     # progress: headers count as the first half of the work, decoding as the second
@@ -423,13 +423,13 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if len(files) == 1 and files[0].suffix.lower() in IMAGE_SUFFIXES:
         kind = "images"
     if kind == "dicom":
-        from ctui.engine.io.series import dicom
+        from ctui.engine.io.series import dicom  # the DICOM loader (a dozen modules) loads when DICOM files are met
 
         found, _, ids = dicom.read_headers(files, base=base, progress=(
             None if progress is None else lambda done, total: report(progress, done, total, "reading headers")))
         return [dicom.series_summary(s, ids=ids) for s in dicom._ordered_series(found)]
     if kind == "images":
-        from ctui.engine.io.series.stacks import image_entries, parse_spacing
+        from ctui.engine.io.series.stacks import image_entries, parse_spacing  # loaded with its format
 
         entries, _ = image_entries([f for f in files if f.suffix.lower() in IMAGE_SUFFIXES], base)
         if not entries:
@@ -445,8 +445,8 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
     if kind == "mhd":
         vf = next(f for f in files if _is_volume_file(f))
         if vf.suffix.lower() in _MHD:
-            from ctui.engine.io.series.metaimage import mhd_spacing, read_mhd_header
-            from ctui.engine.io.series.stacks import parse_spacing
+            from ctui.engine.io.series.metaimage import mhd_spacing, read_mhd_header  # loaded with its format
+            from ctui.engine.io.series.stacks import parse_spacing  # loaded with its format
 
             hdr, _ = read_mhd_header(vf)
             try:
@@ -458,11 +458,11 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
                      "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
                      "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],
                      "kind": "mhd"}]
-        from ctui.engine.io.series.research import header_info
+        from ctui.engine.io.series.research import header_info  # loaded with its format
 
         return [header_info(vf)]
     # raw: geometry from the options
-    from ctui.engine.io.series.stacks import parse_dtype, parse_shape, parse_spacing
+    from ctui.engine.io.series.stacks import parse_dtype, parse_shape, parse_spacing  # loaded with its format
 
     shp = parse_shape(shape, path)
     dt = parse_dtype(dtype, path)

@@ -36,7 +36,7 @@ def _declared(p: Path) -> tuple[tuple[int, int, int], int, bool] | None:
             shp = [int(s) for s in img.shape] + [1, 1]
             return (shp[2], shp[1], shp[0]), int(img.header.get_data_dtype().itemsize), name.endswith(".gz")
         if name.endswith((".nrrd", ".nhdr")):
-            from ctui.engine.io.series.research import _TYPE, _read_nrrd_header
+            from ctui.engine.io.series.research import _TYPE, _read_nrrd_header  # loaded with its format
 
             hdr = _read_nrrd_header(p)
             if str(hdr.get("encoding", "raw")).lower() != "raw" or int(hdr.get("line skip", 0) or 0):
