@@ -138,3 +138,23 @@ def test_no_module_writes_another_objects_private_attributes():
                     and str(node.args[1].value).startswith("_")):
                 bad.append(f"{p.relative_to(ROOT)}:{node.lineno} {ast.unparse(node)}")
     assert not bad, "writes to another object's private attributes: " + "; ".join(bad)
+
+
+def test_engine_imports_inside_functions_say_why():
+    """An engine module imported inside a function (not at the top) is there for a reason the
+    code states: a ``#`` comment on the import, or the function's docstring about the import
+    (a heavy library such as numba or pydicom loaded on first use, a format's loader)."""
+    bad = []
+    for p in _py_files(PKG / "engine"):
+        src = p.read_text().splitlines()
+        for fn in ast.walk(ast.parse("\n".join(src))):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            doc = (ast.get_docstring(fn) or "").lower()
+            for node in ast.walk(fn):
+                if (isinstance(node, ast.ImportFrom) and (node.module or "").startswith("ctui.engine")
+                        and not any("#" in src[i] for i in range(node.lineno - 1, node.end_lineno))
+                        and "import" not in doc):
+                    bad.append(f"{p.relative_to(ROOT)}:{node.lineno} {src[node.lineno - 1].strip()}")
+    assert not bad, "imports inside functions without a reason (move them to the top, or say why): " + \
+        "; ".join(sorted(set(bad)))
