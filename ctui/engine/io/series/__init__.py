@@ -212,16 +212,10 @@ def load(
                                 f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
         else:
             base = p.parent
-            if headers_only and shape is None and _is_volume_file(p) and p.is_file():
-                from ctui.engine.io.series.sampled import inspect_volume_file  # large NIfTI/NRRD: sample slices
-
-                sampled = inspect_volume_file(p, _load_volume_file, spacing=spacing, **common)
-                if sampled is not None:
-                    return _with_series(sampled)
-            vol = _load_one_file(p, shape=shape, dtype=dtype, spacing=spacing, offset=offset, skipped=skipped,
-                                 common=common)
+            vol = _single_file(p, headers_only=headers_only, shape=shape, dtype=dtype, spacing=spacing,
+                               offset=offset, skipped=skipped, common=common)
             if vol is not None:
-                return _with_series(vol)
+                return vol
             files = [p]
         path_label = p
     else:
@@ -282,6 +276,21 @@ def _load_files(kind: str, files: list[Path], *, single: Path | None, base: Path
         return load_images(imgs, path=path_label, base=base, skipped=skipped, spacing=spacing, **common)
     vf = next(f for f in files if _is_volume_file(f))
     return _load_volume_file(vf, skipped=skipped, spacing=spacing, **common)
+
+
+def _single_file(p: Path, *, headers_only: bool, shape: Any, dtype: Any, spacing: Any, offset: Any,
+                 skipped: list[dict[str, str]], common: dict[str, Any]) -> Volume | None:
+    """A single file given by itself (:func:`_load_one_file`); a large NIfTI/NRRD described from
+    sampled slices when ``headers_only`` (:mod:`.sampled`). None: try it as DICOM."""
+    if headers_only and shape is None and _is_volume_file(p) and p.is_file():
+        from ctui.engine.io.series.sampled import inspect_volume_file  # lazy: only ctui info imports it
+
+        sampled = inspect_volume_file(p, _load_volume_file, spacing=spacing, **common)
+        if sampled is not None:
+            return _with_series(sampled)
+    vol = _load_one_file(p, shape=shape, dtype=dtype, spacing=spacing, offset=offset, skipped=skipped,
+                         common=common)
+    return None if vol is None else _with_series(vol)
 
 
 def _load_one_file(p: Path, *, shape: Any, dtype: Any, spacing: Any, offset: Any, skipped: list[dict[str, str]],
