@@ -496,3 +496,23 @@ def test_info_samples_a_huge_compressed_nifti(tmp_path):
     vol, d = describe_series(tmp_path / "big.nii")
     assert d["shape_zyx"] == [600, 300, 300] and d["sampled_slices"] == 3 and d["value_range"][1] <= 996
     assert not any("vox_offset" in w for w in vol.warnings)
+
+
+def test_export_prints_object_names_escaped(files, tmp_path, capsys):
+    """An object name holding ESC[2J and OSC 52 (from a hostile project) reaches the
+    terminal escaped when `ctui export` lists what it wrote."""
+    import zipfile
+
+    with zipfile.ZipFile(files["project"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    doc = json.loads(members["project.json"])
+    doc["objects"][0]["name"] = "\x1b[2Jkid\x1b]52;c;ZXZpbA==\x07ney"
+    members["project.json"] = json.dumps(doc).encode()
+    p = tmp_path / "esc.ctui"
+    with zipfile.ZipFile(p, "w") as zf:
+        for n, b in members.items():
+            zf.writestr(n, b)
+    capsys.readouterr()
+    assert main(["export", str(p), "--format", "stl", "--out", str(tmp_path / "o.stl")]) == 0
+    out, err = capsys.readouterr()
+    assert "\x1b" not in out + err and "\x07" not in out + err
