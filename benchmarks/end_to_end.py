@@ -17,6 +17,19 @@ Run: ``python3 benchmarks/end_to_end.py [--shape 300,512,512] [--repeat 3] [--le
     ``--method contours``, cold and warm cache (the goal: <= 3 s cold).
 
 Ratios printed: ctui / peer (goal <= 1.2), cold / warm.
+
+``--suite`` (issue 27) prints instead, in one run, the wall and CPU seconds (user + system of
+the process and its children, ``os.wait4``: what a loaded machine inflates least) of fresh
+processes for every command a user meets: ``ctui --help``, ``ctui info``, ``ctui mesh --iso``
+on the big series (warm and cold numba cache) beside the SimpleITK + VTK script, ``ctui
+segment`` + ``ctui mesh`` of a kidney (the TotalSegmentator abdomen of ``/work/shared/data``
+written as DICOM, seeded at the right kidney's deepest voxel), ``ctui measure`` without and
+with sections (``--path auto``), ``ctui export --format dicom-seg``, and the TUI's time to a
+painted workspace (series and project; tmux, wall only). With ``--base TREE`` (an older
+checkout: ``git worktree add /tmp/ctui-base fa2b183``) every row also runs that tree
+(``PYTHONPATH``), interleaved run by run, for before/after figures from the same run::
+
+    python3 benchmarks/end_to_end.py --suite --base /tmp/ctui-base --repeat 3
 """
 
 from __future__ import annotations
@@ -128,7 +141,15 @@ def main() -> None:
     ap.add_argument("--skip-big", action="store_true", help="only the sample's cold/warm figures")
     ap.add_argument("--tree", default=None, help="run the ctui of this source tree (e.g. an older release unpacked "
                     "with git archive) for a before/after comparison")
+    ap.add_argument("--suite", action="store_true", help="every command, wall and CPU seconds (issue 27)")
+    ap.add_argument("--base", default=None, help="with --suite: an older tree run beside this one (before/after)")
+    ap.add_argument("--no-tui", action="store_true", help="with --suite: skip the TUI rows")
     args = ap.parse_args()
+    if args.suite:
+        from e2e_suite import run_suite
+
+        run_suite(args, make_series=make_series, peer_source=PEER)
+        return
     global TREE
     if args.tree:
         TREE = Path(args.tree).resolve()

@@ -11,7 +11,6 @@ import numpy as np
 
 from ctui.engine.actions import defaults
 from ctui.engine.actions.opened import Opened, open_input
-from ctui.engine.core.borders import object_borders
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
@@ -20,9 +19,17 @@ from ctui.engine.io.meshes import FORMATS as MESH_SUFFIXES  # re-exported with s
 from ctui.engine.io.meshes import save_mesh
 from ctui.engine.io.mric import read_mric, require_spacing
 from ctui.engine.mesh import meshtools
-from ctui.engine.mesh.contour_connect import connect_contours
 from ctui.engine.mesh.surface import isosurface, label_surfaces
 from ctui.engine.mesh.warm import warm_up  # re-exported: the TUI compiles the mesh kernels while the user looks
+
+
+def _contour_tools() -> tuple:
+    """(connect_contours, object_borders), imported when the contours method runs: the tiler
+    imports numba and the borders OpenCV (0.3-0.6 s a process, unused by marching cubes)."""
+    from ctui.engine.core.borders import object_borders
+    from ctui.engine.mesh.contour_connect import connect_contours
+
+    return connect_contours, object_borders
 
 
 @dataclass
@@ -66,6 +73,7 @@ def label_meshes(labels: np.ndarray, geometry: Geometry, ids: Sequence[int], *, 
     """{id: Mesh} of the objects ``ids`` of a label map on ``geometry`` (patient mm)."""
     g = geometry
     if method == "contours":
+        connect_contours, object_borders = _contour_tools()
         out = {}
         for n, k in enumerate(ids):
             m = connect_contours(object_borders(labels, k), spacing=g.spacing, origin=g.origin,
@@ -104,6 +112,7 @@ def connect_mric(path: str | os.PathLike, *, object_index: int | None = None,
         else:
             k = int(object_index) - 1
             per_slice.append(list(objs[k]) if 0 <= k < len(objs) else [])
+    connect_contours, _ = _contour_tools()
     return connect_contours(per_slice, spacing=spacing, origin=origin, direction=direction, method=method)
 
 
@@ -116,6 +125,7 @@ def _series_mesh(opened: Opened, iso: float | None, method: str, tiling: str,
     if not np.isfinite(iso) or abs(iso) > 1e9:
         raise CtuiError(f"iso value {iso!r}: want a finite value within +-1e9", path=opened.path, option="iso")
     if method == "contours":
+        connect_contours, object_borders = _contour_tools()
         mask = (vol.data > iso).astype(np.uint8)
         mesh = connect_contours(object_borders(mask, 1), spacing=vol.spacing, origin=vol.origin,
                                 direction=vol.direction, method=tiling)

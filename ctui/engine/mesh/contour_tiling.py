@@ -11,7 +11,9 @@ import os
 import numpy as np
 from numba import njit
 
-from ctui.engine.mesh import jit  # (also sets the numba cache folder before the kernels are defined)
+from ctui.engine.mesh import jit
+
+jit.configure_cache()  # the numba cache folder, before the kernels are defined
 
 # --------------------------------------------------------------------------- tiling kernels
 

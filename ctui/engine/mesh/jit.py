@@ -1,10 +1,10 @@
 """Where the compiled (numba) kernels are cached, and whether they are compiled yet.
 
-* On import, when ``NUMBA_CACHE_DIR`` is not set and the package's own ``__pycache__``
-  folders are not writable (a system-wide install), numba's cache goes to
+* :func:`configure_cache` (called by each kernel module): when ``NUMBA_CACHE_DIR`` is not
+  set and the package's own ``__pycache__`` folders are not writable (a system-wide
+  install), numba's cache goes to
   ``$XDG_CACHE_HOME/ctui/numba`` (default ``~/.cache/ctui/numba``), so the kernels are
-  compiled once per user, not once per process. Import this module before defining a
-  ``cache=True`` kernel.
+  compiled once per user, not once per process.
 * :func:`is_compiled` says whether a kernel is compiled in this process or loadable from
   the disk cache, without compiling it: the meshing functions use a vectorised numpy
   path meanwhile (same output), so a fresh install's first mesh takes about a second
@@ -15,6 +15,13 @@
 ``CTUI_KERNELS=compiled`` (always compile and use the kernels), ``=numpy`` (always the
 vectorised path) or ``=auto`` (default) chooses; ``CTUI_NO_BACKGROUND_COMPILE=1`` turns
 the background compilation off.
+
+numba itself is imported only by the kernel modules (``mc_kernels``, ``tool_kernels``,
+``contour_tiling``, ``multilabel``), and those only when a kernel is about to run
+(:func:`use_compiled` takes a function returning the kernels): importing numba costs
+0.2-0.4 s per process and initialising its CPU target another 0.4-0.6 s, more than the
+numpy path takes on a kidney or the sample. :func:`target_ready` says whether that price is
+paid already in this process (one more cached kernel then loads in ~20 ms).
 """
 
 from __future__ import annotations
@@ -25,9 +32,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
-
-import numba
+from typing import Any, Callable, Sequence
 
 
 def _writable(folder: Path) -> bool:
@@ -43,7 +48,10 @@ def user_cache_dir() -> Path:
 
 def configure_cache() -> str | None:
     """Point numba's cache at the user cache folder when the package folder is read-only;
-    returns the folder in use (None: numba's default, next to the sources)."""
+    returns the folder in use (None: numba's default, next to the sources). Imports numba:
+    the kernel modules call it before defining their ``cache=True`` kernels."""
+    import numba
+
     if numba.config.CACHE_DIR:
         return str(numba.config.CACHE_DIR)
     if _writable(Path(__file__).resolve().parent / "__pycache__"):
@@ -57,7 +65,29 @@ def configure_cache() -> str | None:
     return str(d)
 
 
-configure_cache()
+def _cache_dir_for_children() -> str | None:
+    """The numba cache folder a background compilation should use, without importing numba."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return os.environ["NUMBA_CACHE_DIR"]
+    nb = sys.modules.get("numba")
+    if nb is not None and nb.config.CACHE_DIR:
+        return str(nb.config.CACHE_DIR)
+    if _writable(Path(__file__).resolve().parent / "__pycache__"):
+        return None
+    return str(user_cache_dir())
+
+
+def target_ready() -> bool:
+    """Whether numba's CPU target is initialised in this process (a kernel ran or was loaded):
+    then one more cached kernel loads in milliseconds."""
+    if "numba" not in sys.modules:
+        return False
+    try:
+        from numba.core.registry import cpu_target
+
+        return "_toplevel_target_context" in vars(cpu_target)
+    except Exception:  # pragma: no cover - numba internals changed
+        return False
 
 
 def mode() -> str:
@@ -72,6 +102,8 @@ def is_compiled(dispatcher: Any, dtype: Any = None) -> bool:
     numba's cache index without compiling; when that cannot be read (another numba
     version), answers True (the compiled path, compiling if need be)."""
     try:
+        import numba
+
         want = None if dtype is None else numba.from_dtype(dtype)
 
         def matches(sig) -> bool:
@@ -98,17 +130,25 @@ def is_compiled(dispatcher: Any, dtype: Any = None) -> bool:
 SMALL_WORK = 4_000_000
 
 
-def use_compiled(dispatchers: Any, dtype: Any = None, *, work: int | None = None) -> bool:
+def use_compiled(dispatchers: Sequence[Any] | Callable[[], Sequence[Any]], dtype: Any = None, *,
+                 work: int | None = None, cheap_when_ready: bool = False) -> bool:
     """Whether to run the compiled kernels (all of ``dispatchers`` ready, or forced).
 
-    ``work`` (voxels or faces): small jobs take the numpy path in ``auto`` mode unless
-    every kernel is already loaded in this process (same output either way)."""
+    ``dispatchers``: the kernels, or a function returning them (called only when the
+    answer needs them, so numba is not imported for small jobs). ``work`` (voxels or
+    faces): small jobs take the numpy path in ``auto`` mode unless every kernel is
+    already loaded in this process, or (``cheap_when_ready``) numba's target is initialised
+    and the kernels are in the disk cache (same output either way)."""
     m = mode()
     if m != "auto":
         return m == "compiled"
-    if work is not None and work < SMALL_WORK and not all(getattr(d, "signatures", None) for d in dispatchers):
+    small = work is not None and work < SMALL_WORK and not (cheap_when_ready and target_ready())
+    if small and "numba" not in sys.modules:  # no kernel can be loaded in this process yet
         return False
-    return all(is_compiled(d, dtype) for d in dispatchers)
+    ds = dispatchers() if callable(dispatchers) else dispatchers
+    if small and not all(getattr(d, "signatures", None) for d in ds):
+        return False
+    return all(is_compiled(d, dtype) for d in ds)
 
 
 _LOCK = Path(tempfile.gettempdir()) / f"ctui-numba-warm-{os.getuid() if hasattr(os, 'getuid') else 0}.lock"
@@ -132,8 +172,9 @@ def compile_in_background() -> bool:
             kw["start_new_session"] = True
             kw["preexec_fn"] = lambda: os.nice(19)
         env = dict(os.environ, CTUI_NO_BACKGROUND_COMPILE="1")
-        if numba.config.CACHE_DIR:
-            env["NUMBA_CACHE_DIR"] = str(numba.config.CACHE_DIR)
+        cache_dir = _cache_dir_for_children()
+        if cache_dir:
+            env["NUMBA_CACHE_DIR"] = cache_dir
         subprocess.Popen([sys.executable, "-m", "ctui.engine.mesh.warm"], env=env, **kw)
         return True
     except OSError:

@@ -53,18 +53,25 @@ import numpy as np
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.mesh import jit
-from ctui.engine.mesh.mc_kernels import (
-    _finish_vertices,
-    _pass_count,
-    _pass_generate,
-    _pass_rows,
-    _pass_trims,
-)
 from ctui.engine.mesh.mc_numpy import marching_cubes_numpy
 from ctui.engine.mesh.mc_tables import _CORNER_OFFSETS, _EDGES, NTRI, TRI_TABLE
 
 __all__ = ["NTRI", "TRI_TABLE", "_CORNER_OFFSETS", "_EDGES", "kernels_ready", "marching_cubes", "marching_squares"]
-_KERNELS = (_pass_rows, _pass_count, _pass_generate, _finish_vertices)
+
+
+def _kernels():
+    """The compiled passes (:mod:`ctui.engine.mesh.mc_kernels`), imported on first use: that
+    module imports numba (0.2-0.4 s a process), which the numpy path does not need."""
+    from ctui.engine.mesh import mc_kernels as k
+
+    return k
+
+
+def _kernel_list() -> tuple:
+    """The dispatchers jit.use_compiled checks (looked up only when needed)."""
+    k = _kernels()
+    return (k._pass_rows, k._pass_count, k._pass_generate, k._finish_vertices)
+
 
 _KERNEL_DTYPES = (np.dtype(np.int16), np.dtype(np.float32))
 
@@ -147,7 +154,7 @@ def marching_cubes(
     if isinstance(thr, np.int64) and data.dtype != np.int64:
         # level below the dtype's range: everything inside, no surface
         return empty
-    if not jit.use_compiled(_KERNELS, data.dtype, work=int(data.size)):
+    if not jit.use_compiled(_kernel_list, data.dtype, work=int(data.size)):
         if data.size >= jit.SMALL_WORK:
             jit.compile_in_background()
         return marching_cubes_numpy(data, thr, float(level), m, org, ginv, bool(normals), progress=progress)
@@ -169,9 +176,10 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
     ta = np.ones(shape2, np.int64)
     tb = np.zeros(shape2, np.int64)
     tlen = np.zeros(shape2, np.int64)
+    k = _kernels()
     report(progress, 0, 4, "marching cubes")
-    _pass_rows(data, thr, xl, xr, sl, sr, cx)
-    _pass_trims(xl, xr, sl, sr, ta, tb, tlen, nx)
+    k._pass_rows(data, thr, xl, xr, sl, sr, cx)
+    k._pass_trims(xl, xr, sl, sr, ta, tb, tlen, nx)
     noff = np.zeros(nz * ny, np.int64)
     np.cumsum(tlen.ravel()[:-1], out=noff[1:])
     n_nib = int(noff[-1] + tlen.ravel()[-1])
@@ -179,7 +187,7 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
     nib = np.empty(n_nib, np.uint8)
     noff = noff.reshape(shape2)
     report(progress, 1, 4, "marching cubes")
-    _pass_count(data, thr, xl, xr, sl, sr, ta, tb, noff, nib, cy, cz, tc, NTRI)
+    k._pass_count(data, thr, xl, xr, sl, sr, ta, tb, noff, nib, cy, cz, tc, NTRI)
     nv_row = (cx + cy + cz).ravel()
     vbase = np.zeros(nz * ny, np.int64)
     np.cumsum(nv_row[:-1], out=vbase[1:])
@@ -195,10 +203,10 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
     norms = np.empty((nv, 3) if normals else (1, 3), np.float32)
     faces = np.empty((nt, 3), np.int32)
     report(progress, 2, 4, "marching cubes")
-    _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, vbase.reshape(shape2),
+    k._pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, vbase.reshape(shape2),
                    tbase.reshape(shape2), NTRI, TRI_TABLE, verts, faces)
     report(progress, 3, 4, "marching cubes")
-    _finish_vertices(data, verts, norms, m, org, ginv, normals)
+    k._finish_vertices(data, verts, norms, m, org, ginv, normals)
     report(progress, 4, 4, "marching cubes")
     return verts, faces, (norms if normals else None)
 
@@ -206,7 +214,7 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
 def kernels_ready(dtype=np.int16) -> bool:
     """Whether marching cubes' compiled kernels for ``dtype`` data are ready (compiled in
     this process or cached on disk)."""
-    return all(jit.is_compiled(k, np.dtype(dtype)) for k in _KERNELS)
+    return all(jit.is_compiled(k, np.dtype(dtype)) for k in _kernel_list())
 
 
 # --------------------------------------------------------------------------- squares

@@ -12,7 +12,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ctui.engine.mesh import jit  # noqa: F401  (sets the numba cache folder before the kernels are defined)
+from ctui.engine.mesh import jit
+
+jit.configure_cache()  # the numba cache folder, before the kernels are defined
 
 
 @njit(cache=True, parallel=True)

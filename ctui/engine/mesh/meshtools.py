@@ -20,7 +20,6 @@ from __future__ import annotations
 from typing import Iterable
 
 import numpy as np
-from numba import njit
 
 from ctui.engine.core.meshdata import Mesh, signed_volume_mm3
 from ctui.engine.mesh import jit
@@ -119,6 +118,11 @@ def mesh_report(mesh: Mesh) -> dict:
     """
     nv, nf = mesh.n_vertices, mesh.n_faces
     f = np.asarray(mesh.faces, dtype=np.int64)
+    if nf and jit.use_compiled(_tool_kernels, work=nf, cheap_when_ready=True):
+        # one compiled pass, no sort and no large temporaries (1.4 M faces: 0.4-0.6 -> ~0.05 s);
+        # taken when numba already runs in this process (after compiled marching cubes)
+        v = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        return _report_dict(nf, nv, *_tool_kernels()[1](v, np.ascontiguousarray(f), v.mean(axis=0)))
     ncomp, flab = face_components(mesh)
     # one sort of the 3m half-edges serves the edge counts, the winding check and the
     # per-component closedness; per-component volumes are one bincount of the faces'
@@ -166,19 +170,30 @@ def mesh_report(mesh: Mesh) -> dict:
         closed = int(np.count_nonzero(~bad_comp))
         vol = float(per_comp[~bad_comp].sum())
     n_used = int(np.count_nonzero(np.bincount(f.ravel(), minlength=nv))) if nf else 0
+    return _report_dict(nf, nv, ncomp, closed, n_edges, boundary, nonman, consistent, n_used, area, vol)
+
+
+def _report_dict(nf, nv, ncomp, closed, n_edges, boundary, nonman, consistent, n_used, area, vol) -> dict:
     return {
         "triangles": int(nf),
         "vertices": int(nv),
         "watertight": bool(nf > 0 and boundary == 0 and nonman == 0),
-        "non_manifold_edges": nonman,
-        "boundary_edges": boundary,
+        "non_manifold_edges": int(nonman),
+        "boundary_edges": int(boundary),
         "euler": int(n_used - n_edges + nf),
         "components": int(ncomp),
         "closed_components": int(closed),
-        "winding_consistent": consistent,
+        "winding_consistent": bool(consistent),
         "volume_ml": float(vol) / 1000.0,
-        "area_mm2": area,
+        "area_mm2": float(area),
     }
+
+
+def _tool_kernels() -> tuple:
+    """(vertex normals, report) compiled kernels, imported on first use (numba: see jit)."""
+    from ctui.engine.mesh import tool_kernels as k
+
+    return (k._vertex_normals, k._report_kernel)
 
 
 def _area_and_volume_terms(v: np.ndarray, f: np.ndarray, chunk: int = 1 << 18) -> tuple[float, np.ndarray]:
@@ -205,8 +220,8 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, float32 (n, 3) (outward for CCW-outside faces)."""
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    if jit.use_compiled([_vertex_normals], np.float64, work=len(f) * 4):
-        return _vertex_normals(v, f)
+    if jit.use_compiled(lambda: _tool_kernels()[:1], np.float64, work=len(f) * 4):
+        return _tool_kernels()[0](v, f)
     # not compiled yet (fresh install): the same sums by bincount, no compilation
     nrm = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]) if len(f) else np.zeros((0, 3))
     n = np.zeros((len(v), 3))
@@ -216,34 +231,6 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     ln = np.linalg.norm(n, axis=1)
     ln[ln == 0.0] = 1.0
     return (n / ln[:, None]).astype(np.float32)
-
-
-@njit(cache=True)
-def _vertex_normals(v, f):
-    n = np.zeros((v.shape[0], 3))
-    for t in range(f.shape[0]):
-        a, b, c = f[t, 0], f[t, 1], f[t, 2]
-        ux = v[b, 0] - v[a, 0]
-        uy = v[b, 1] - v[a, 1]
-        uz = v[b, 2] - v[a, 2]
-        wx = v[c, 0] - v[a, 0]
-        wy = v[c, 1] - v[a, 1]
-        wz = v[c, 2] - v[a, 2]
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
-        for k in (a, b, c):
-            n[k, 0] += nx
-            n[k, 1] += ny
-            n[k, 2] += nz
-    out = np.empty((v.shape[0], 3), np.float32)
-    for i in range(v.shape[0]):
-        ln = np.sqrt(n[i, 0] ** 2 + n[i, 1] ** 2 + n[i, 2] ** 2)
-        if ln == 0.0:
-            ln = 1.0
-        for c in range(3):
-            out[i, c] = n[i, c] / ln
-    return out
 
 
 def _laplacian(faces: np.ndarray, n: int):

@@ -36,7 +36,10 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from ctui.engine.mesh import jit
 from ctui.engine.mesh.marching import _CORNER_OFFSETS, _EDGES, NTRI, TRI_TABLE
+
+jit.configure_cache()  # the numba cache folder, before the kernels are defined
 
 # per table edge: axis (0 x, 1 y, 2 z) and the offsets (dx, dy, dz) of its lower corner
 _EDGE_AXIS = np.array([0] * 4 + [1] * 4 + [2] * 4, dtype=np.int64)

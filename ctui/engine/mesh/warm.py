@@ -37,9 +37,15 @@ def _multilabel() -> None:
 
 
 def _normals() -> None:
-    from ctui.engine.mesh.meshtools import _vertex_normals  # numba kernels
+    from ctui.engine.mesh.tool_kernels import _vertex_normals  # numba kernels
 
     _vertex_normals(np.eye(3), np.array([[0, 1, 2]], np.int64))
+
+
+def _report() -> None:
+    from ctui.engine.mesh.tool_kernels import _report_kernel  # numba kernels
+
+    _report_kernel(np.eye(3), np.array([[0, 1, 2]], np.int64), np.zeros(3))
 
 
 def _contours() -> None:
@@ -60,6 +66,7 @@ STEPS = (("marching cubes (int16)", lambda: _marching(np.int16)),
          ("marching cubes (float32)", lambda: _marching(np.float32)),
          ("multi-label marching cubes", _multilabel),
          ("vertex normals", _normals),
+         ("mesh report", _report),
          ("contour connecting", _contours))
 
 
