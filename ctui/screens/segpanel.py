@@ -27,12 +27,8 @@ def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, 
     panel), the slice limits (``i``), the ROI box and the background seeds' owner is the caller."""
     o = dict(getattr(session, "segment_options", {}) or {})
     rng = o.get("range", "given")
-    info = session.seg.objects.get(session.current) if session.seg is not None else None
-    st = dict(getattr(info, "settings", {}) or {})
-    if rng == "given" and "low" in st and "high" in st:  # the range the object was filled with (Enter, S)
-        th: list = [(float(st["low"]), float(st["high"]))]
-    elif rng == "given" and session.range_ is not None:  # the range typed with T
-        th = [tuple(session.range_)]
+    if rng == "given" and session.range_ is not None:  # the range the user typed (T); Enter's default
+        th: list = [tuple(session.range_)]          # tolerance is no choice of theirs, so it does not count
     elif rng in ("auto", "given"):  # nothing given: from the seed's neighbourhood
         th = [None]
     else:
@@ -52,7 +48,7 @@ def describe(session: Any) -> str:
     o = getattr(session, "segment_options", {}) or {}
     neck = o.get("neck")
     rng = o.get("range", "given")
-    rtxt = "auto" if rng == "auto" else ("the fill's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
+    rtxt = "auto" if rng == "auto" else ("T's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
     bg = len(getattr(session, "background_seeds", []) or [])
     return (f"{o.get('method', 'fill')} {session.prop_mode}, neck {'auto' if neck is None else f'{neck:g} mm'}, "
             f"range {rtxt}{', holes filled' if o.get('fill_holes', True) else ''}"
@@ -96,7 +92,7 @@ class SegmentPanel(ModalScreen):
                 yield Input("auto" if neck is None else f"{neck:g}", id="neck", placeholder="auto, 0 (off) or mm")
             with Horizontal():
                 yield Label("Range")
-                yield Input(rtxt, id="range", placeholder="given (the fill's or T's; else auto), auto, or LO:HI")
+                yield Input(rtxt, id="range", placeholder="given (the range typed with T; else auto), auto, or LO:HI")
             with Horizontal():
                 yield Label("Min island (vox)")
                 yield Input(str(int(o.get("min_island", 0))), id="min_island", placeholder="0 = keep all")
