@@ -65,6 +65,34 @@ def configure_cache() -> str | None:
     return str(d)
 
 
+def start_target() -> None:
+    """Initialise numba's CPU target now, without its BLAS probe when that would import
+    scipy.linalg only for it.
+
+    On first use numba checks for BLAS by importing ``scipy.linalg.cython_blas``: 0.17-0.23 s
+    of scipy.linalg and array-API imports, a third of numba's start-up. No ctui kernel uses
+    BLAS (no ``np.dot``, ``@`` or ``np.linalg`` in a kernel); numba's linear-algebra functions
+    import it themselves when a kernel using them is typed, so they still work. Done on the
+    main thread only (the import is answered "absent" for the moment of the start-up, which
+    another thread importing scipy.linalg at that moment would see)."""
+    import threading
+
+    name = "scipy.linalg.cython_blas"
+    if target_ready() or name in sys.modules or threading.current_thread() is not threading.main_thread():
+        return
+    try:
+        from numba.core.registry import cpu_target
+
+        sys.modules[name] = None  # type: ignore[assignment]  # "import scipy.linalg.cython_blas" -> ImportError
+        try:
+            cpu_target.target_context.refresh()
+        finally:
+            if sys.modules.get(name, 0) is None:
+                del sys.modules[name]
+    except Exception:  # pragma: no cover - numba internals changed: its own start-up then
+        pass
+
+
 def _cache_dir_for_children() -> str | None:
     """The numba cache folder a background compilation should use, without importing numba."""
     if os.environ.get("NUMBA_CACHE_DIR"):
@@ -80,14 +108,8 @@ def _cache_dir_for_children() -> str | None:
 def target_ready() -> bool:
     """Whether numba's CPU target is initialised in this process (a kernel ran or was loaded):
     then one more cached kernel loads in milliseconds."""
-    if "numba" not in sys.modules:
-        return False
-    try:
-        from numba.core.registry import cpu_target
-
-        return "_toplevel_target_context" in vars(cpu_target)
-    except Exception:  # pragma: no cover - numba internals changed
-        return False
+    # the target's first refresh imports numba's numpy implementations (numba.np.arraymath)
+    return "numba" in sys.modules and "numba.np.arraymath" in sys.modules
 
 
 def mode() -> str:
@@ -141,6 +163,8 @@ def use_compiled(dispatchers: Sequence[Any] | Callable[[], Sequence[Any]], dtype
     and the kernels are in the disk cache (same output either way)."""
     m = mode()
     if m != "auto":
+        if m == "compiled":
+            start_target()
         return m == "compiled"
     small = work is not None and work < SMALL_WORK and not (cheap_when_ready and target_ready())
     if small and "numba" not in sys.modules:  # no kernel can be loaded in this process yet
@@ -148,7 +172,10 @@ def use_compiled(dispatchers: Sequence[Any] | Callable[[], Sequence[Any]], dtype
     ds = dispatchers() if callable(dispatchers) else dispatchers
     if small and not all(getattr(d, "signatures", None) for d in ds):
         return False
-    return all(is_compiled(d, dtype) for d in ds)
+    if all(is_compiled(d, dtype) for d in ds):
+        start_target()
+        return True
+    return False
 
 
 _LOCK = Path(tempfile.gettempdir()) / f"ctui-numba-warm-{os.getuid() if hasattr(os, 'getuid') else 0}.lock"

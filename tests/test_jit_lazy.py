@@ -1,0 +1,81 @@
+"""numba is imported only when a compiled kernel runs, and its start-up without the BLAS
+probe leaves numba's linear algebra working (issue 27). Fresh interpreters, so the import
+state is known; no timing."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+
+from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh import meshtools
+
+from conftest import ROOT
+
+
+def _python(code: str, **env_extra: str) -> str:
+    env = dict(os.environ, CTUI_NO_BACKGROUND_COMPILE="1", **env_extra)
+    env.pop("CTUI_KERNELS", None)
+    env.update(env_extra)
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env, cwd=ROOT, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
+
+
+def test_small_label_mesh_and_report_import_no_numba():
+    out = _python("""
+        import sys
+        import numpy as np
+        from ctui.engine.actions.mesh import label_meshes
+        from ctui.engine.core.geometry import Geometry
+        from ctui.engine.mesh.meshtools import mesh_report
+        z, y, x = np.mgrid[:12, :20, :20]
+        lab = (((x - 10) ** 2 + (y - 10) ** 2 + 4 * (z - 6) ** 2) < 49).astype(np.uint8)
+        g = Geometry(shape=lab.shape, spacing=(2.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), direction=np.eye(3))
+        m = label_meshes(lab, g, [1])[1]
+        rep = mesh_report(m)
+        print(rep["watertight"], "numba" in sys.modules)
+    """)
+    assert out.split() == ["True", "False"]
+
+
+def test_target_started_without_blas_probe_keeps_linear_algebra():
+    out = _python("""
+        import sys
+        import numpy as np
+        from ctui.engine.mesh import jit
+        jit.start_target()
+        print("scipy.linalg" in sys.modules, sys.modules.get("scipy.linalg.cython_blas", 0) is None, jit.target_ready())
+        import numba
+
+        @numba.njit
+        def solve(a, b):
+            return np.dot(np.linalg.inv(a), b)
+
+        print(solve(np.array([[2.0, 0.0], [0.0, 4.0]]), np.array([2.0, 4.0])).tolist())
+    """)
+    first, second = out.strip().splitlines()
+    assert first.split() == ["False", "False", "True"]
+    assert second == "[1.0, 1.0]"
+
+
+def test_compiled_report_equals_numpy_report(monkeypatch):
+    """The one-pass compiled report and the numpy one agree on odd meshes: open, flipped,
+    a fin (non-manifold edge), two components and unused vertices."""
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(12, 3)).astype(np.float32)
+    tet = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    meshes = [Mesh(v[:4], tet), Mesh(v[:4], tet[:3]), Mesh(v[:4], np.array([[0, 2, 1], [0, 1, 3], [1, 3, 2], [0, 3, 2]])),
+              Mesh(v[:5], np.concatenate([tet, [[0, 1, 4]]])), Mesh(v, np.concatenate([tet, tet + 4]))]
+    for m in meshes:
+        monkeypatch.setenv("CTUI_KERNELS", "numpy")
+        a = meshtools.mesh_report(m)
+        monkeypatch.setenv("CTUI_KERNELS", "compiled")
+        b = meshtools.mesh_report(m)
+        assert {k: a[k] for k in a if not isinstance(a[k], float)} == {k: b[k] for k in b if not isinstance(b[k], float)}
+        assert abs(a["volume_ml"] - b["volume_ml"]) < 1e-12 and abs(a["area_mm2"] - b["area_mm2"]) < 1e-9
