@@ -30,6 +30,7 @@ from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh, face_areas, signed_volume_mm3
 from ctui.engine.measure.fields import partial_volume_field, partial_volume_fraction  # noqa: F401  (re-exported)
 from ctui.engine.measure.paths import index_matrix, index_to_mm
+from ctui.engine.mesh.meshtools import face_components
 from ctui.engine.mesh.surface import mask_surface
 
 
@@ -39,21 +40,7 @@ def mesh_components(mesh: Mesh) -> tuple[int, np.ndarray]:
 
     Returns (count, face_labels (m,) int).
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    f = np.asarray(mesh.faces, dtype=np.int64)
-    nv = len(mesh.vertices)
-    if len(f) == 0:
-        return 0, np.zeros(0, dtype=np.int64)
-    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-    cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    g = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(nv, nv))
-    _, vlab = connected_components(g, directed=False)
-    flab = vlab[f[:, 0]]
-    # renumber to the components that own faces
-    uniq, flab = np.unique(flab, return_inverse=True)
-    return len(uniq), flab.astype(np.int64)
+    return face_components(mesh)
 
 
 def edge_counts(faces: np.ndarray) -> tuple[int, int]:

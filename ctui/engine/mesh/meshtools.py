@@ -56,19 +56,45 @@ def _directed_consistent(faces: np.ndarray, n_vertices: int) -> bool:
     return bool(len(np.unique(key)) == len(key))
 
 
-def face_components(mesh: Mesh) -> tuple[int, np.ndarray]:
-    """(number of components, component label per face), faces joined by shared vertices."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+def _vertex_roots(f: np.ndarray, n: int, max_rounds: int = 64) -> np.ndarray | None:
+    """Each vertex's smallest connected vertex index (faces join their three vertices), by
+    hooking onto the smallest label and pointer jumping: a few rounds on meshes (a 1.4 M-face
+    CT surface: 3), as fast as scipy's csgraph without its import (0.1-0.15 s). None when
+    ``max_rounds`` do not settle it (then scipy's)."""
+    lab = np.arange(n)
+    a, b, c = f[:, 0], f[:, 1], f[:, 2]
+    for _ in range(max_rounds):
+        la, lb, lc = lab[a], lab[b], lab[c]
+        m = np.minimum(np.minimum(la, lb), lc)
+        if np.array_equal(la, m) and np.array_equal(lb, m) and np.array_equal(lc, m):
+            return lab
+        for lx in (la, lb, lc):
+            np.minimum.at(lab, lx, m)  # lab[i] <= i throughout, so the jumping below ends
+        while True:
+            nxt = lab[lab]
+            if np.array_equal(nxt, lab):
+                break
+            lab = nxt
+    return None
 
+
+def face_components(mesh: Mesh) -> tuple[int, np.ndarray]:
+    """(number of components, component label per face), faces joined by shared vertices;
+    components numbered by their smallest vertex index."""
     f = np.asarray(mesh.faces, dtype=np.int64)
     n = mesh.n_vertices
     if len(f) == 0:
         return 0, np.zeros(0, np.int64)
-    rows = np.concatenate([f[:, 0], f[:, 1]])
-    cols = np.concatenate([f[:, 1], f[:, 2]])
-    g = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
-    ncomp, vlab = connected_components(g, directed=False)
+    vlab = _vertex_roots(f, n)
+    if vlab is None:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        rows = np.concatenate([f[:, 0], f[:, 1]])
+        cols = np.concatenate([f[:, 1], f[:, 2]])
+        g = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
+        _, vlab = connected_components(g, directed=False)
+    ncomp = int(vlab.max()) + 1
     flab = vlab[f[:, 0]]
     # renumber to the components that own faces, in the same order (a table, not a sort:
     # np.unique's argsort of the labels was half of this function on a 1.4 M-face CT surface)
