@@ -1,11 +1,12 @@
-"""``ctui info`` of a large NIfTI or NRRD file: the header and sample slices, as for DICOM.
+"""``ctui info`` of a large NIfTI, NRRD or MetaImage file: the header and sample slices, as for DICOM.
 
 Decoding a whole volume to print its value range cost a 2 MB ``.nii.gz`` declaring
 2000x2000x1000 voxels 7.7 GB and 39 s. :func:`inspect_volume_file` gives a headers-only
 Volume (``data`` a zero-byte placeholder, ``meta["headers_only"]``, ``value_range`` of
 the sampled slices) when the declared voxels exceed :data:`SAMPLE_ABOVE` bytes: the
 first, middle and last slices, each loaded through the format's own reader with a
-one-slice crop (NIfTI slices its gzip stream as it reads; raw NRRD reads the slab). In
+one-slice crop (NIfTI slices its gzip stream as it reads; raw NRRD and MetaImage read the
+slab; compressed NRRD and MetaImage are inflated whole, bounded by their declared size). In
 a compressed file only slices within the first :data:`COMPRESSED_REACH` bytes are
 sampled. Smaller files are loaded whole (None: the caller's usual path).
 """
@@ -44,6 +45,15 @@ def _declared(p: Path) -> tuple[tuple[int, int, int], int, bool] | None:
             sizes = [int(s) for s in np.atleast_1d(hdr.get("sizes", []))] + [1, 1]
             code = _TYPE.get(str(hdr.get("type", "")).strip().lower())
             return ((sizes[2], sizes[1], sizes[0]), np.dtype(code).itemsize, False) if code else None
+        if name.endswith((".mhd", ".mha")):
+            from ctui.engine.io.series.metaimage import _MET_TYPES, read_mhd_header
+
+            hdr, _ = read_mhd_header(p)
+            if hdr.get("CompressedData", "False").lower() == "true":
+                return None  # a zlib stream is inflated whole (bounded by the declared size)
+            dims = [int(v) for v in hdr.get("DimSize", "").split()] + [1, 1]
+            code = _MET_TYPES.get(hdr.get("ElementType", "").strip())
+            return ((dims[2], dims[1], dims[0]), np.dtype(code).itemsize, False) if code else None
     except Exception:  # noqa: BLE001 - an unreadable header: the full load reports it
         return None
     return None
