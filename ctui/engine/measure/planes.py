@@ -116,13 +116,12 @@ def sample_planes(indicator: np.ndarray, centres: np.ndarray, u_idx: np.ndarray,
     """
     from scipy import ndimage as ndi
 
-    coords = (
-        centres[:, :, None, None]
-        + u_idx[:, :, None, None] * t[None, None, :, None]
-        + v_idx[:, :, None, None] * t[None, None, None, :]
-    )  # (b, 3, n, n)
-    coords = np.moveaxis(coords, 1, 0).reshape(3, -1)
-    vals = ndi.map_coordinates(indicator, coords, order=1, mode="constant", cval=0.0)
+    # built axis by axis in (3, b, n, n) order: no transposed copy of the whole grid
+    coords = np.empty((3, len(centres), len(t), len(t)))
+    for k in range(3):
+        coords[k] = (centres[:, k, None, None] + u_idx[:, k, None, None] * t[None, :, None]
+                     + v_idx[:, k, None, None] * t[None, None, :])
+    vals = ndi.map_coordinates(indicator, coords.reshape(3, -1), order=1, mode="constant", cval=0.0)
     return vals.reshape(len(centres), len(t), len(t))
 
 
