@@ -74,6 +74,7 @@ class CtuiApp(App):
         self.errors: list[str] = []  # every error notified (tests read it)
         self.internal_errors: list[str] = []  # tracebacks of internal errors (reported, not fatal)
         self._quitting = False
+        self._warm_started = False
 
     # ------------------------------------------------------------------ start
     def on_mount(self) -> None:
@@ -87,12 +88,16 @@ class CtuiApp(App):
             self.load_worker(self.path)
         self.set_interval(30.0, self._autosave_tick)
         self.call_after_refresh(self._check_colours)
-        self.warm_worker()
 
     def warm_worker(self) -> None:
         """Compile (or load from numba's cache) the meshing kernels while the user looks at
         slices, so the first 3D view does not wait for a compiler. A daemon thread, not a
-        Textual worker: a compile cannot be interrupted and quitting must not wait for it."""
+        Textual worker: a compile cannot be interrupted and quitting must not wait for it.
+        Started once, after the first workspace is painted: importing and starting numba
+        holds the GIL for ~0.5 s, which delayed loading and the first paint."""
+        if self._warm_started:
+            return
+        self._warm_started = True
         threading.Thread(target=self._warm, name="ctui-warm-up", daemon=True).start()
 
     def _warm(self) -> None:
@@ -205,6 +210,7 @@ class CtuiApp(App):
         self.push_screen(ws)
         if recovery:
             self.call_after_refresh(self._offer_recovery, session)
+        self.call_after_refresh(self.set_timer, 0.3, self.warm_worker)  # once the workspace is on screen
 
     def _offer_recovery(self, session: Session) -> None:
         """An autosave newer than the project (or of an unsaved source): offer it."""
