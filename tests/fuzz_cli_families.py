@@ -82,7 +82,7 @@ OUTPUT_CASES = [
     (["segment", "{series}", "--seed", "24,24,8", "--range", "200:400", "--project", "{dir}/out.ctui"], "out.ctui"),
 ]
 # (never /dev/null itself: a regression would replace this machine's /dev/null, as root)
-SPECIALS = ("fifo", "devnull-link", "dangling-link", "dir-link")
+SPECIALS = ("fifo", "devnull-link", "dangling-link", "dir-link", "file-link")  # file-link: written through, kept
 
 
 def _nrrd_cases(vals: bytes) -> dict[str, bytes]:
@@ -330,6 +330,9 @@ def layout_specials(case_dir: Path, specials: dict[str, str]) -> None:
             p.symlink_to("/dev/null")
         elif what == "dir-link":
             p.symlink_to(case_dir)
+        elif what == "file-link":
+            (case_dir / f"target-{name}").write_bytes(b"old")
+            p.symlink_to(case_dir / f"target-{name}")
         elif what == "dangling-link":
             p.symlink_to(case_dir / "nowhere" / "x")
 
