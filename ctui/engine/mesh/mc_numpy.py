@@ -24,7 +24,6 @@ _EDGE_START = np.array(
     [(0, 0, 0, 0), (0, 0, 1, 0), (0, 1, 0, 0), (0, 1, 1, 0),
      (1, 0, 0, 0), (1, 0, 0, 1), (1, 1, 0, 0), (1, 1, 0, 1),
      (2, 0, 0, 0), (2, 0, 0, 1), (2, 0, 1, 0), (2, 0, 1, 1)], dtype=np.int64)
-_NTRI8 = NTRI.astype(np.uint8)
 _SLAB_VOXELS = 1 << 21  # about 2 M voxels per slab
 _CHUNK = 1 << 18  # edges or cells per vectorised step (a few hundred bytes each in temporaries)
 
@@ -32,12 +31,26 @@ _CHUNK = 1 << 18  # edges or cells per vectorised step (a few hundred bytes each
 def _cases(ins: np.ndarray) -> np.ndarray:
     """Case (uint8) of every cell between the planes of ``ins`` (s + 1, ny, nx) bool."""
     u = ins.view(np.uint8)
-    case = u[:-1, :-1, :-1].copy()
-    for bit, (dz, dy, dx) in ((1, (0, 1, 0)), (2, (1, 0, 0)), (3, (1, 1, 0)), (4, (0, 0, 1)),
-                              (5, (0, 1, 1)), (6, (1, 0, 1)), (7, (1, 1, 1))):
-        sub = u[dz: u.shape[0] - 1 + dz, dy: u.shape[1] - 1 + dy, dx: u.shape[2] - 1 + dx]
-        case |= sub << np.uint8(bit)
+    # bit = dy + 2 dz + 4 dx of the corner: the x pairs first (bits 0 and 4), then the four
+    # (dy, dz) rows of pairs, each shifted by dy + 2 dz (half the passes of one per corner)
+    pair = u[:, :, 1:] << np.uint8(4)
+    pair |= u[:, :, :-1]
+    case = pair[:-1, :-1].copy()
+    tmp = np.empty_like(case)
+    for shift, (dz, dy) in ((1, (0, 1)), (2, (1, 0)), (3, (1, 1))):
+        np.left_shift(pair[dz: pair.shape[0] - 1 + dz, dy: pair.shape[1] - 1 + dy], np.uint8(shift), out=tmp)
+        case |= tmp
     return case
+
+
+def _nonzero3(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``np.nonzero`` of a C-contiguous 3D array: flat indices split by divmod (10x faster
+    than numpy's multi-index nonzero on sparse slabs)."""
+    _, ny, nx = a.shape
+    i = np.flatnonzero(a)
+    z, r = np.divmod(i, ny * nx)
+    y, x = np.divmod(r, nx)
+    return z, y, x
 
 
 def _slab_edges(ins: np.ndarray, z0: int, n_planes: int, shape: tuple[int, int, int], kept_bytes: int
@@ -60,8 +73,8 @@ def _slab_edges(ins: np.ndarray, z0: int, n_planes: int, shape: tuple[int, int, 
     check_allocation(n * 120 + out + (kept_bytes + out), what=f"a surface of over {2 * n:,} triangles",
                      hint="raise the iso value or crop the series")
     for axis, cross in enumerate(crossings):
-        z, y, x = np.nonzero(cross)
-        z = z + z0
+        z, y, x = _nonzero3(cross)
+        z += z0
         keys.append(((z * ny + y) * 3 + axis) * nx + x)
         axes.append(np.full(len(z), axis, np.int8))
         zs.append(z)
@@ -139,7 +152,7 @@ def _slab_faces(case: np.ndarray, z0: int, shape: tuple[int, int, int]) -> np.nd
     """Edge keys (k, 3) of the triangles of the slab's cells, in raster and table order
     (in chunks of cells, so the temporaries stay small on noisy data)."""
     _, ny, nx = shape
-    flat = np.flatnonzero(_NTRI8[case])
+    flat = np.flatnonzero((case - np.uint8(1)) < np.uint8(254))  # cases 1..254 have triangles (0, 255 none)
     out = []
     for i in range(0, len(flat), _CHUNK):
         f = flat[i: i + _CHUNK]
@@ -183,7 +196,15 @@ def marching_cubes_numpy(data: np.ndarray, thr, level: float, m: np.ndarray, org
         report(progress, z1, nz - 1, "marching cubes")
     all_keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
     verts = np.concatenate(poss) if poss else np.zeros((0, 3), np.float32)
-    fk = np.concatenate(fkeys) if fkeys else np.zeros((0, 3), np.int64)
-    faces = np.searchsorted(all_keys, fk).astype(np.int32)
+    faces = np.empty((sum(len(k) for k in fkeys), 3), np.int32)
+    # a slab's cells use edges starting in its planes or the next slab's first plane: each
+    # slab's face keys are looked up among those two slabs' keys only (cache-sized searches,
+    # 2-3x faster than one search of all the keys)
+    starts = np.concatenate([[0], np.cumsum([len(k) for k in keys])])
+    row = 0
+    for i, fk in enumerate(fkeys):
+        lo, hi = int(starts[i]), int(starts[min(i + 2, len(keys))])
+        faces[row: row + len(fk)] = np.searchsorted(all_keys[lo:hi], fk) + lo
+        row += len(fk)
     norms = (np.concatenate(nrms) if nrms else np.zeros((0, 3), np.float32)) if normals else None
     return verts, faces, norms
