@@ -146,9 +146,10 @@ def is_compiled(dispatcher: Any, dtype: Any = None) -> bool:
 
 
 #: below this much work (voxels, faces) the vectorised numpy path is used unless the kernels
-#: are already loaded in this process: loading numba's cached kernels costs ~1.2 s per
-#: process, more than the numpy path takes on small input (a kidney's 9 k-face mesh:
-#: `ctui mesh` 2.6 -> 1.4 s CPU; the sample's isosurface 2.3 -> 1.8 s)
+#: are already loaded in this process: importing numba, starting it and loading the cached
+#: marching cubes costs ~0.5 s per process (1.2 s before numba was imported lazily and
+#: started without its BLAS probe), more than the numpy path takes on small input (a
+#: kidney's 9 k-face mesh: `ctui mesh` 2.6 -> 1.4 s CPU; the sample's isosurface 2.3 -> 1.8 s)
 SMALL_WORK = 4_000_000
 
 
