@@ -64,6 +64,24 @@ def _write_stl_records(fh, v: np.ndarray, f: np.ndarray, chunk: int = 1 << 16) -
         fh.write(memoryview(rec).cast("B"))
 
 
+def _write_ply_binary(fh, v: np.ndarray, f: np.ndarray, normals: np.ndarray | None) -> None:
+    """Binary little-endian PLY (the layout trimesh's exporter writes: float x y z [nx ny nz],
+    faces as uchar-counted int lists) with numpy, without importing trimesh (0.3-0.5 s)."""
+    props = "".join(f"property float {c}\n" for c in ("x", "y", "z") + (("nx", "ny", "nz") if normals is not None else ()))
+    fh.write(("ply\nformat binary_little_endian 1.0\ncomment ctui\n"
+              f"element vertex {len(v)}\n{props}element face {len(f)}\n"
+              "property list uchar int vertex_indices\nend_header\n").encode("ascii"))
+    vrec = np.empty((len(v), 6 if normals is not None else 3), "<f4")
+    vrec[:, :3] = v
+    if normals is not None:
+        vrec[:, 3:] = normals
+    fh.write(memoryview(vrec).cast("B"))
+    frec = np.empty(len(f), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
+    frec["n"] = 3
+    frec["i"] = f
+    fh.write(memoryview(frec).cast("B"))
+
+
 def _fmt(path: Path) -> str:
     ext = path.suffix.lower()
     if ext not in FORMATS:
@@ -105,11 +123,16 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, *, ascii: bool = False) -> Pa
                 fh.write(np.uint32(len(f)).tobytes())
                 _write_stl_records(fh, v, f)
         return p
+    normals = mesh.normals if mesh.normals is not None and len(mesh.normals) == len(v) else None
+    if ext == ".ply" and not ascii:
+        with atomic_write(p, "wb") as fh:
+            _write_ply_binary(fh, v, f, normals)
+        return p
     import trimesh
 
     tm = trimesh.Trimesh(vertices=v, faces=f, process=False, validate=False)
-    if mesh.normals is not None and len(mesh.normals) == len(v):
-        tm.vertex_normals = np.asarray(mesh.normals, np.float64)
+    if normals is not None:
+        tm.vertex_normals = np.asarray(normals, np.float64)
     if ext == ".ply":
         data = trimesh.exchange.ply.export_ply(tm, encoding="ascii" if ascii else "binary",
                                                include_attributes=False)
