@@ -46,7 +46,7 @@ def _declared(p: Path) -> tuple[tuple[int, int, int], int, bool] | None:
             code = _TYPE.get(str(hdr.get("type", "")).strip().lower())
             return ((sizes[2], sizes[1], sizes[0]), np.dtype(code).itemsize, False) if code else None
         if name.endswith((".mhd", ".mha")):
-            from ctui.engine.io.series.metaimage import _MET_TYPES, read_mhd_header
+            from ctui.engine.io.series.metaimage import _MET_TYPES, read_mhd_header  # each format on first use
 
             hdr, _ = read_mhd_header(p)
             if hdr.get("CompressedData", "False").lower() == "true":
