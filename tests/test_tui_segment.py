@@ -57,9 +57,10 @@ async def test_tui_segment_equals_cli(tmp_path, capsys, mode):
         s.z, s.y, s.x = seed[2], seed[1], seed[0]
         from ctui.screens.ws_keys import panel_text
 
-        shown = str(panel_text(ws))  # the range S will use, before the fill, as the CLI reports it
+        ws.update_panel()
         lo, hi = report["objects"][0]["range"]
-        assert f"Seed range here {lo:.0f}..{hi:.0f}" in shown
+        want = f"Seed range here {lo:.0f}..{hi:.0f}"  # the range S will use, before the fill, as the CLI reports it
+        await wait_for(pilot, lambda: want in str(panel_text(ws)), what="the seed range in the side panel")
         await pilot.press("S")
         await wait_for(pilot, lambda: ws.proposal is not None, timeout=120, what="the proposal")
         status = str(ws.query_one("#status").render())

@@ -324,6 +324,9 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         else:
             self._job = None
         self.show_progress(None)
+        if msg.reason == "cancelled":
+            self.set_status(f"{msg.what} cancelled: nothing changed")
+            return
         self.app.notify(f"{msg.what} failed: {msg.reason}", severity="error", timeout=10)
 
     @on(JobProgress)

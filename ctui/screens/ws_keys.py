@@ -405,15 +405,24 @@ def _seed_text(ws, t: Text) -> None:
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
     cache = getattr(ws, "seed_range_cache", None)
     if cache is None or cache[0] != key:
-        try:
-            with s._lock:
-                rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
-        except Exception:  # off the image, a filter error: the views report it
-            rc = None
-        cache = (key, rc)
-        ws.seed_range_cache = cache
+        ws.seed_range_cache = (key, None)
+
+        def work() -> None:  # a thread: filters on the neighbourhood may take a while
+            try:
+                with s._lock:
+                    rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
+            except Exception:  # off the image, a filter error: the views report it
+                return
+            if getattr(ws, "seed_range_cache", (None,))[0] == key and ws.is_attached:
+                ws.seed_range_cache = (key, rc)
+                ws.app.call_from_thread(ws.update_panel)
+
+        ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
+        t.append("Seed range here ...\n", style="dim")
+        return
     rc = cache[1]
     if rc is None:
+        t.append("Seed range here ...\n", style="dim")
         return
     t.append(f"Seed range here {rc.low:.0f}..{rc.high:.0f} ", style="bold")
     top = max(rc.hist) or 1

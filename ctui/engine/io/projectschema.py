@@ -42,6 +42,7 @@ PROPAGATION_KEYS: dict[str, tuple] = {
     "direction": (str,), "mode": (str,), "range": (list, type(None)), "per_object": (list,),
     "leak_min_pixels": (int,), "on_leak": (str,), "confine": (bool,), "overwrite": (bool,),
     "max_slices": (int,), "neck_mm": (int, float), "slices": (list,),
+    "neck_rule": (str,), "fill_holes": (bool,), "box": (list,),
 }
 #: Loader options a project may record (see ctui.engine.io.series.load).
 SOURCE_OPTION_KEYS = ("series", "spacing", "shape", "dtype", "offset", "crop", "downsample", "resample")
@@ -148,8 +149,13 @@ def _propagation(prop: dict, field: str = "propagation") -> None:
             raise _Bad(f, f"expected 4 or 8, got {v}")
         if key == "slices":
             _numbers(v, f, (2,), integer=True)
-        if key in ("direction", "mode", "on_leak"):
+        if key in ("direction", "mode", "on_leak", "neck_rule"):
             _text(v, f, limit=32)
+        if key == "box":
+            if len(v) != 3 or not all(isinstance(r, list) for r in v):
+                raise _Bad(f, f"expected three [first, last] slice/row/column ranges, got {_short(v)}")
+            for r in v:
+                _numbers(r, f, (2,), integer=True)
         if key == "per_object":
             if field != "propagation":
                 raise _Bad(f, "nested per_object")
