@@ -60,7 +60,13 @@ def test_workspace_snapshot(snap_compare, phantom_volume, size):
         app.session.range_ = (115.0, 400.0)
         await pilot.press("enter")
         await pilot.pause()
-        app.workspace.set_status("")
+        ws = app.workspace
+        ws.update_panel()  # the seed range at the cursor is computed in a thread: wait for it
+        await wait_for(pilot, lambda: getattr(ws, "seed_range_cache", (None, None))[1] is not None,
+                       what="the seed range")
+        ws.update_panel()
+        ws.set_status("")
+        await pilot.pause()
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 
