@@ -124,11 +124,13 @@ try:
     reset = True
 except OSError:
     reset = False
-times = []
+times, cpu = [], []
 for _ in range(repeat):
-    t = time.perf_counter(); nv, nf, keep = run(); times.append(time.perf_counter() - t); del keep
+    t, c = time.perf_counter(), time.process_time()
+    nv, nf, keep = run()
+    times.append(time.perf_counter() - t); cpu.append(time.process_time() - c); del keep
 peak = hwm() if reset else rss()
-print(json.dumps({"method": method, "times": times, "vertices": nv, "triangles": nf,
+print(json.dumps({"method": method, "times": times, "cpu": cpu, "vertices": nv, "triangles": nf,
                   "peak_over_volume_mb": (peak - base2) / 2**20, "first_call_peak_mb": (first_peak - base) / 2**20,
                   "volume_mb": vol.nbytes / 2**20}))
 """
@@ -140,7 +142,12 @@ def main() -> int:
     ap.add_argument("--level", type=float, default=300.0, help="bone threshold (HU)")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--methods", default="ctui,vtk,skimage")
+    ap.add_argument("--base", default=None, help="an older ctui tree (git worktree add /tmp/ctui-base REV): its "
+                    "kernel and this tree's, alternately in fresh processes, --rounds times (wall and CPU)")
+    ap.add_argument("--rounds", type=int, default=4)
     args = ap.parse_args()
+    if args.base:
+        return compare_trees(Path(args.base).resolve(), tuple(int(s) for s in args.shape.split(",")), args)
     shape = tuple(int(s) for s in args.shape.split(","))
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "ct.npy"
@@ -171,6 +178,32 @@ def main() -> int:
                     p = results[peer]
                     print(f"ratio {peer}/ctui time: {p['median'] / c:.2f}x   "
                           f"memory ctui/{peer}: {results['ctui']['peak_over_volume_mb'] / max(p['peak_over_volume_mb'], 1e-9):.2f}")
+    return 0
+
+
+def compare_trees(base: Path, shape: tuple[int, int, int], args) -> int:
+    """This tree's ctui kernel against ``base``'s: fresh processes, alternating order per round,
+    ``--repeat`` timed calls each after a warm-up; minimum and median wall and CPU seconds."""
+    trees = {"base": base, "now": ROOT}
+    got: dict[str, dict[str, list[float]]] = {k: {"times": [], "cpu": []} for k in trees}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "ct.npy"
+        np.save(path, make_ct(shape))
+        for r in range(args.rounds):
+            for name in (list(trees) if r % 2 == 0 else list(trees)[::-1]):
+                env = dict(os.environ, PYTHONPATH=str(trees[name]))
+                out = subprocess.run([sys.executable, "-c", CHILD, "ctui", str(path), str(args.level), str(args.repeat)],
+                                     capture_output=True, text=True, env=env, cwd=trees[name])
+                if out.returncode != 0:
+                    print(f"{name}: failed\n{out.stderr[-2000:]}")
+                    return 1
+                res = json.loads(out.stdout.strip().splitlines()[-1])
+                for k in ("times", "cpu"):
+                    got[name][k] += res.get(k, [])
+    print(f"isosurface kernel {shape} at {args.level:g} HU, {args.rounds} rounds x {args.repeat} calls")
+    for name, d in got.items():
+        print(f"{name:5s} wall min {min(d['times']):.3f} median {np.median(d['times']):.3f} s   "
+              f"cpu min {min(d['cpu']):.3f} median {np.median(d['cpu']):.3f} s   ({trees[name]})")
     return 0
 
 
