@@ -61,7 +61,8 @@ def _run(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read().decode(errors="replace"), err.read().decode(errors="replace")
-    if os.waitstatus_to_exitcode(status) not in (0, 2) or (os.waitstatus_to_exitcode(status) == 2 and "--help" not in cmd):
+    code = os.waitstatus_to_exitcode(status)
+    if code != 0 and not (code == 2 and "--help" in cmd):
         raise SystemExit(f"failed ({cwd}): {' '.join(cmd)}\n{stderr[-2000:]}")
     lines = stdout.strip().splitlines()
     return dt, usage.ru_utime + usage.ru_stime, lines[-1] if lines else ""

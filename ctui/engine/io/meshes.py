@@ -67,7 +67,8 @@ def _write_stl_records(fh, v: np.ndarray, f: np.ndarray, chunk: int = 1 << 16) -
 def _write_ply_binary(fh, v: np.ndarray, f: np.ndarray, normals: np.ndarray | None) -> None:
     """Binary little-endian PLY (the layout trimesh's exporter writes: float x y z [nx ny nz],
     faces as uchar-counted int lists) with numpy, without importing trimesh (0.3-0.5 s)."""
-    props = "".join(f"property float {c}\n" for c in ("x", "y", "z") + (("nx", "ny", "nz") if normals is not None else ()))
+    names = ("x", "y", "z") + (("nx", "ny", "nz") if normals is not None else ())
+    props = "".join(f"property float {c}\n" for c in names)
     fh.write(("ply\nformat binary_little_endian 1.0\ncomment ctui\n"
               f"element vertex {len(v)}\n{props}element face {len(f)}\n"
               "property list uchar int vertex_indices\nend_header\n").encode("ascii"))
