@@ -516,3 +516,29 @@ def test_export_prints_object_names_escaped(files, tmp_path, capsys):
     assert main(["export", str(p), "--format", "stl", "--out", str(tmp_path / "o.stl")]) == 0
     out, err = capsys.readouterr()
     assert "\x1b" not in out + err and "\x07" not in out + err
+
+
+# ----------------------------------------------------------------- 21: TUI open dialog, long names
+async def test_open_dialog_long_path_component(tmp_path, monkeypatch):
+    """A typed path component over 255 bytes: a notification, not "Internal error in stat"."""
+    from textual.widgets import Input
+
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.testing import wait_workspace
+
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+    app = CtuiApp()
+    async with app.run_test(size=(160, 50)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.press("o")
+        await pilot.pause()
+        scr = app.screen
+        assert type(scr).__name__ == "OpenScreen"
+        scr.query_one("#op-path", Input).value = str(tmp_path / ("x" * 300) / "y")
+        scr.action_open_typed()
+        await pilot.pause()
+        assert app.screen is scr and len(app.errors) == 1 and "File name too long" in app.errors[0], app.errors
+        assert not any("Internal error" in e for e in app.errors)

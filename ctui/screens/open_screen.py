@@ -100,7 +100,12 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
         if not text:
             return
         p = Path(os.path.expanduser(text))
-        if not p.exists():
+        try:
+            found = p.exists()
+        except (OSError, ValueError) as exc:  # a name over 255 bytes, a NUL: say so, not "Internal error"
+            self.app.notify(f"{str(p)[:120]}: cannot open ({getattr(exc, 'strerror', None) or exc})", severity="error")
+            return
+        if not found:
             self.app.notify(f"{p}: no such file or folder", severity="error")
             return
         self.dismiss((str(p), None))
