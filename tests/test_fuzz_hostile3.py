@@ -542,3 +542,20 @@ async def test_open_dialog_long_path_component(tmp_path, monkeypatch):
         await pilot.pause()
         assert app.screen is scr and len(app.errors) == 1 and "File name too long" in app.errors[0], app.errors
         assert not any("Internal error" in e for e in app.errors)
+
+
+def test_info_samples_a_huge_gzip_nrrd(tmp_path):
+    """A gzip NRRD declaring 2000x2000x1000 uint8: info inflates the first slice only."""
+    from ctui.engine.actions.info import describe_series
+
+    with open(tmp_path / "h.nrrd", "wb") as fh:
+        fh.write(b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2000 2000 1000\nencoding: gzip\n\n")
+        fh.write(gzip.compress(bytes(16 << 20)))
+    import tracemalloc
+
+    tracemalloc.start()
+    vol, d = describe_series(tmp_path / "h.nrrd")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert d["shape_zyx"] == [1000, 2000, 2000] and d["sampled_slices"] == 1 and d["value_range"] == [0.0, 0.0]
+    assert peak < 100 << 20

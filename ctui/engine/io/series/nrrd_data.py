@@ -82,10 +82,13 @@ def _inflate(fh: BinaryIO, encoding: str, want: int, *, path: Path) -> bytes:
     return bytes(out)
 
 
-def _text_values(fh: BinaryIO, count: int, dtype: np.dtype, *, path: Path) -> np.ndarray:
+def _text_values(fh: BinaryIO, count: int, dtype: np.dtype, *, path: Path, partial: bool = False) -> np.ndarray:
     raw = fh.read(count * _TEXT_CHARS + 4096)
+    words = raw.decode("ascii", errors="replace").split()
+    if partial:
+        words = words[:count]
     try:
-        vals = np.array(raw.decode("ascii").split(), dtype=np.float64 if dtype.kind == "f" else np.int64)
+        vals = np.array(words, dtype=np.float64 if dtype.kind == "f" else np.int64)
     except (UnicodeDecodeError, ValueError, OverflowError):
         raise LoadError("NRRD ascii data holds something that is not a number", path=path) from None
     if vals.size < count:
@@ -101,10 +104,14 @@ def _text_values(fh: BinaryIO, count: int, dtype: np.dtype, *, path: Path) -> np
 
 
 def read_payload(path: Path, hdr: dict, *, dtype: np.dtype, full: tuple[int, int, int],
-                 datafile: str | None) -> np.ndarray:
+                 datafile: str | None, zstop: int | None = None) -> np.ndarray:
     """The NRRD's voxels as a (z, y, x) array of ``dtype`` (native byte order), read with
     bounds: a regular data file, ``line skip`` within the file, decoding stopped at the
-    declared size. Encodings: raw, gzip, bzip2, ascii/text, hex."""
+    declared size. Encodings: raw, gzip, bzip2, ascii/text, hex. ``zstop``: only the first
+    ``zstop`` slices are decoded (the array has that many; the stream's end is not checked)."""
+    partial = zstop is not None and zstop < full[0]
+    if partial:
+        full = (int(zstop), full[1], full[2])
     encoding = str(hdr.get("encoding", "raw")).strip().lower()
     try:
         line_skip = int(hdr.get("line skip", hdr.get("lineskip", 0)) or 0)
@@ -133,12 +140,12 @@ def read_payload(path: Path, hdr: dict, *, dtype: np.dtype, full: tuple[int, int
         elif encoding in ("gzip", "gz", "bzip2", "bz2"):
             if byte_skip == -1:
                 raise LoadError("NRRD byte skip -1 with compressed data is not supported", path=path)
-            out = _inflate(fh, encoding, need + byte_skip + 1, path=path)
+            out = _inflate(fh, encoding, need + byte_skip + (0 if partial else 1), path=path)
             if len(out) > need + byte_skip:
                 raise LoadError(f"compressed NRRD data holds more than the {need} bytes the header declares", path=path)
             buf = out[byte_skip:]
         elif encoding in ("ascii", "text", "txt"):
-            return _text_values(fh, count, dtype, path=path).reshape(full)
+            return _text_values(fh, count, dtype, path=path, partial=partial).reshape(full)
         elif encoding == "hex":
             txt = b"".join(fh.read(2 * need + need // 2 + 4096).split())
             try:

@@ -270,10 +270,12 @@ def _load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progres
         vol.source = f"NRRD ({encoding}), {vol.shape[0]}x{ny}x{nx}, from {path}"
         return vol
     plan = make_plan(full, crop=crop, downsample=downsample, path=path)
-    check_memory(2 * int(np.prod(full)) * dt.itemsize, shape=full, path=path, limit=memory_limit)
+    zstop = max(range(*plan.z.indices(nz))) + 1  # slices after the crop are never decoded (info samples slice 0)
+    check_memory(2 * zstop * ny * nx * dt.itemsize, shape=full, path=path, limit=memory_limit)
     if datafile is not None and _nrrd_data_files(path, str(datafile), nz) is not None:
         raise LoadError(f"NRRD {encoding} data in several data files is not supported (raw only)", path=path)
-    data = read_payload(path, hdr, dtype=dt, full=full, datafile=None if datafile is None else str(datafile))
+    data = read_payload(path, hdr, dtype=dt, full=full, datafile=None if datafile is None else str(datafile),
+                        zstop=zstop)
     data = data[plan.z, plan.y, plan.x]
     data = np.ascontiguousarray(data, dtype=dt.newbyteorder("="))
     return _finish(data, sp, direction, origin, path=path, fmt=f"NRRD ({encoding})", skipped=skipped, warnings=warnings,

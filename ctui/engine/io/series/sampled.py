@@ -6,7 +6,8 @@ Volume (``data`` a zero-byte placeholder, ``meta["headers_only"]``, ``value_rang
 the sampled slices) when the declared voxels exceed :data:`SAMPLE_ABOVE` bytes: the
 first, middle and last slices, each loaded through the format's own reader with a
 one-slice crop (NIfTI slices its gzip stream as it reads; raw NRRD and MetaImage read the
-slab; compressed NRRD and MetaImage are inflated whole, bounded by their declared size). In
+slab, a compressed NRRD is inflated up to the slice; a compressed MetaImage is inflated
+whole, bounded by its declared size). In
 a compressed file only slices within the first :data:`COMPRESSED_REACH` bytes are
 sampled. Smaller files are loaded whole (None: the caller's usual path).
 """
@@ -40,11 +41,11 @@ def _declared(p: Path) -> tuple[tuple[int, int, int], int, bool] | None:
             from ctui.engine.io.series.research import _TYPE, _read_nrrd_header  # loaded with its format
 
             hdr = _read_nrrd_header(p)
-            if str(hdr.get("encoding", "raw")).lower() != "raw" or int(hdr.get("line skip", 0) or 0):
-                return None  # a compressed or text payload is decoded whole (bounded by its declared size)
+            # a compressed or text payload is decoded up to the sampled slice only (read_payload's zstop)
+            packed = str(hdr.get("encoding", "raw")).lower() != "raw" or bool(int(hdr.get("line skip", 0) or 0))
             sizes = [int(s) for s in np.atleast_1d(hdr.get("sizes", []))] + [1, 1]
             code = _TYPE.get(str(hdr.get("type", "")).strip().lower())
-            return ((sizes[2], sizes[1], sizes[0]), np.dtype(code).itemsize, False) if code else None
+            return ((sizes[2], sizes[1], sizes[0]), np.dtype(code).itemsize, packed) if code else None
         if name.endswith((".mhd", ".mha")):
             from ctui.engine.io.series.metaimage import _MET_TYPES, read_mhd_header  # each format on first use
 
