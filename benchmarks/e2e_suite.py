@@ -51,8 +51,9 @@ def make_kidney() -> tuple[Path, str]:
     return out, seed
 
 
-def _run(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
-    """(wall s, CPU s of the process and its children, last stdout line) of one fresh process."""
+def _run(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str, float]:
+    """(wall s, CPU s of the process and its children, last stdout line, peak resident MB) of one
+    fresh process."""
     t = time.perf_counter()
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=err, cwd=cwd)
@@ -65,7 +66,7 @@ def _run(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
     if code != 0 and not (code == 2 and "--help" in cmd):
         raise SystemExit(f"failed ({cwd}): {' '.join(cmd)}\n{stderr[-2000:]}")
     lines = stdout.strip().splitlines()
-    return dt, usage.ru_utime + usage.ru_stime, lines[-1] if lines else ""
+    return dt, usage.ru_utime + usage.ru_stime, lines[-1] if lines else "", usage.ru_maxrss / 1024
 
 
 def tui_paint(path: Path, env: dict, cwd: Path, *, timeout: float = 60.0) -> float | None:
@@ -120,8 +121,9 @@ class Tree:
         return _run([sys.executable, "-m", "ctui.cli", *args], self.cold_env if cold else self.env, self.root)
 
 
-def _median(runs: list[tuple[float, float, str]]) -> tuple[float, float, str]:
-    return (statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs), runs[-1][2])
+def _median(runs: list[tuple[float, float, str, float]]) -> tuple[float, float, str, float]:
+    return (statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs), runs[-1][2],
+            max(r[3] for r in runs))
 
 
 def run_suite(args, *, make_series, peer_source: str) -> None:
@@ -179,17 +181,18 @@ def run_suite(args, *, make_series, peer_source: str) -> None:
 
 
 def _print(rows, trees, results, peer, tui) -> None:
-    head = f"{'command (fresh process; median)':56s}" + "".join(f" {t.name + ' wall':>10s} {t.name + ' cpu':>9s}"
-                                                                 for t in trees)
+    head = f"{'command (fresh process; median; peak MB: max)':56s}" + "".join(
+        f" {t.name + ' wall':>10s} {t.name + ' cpu':>9s} {t.name + ' MB':>8s}" for t in trees)
     print(head)
     for name, _, _ in rows:
         print(f"{name:56s}" + "".join(f" {results[(name, t.name)][0]:10.2f} {results[(name, t.name)][1]:9.2f}"
-                                      for t in trees))
-    print(f"{'peer: SimpleITK + VTK flying edges + STL + mass props':56s} {peer[0]:10.2f} {peer[1]:9.2f}")
+                                      f" {results[(name, t.name)][3]:8.0f}" for t in trees))
+    print(f"{'peer: SimpleITK + VTK flying edges + STL + mass props':56s} {peer[0]:10.2f} {peer[1]:9.2f} "
+          f"{peer[3]:8.0f}")
     for t in trees:
         for name, _, _ in rows:
             if name.startswith("ctui mesh --iso"):
-                w, c, line = results[(name, t.name)]
+                w, c, line, _ = results[(name, t.name)]
                 print(f"  {t.name}: {name.split(',')[1].strip():10s} ctui/peer wall {w / peer[0]:.2f}, "
                       f"cpu {c / peer[1]:.2f}  ({line[:80]})")
     print(f"  peer: {peer[2][:90]}")
