@@ -77,7 +77,7 @@ def inspect_volume_file(p: Path, load_file: Callable[..., Volume], *, spacing: A
     picks = sorted({0, nz // 2, nz - 1})
     if compressed:
         picks = [z for z in picks if (z + 1) * slice_bytes <= COMPRESSED_REACH] or [0]
-    first, samples, ok, why = None, [], [], []
+    first, samples, ok, why, lo_hi = None, [], [], [], []
     for z in picks:
         try:
             v = load_file(p, skipped=[], spacing=spacing, crop=(z, z + 1, None, None, None, None),
@@ -87,7 +87,11 @@ def inspect_volume_file(p: Path, load_file: Callable[..., Volume], *, spacing: A
             continue
         if z == 0:
             first = v
-        samples.append(np.asarray(v.data, dtype=np.float64).ravel())
+        flat = np.asarray(v.data).ravel()
+        samples.append(flat[:: max(1, flat.size // 250_000)].astype(np.float32))  # window: 250 k values a slice
+        fin_z = flat[np.isfinite(flat)] if flat.dtype.kind == "f" else flat
+        if fin_z.size:
+            lo_hi.append((float(fin_z.min()), float(fin_z.max())))
         ok.append(z)
     if first is None:
         return None
@@ -101,5 +105,5 @@ def inspect_volume_file(p: Path, load_file: Callable[..., Volume], *, spacing: A
                                                              np.zeros((1, 1, 1)), modality=first.modality),
                  source=f"{first.meta.get('format', 'volume')} {nz}x{ny}x{nx}, from {p}", warnings=warnings,
                  meta={**first.meta, "headers_only": True, "sampled_slices": ok,
-                       "value_range": [float(fin.min()), float(fin.max())] if fin.size else None})
+                       "value_range": [min(v[0] for v in lo_hi), max(v[1] for v in lo_hi)] if lo_hi else None})
     return vol
