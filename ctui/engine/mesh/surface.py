@@ -58,6 +58,29 @@ def _touches_border(data: np.ndarray, level: float) -> bool:
     return False
 
 
+def _closing_crop(data: np.ndarray, level: float) -> tuple[tuple[slice, ...], list[tuple[int, int]], list[int]]:
+    """The part of the volume a closed isosurface needs, and where to pad it: (slices, pads,
+    origin index (z, y, x) of the padded copy).
+
+    The box of the voxels above ``level`` grown by two voxels (the outside neighbours of its
+    border voxels and their central-difference gradients), padded by one voxel where it reaches
+    the volume's border: the same mesh as padding the whole volume, from a smaller copy (a CT's
+    bone at 300 HU: about half the volume; found by two max reductions, no boolean volume)."""
+    red = np.fmax.reduce if data.dtype.kind == "f" else np.maximum.reduce  # fmax: NaN is outside
+    rows = red(data, axis=2) > level  # (nz, ny)
+    zs, ys = np.flatnonzero(rows.any(axis=1)), np.flatnonzero(rows.any(axis=0))
+    cols = red(red(data[zs[0]: zs[-1] + 1, ys[0]: ys[-1] + 1], axis=0), axis=0) > level
+    xs = np.flatnonzero(cols)
+    sls, pads, off = [], [], []
+    for n, idx in zip(data.shape, (zs, ys, xs)):
+        a, b = max(int(idx[0]) - 2, 0), min(int(idx[-1]) + 3, n)
+        pad = (1 if a == 0 else 0, 1 if b == n else 0)
+        sls.append(slice(a, b))
+        pads.append(pad)
+        off.append(a - pad[0])
+    return tuple(sls), pads, off
+
+
 def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.0, 1.0, 1.0),
                origin: Sequence[float] = (0.0, 0.0, 0.0), direction: np.ndarray | None = None,
                normals: bool = True, close: bool = False, progress: Progress | None = None) -> Mesh:
@@ -73,7 +96,8 @@ def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.
     close : bool
         Close the surface where the object touches the volume's border (the volume is
         padded by one voxel below the level, a copy made only when some border voxel
-        is inside). Off by default (like VTK and scikit-image).
+        is inside, and only of the box that holds the surface). Off by default (like VTK
+        and scikit-image).
     progress : callback ``(done, total, message)``, optional (may cancel).
 
     Returns
@@ -92,10 +116,12 @@ def isosurface(data: np.ndarray, level: float, *, spacing: Sequence[float] = (1.
         fill = lo if lo <= level else level
         if np.issubdtype(data.dtype, np.integer) and fill > level - 1:
             fill = np.floor(level) if np.floor(level) >= np.iinfo(data.dtype).min else fill
-        check_allocation(np.prod(np.add(data.shape, 2)) * data.itemsize, what="a padded copy of the volume")
-        padded = np.pad(data, 1, mode="constant", constant_values=fill)
+        sls, pads, off = _closing_crop(data, level)
+        check_allocation(np.prod([s.stop - s.start + a + b for s, (a, b) in zip(sls, pads)]) * data.itemsize,
+                         what="a padded copy of the volume")
+        padded = np.pad(data[sls], pads, mode="constant", constant_values=fill)
         shift = np.eye(4)
-        shift[:3, 3] = -1.0
+        shift[:3, 3] = off[::-1]  # (x, y, z) index of the copy's first voxel
         aff = aff @ shift
         data = padded
     v, f, n = marching_cubes(data, level, affine=aff, normals=normals, progress=progress)
