@@ -72,15 +72,22 @@ def object_seed(session) -> tuple[int, int, int] | None:
     return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]
 
 
+def _idle(ws) -> bool:
+    """Whether nothing runs and nothing waits for a or x; otherwise says so."""
+    if ws._prop is not None:
+        ws.app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
+        return False
+    if getattr(ws, "proposal", None) is not None:
+        ws.app.notify("Accept (a) or reject (x) the pending proposal first", severity="warning")
+        return False
+    return True
+
+
 def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | None = None) -> None:
     """Segment the current object from ``seed`` (default: the cursor) through ``actions.segment``."""
     app = ws.app
     s = ws.s
-    if ws._prop is not None:
-        app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
-        return
-    if getattr(ws, "proposal", None) is not None:
-        app.notify("Accept (a) or reject (x) the pending proposal first", severity="warning")
+    if not _idle(ws):
         return
     seed = seed or (int(s.x), int(s.y), int(s.z))
     try:
@@ -147,11 +154,7 @@ def start_propagation(ws, direction: str) -> None:
         return
     app = ws.app
     s = ws.s
-    if ws._prop is not None:
-        app.notify("A propagation is already running (Escape cancels it)", severity="warning")
-        return
-    if getattr(ws, "proposal", None) is not None:
-        app.notify("Accept (a) or reject (x) the pending propagation first", severity="warning")
+    if not _idle(ws):
         return
     try:
         settings = settings_for(s, direction)

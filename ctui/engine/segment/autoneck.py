@@ -40,7 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.segment.fill3d import fill3d_seeds
-from ctui.engine.segment.necks import disc, fill_holes_2d, morph_ball, seeded_components
+from ctui.engine.segment.necks import disc, fill_holes_2d, grow_back, morph_ball, seeded_components
 
 JUMP = 1.1  # a drop of V(r) by more than this factor from one radius to the next is a leak going
 MAX_FRACTION = 0.55  # radii up to this fraction of the local depth (larger ones cut the organ itself)
@@ -302,10 +302,7 @@ def cut_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, width_mm: float, spa
         return out, "thin"
     kept = fill3d_seeds(core, hit, connectivity=connectivity)
     del core
-    back = morph_ball(kept, r, spacing, erode=False)
-    del kept
-    back &= filled
-    got = fill3d_seeds(back, hit, connectivity=connectivity)
+    got = grow_back(kept, hit, filled, r, spacing, connectivity=connectivity)
     status = "cut" if np.count_nonzero(got & raw) < np.count_nonzero(raw) else "ok"
     got &= raw if not fill_holes else _small_holes(raw, spacing[1:])
     out[box] = got

@@ -144,7 +144,7 @@ def seeded_components(inrange: np.ndarray, seeds: np.ndarray, *, connectivity: i
 
 
 def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float, spacing_yx: tuple[float, float],
-                 connectivity: int = 8, fill_holes: bool | None = None) -> tuple[np.ndarray, str]:
+                 connectivity: int = 8) -> tuple[np.ndarray, str]:
     """The part of ``candidate`` joined to ``reference`` through necks at least ``neck_mm`` wide.
 
     Parameters
@@ -153,9 +153,6 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
     reference : bool (ny, nx), the previous slice's object (or the seed's fill)
     neck_mm : the narrowest neck followed (mm); 0 disables the cut
     spacing_yx : pixel size (dy, dx) mm
-    fill_holes : None: the candidate as it is; False: its holes (noise, fat, vessels) are filled
-        for the opening, so they do not eat the object, and the result keeps only candidate pixels;
-        True: the result keeps the filled holes too
 
     Returns
     -------
@@ -163,16 +160,15 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
     "thin" (the whole candidate is thinner than the neck: returned unchanged, the caller
     decides), or "lost" (no wide part touches the reference: empty mask).
     """
-    raw = np.ascontiguousarray(candidate, dtype=np.uint8)
-    if neck_mm <= 0 or not raw.any():
-        return _holes(raw.view(bool), fill_holes), "ok"
-    cand = raw if fill_holes is None else np.ascontiguousarray(fill_holes_2d(raw.view(bool)), dtype=np.uint8)
+    cand = np.ascontiguousarray(candidate, dtype=np.uint8)
+    if neck_mm <= 0 or not cand.any():
+        return cand.astype(bool), "ok"
     r = neck_mm / 2.0
     kern = disc(r / spacing_yx[0], r / spacing_yx[1])
     core = cv2.dilate(cv2.erode(cand, kern, borderType=cv2.BORDER_REPLICATE), kern)
     core &= cand
     if not core.any():
-        return _holes(raw.view(bool), fill_holes), "thin"
+        return cand.astype(bool), "thin"
     ref = np.asarray(reference, bool)
     kept = seeded_components(core, ref & (core > 0), connectivity=connectivity)
     if not kept.any():
@@ -181,25 +177,18 @@ def cut_necks_2d(candidate: np.ndarray, reference: np.ndarray, *, neck_mm: float
         if not kept.any():
             return np.zeros(cand.shape, bool), "lost"
     out = (cv2.dilate(kept.view(np.uint8), kern) & cand).view(bool)  # every piece lies within r of ``kept``
-    status = "cut" if np.count_nonzero(out) < np.count_nonzero(cand) else "ok"
-    if fill_holes is False:
-        out &= raw.view(bool)
-    return out, status
-
-
-def _holes(mask: np.ndarray, fill_holes: bool | None) -> np.ndarray:
-    return fill_holes_2d(mask) if fill_holes else mask.astype(bool)
+    return out, ("cut" if np.count_nonzero(out) < np.count_nonzero(cand) else "ok")
 
 
 def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float,
                  spacing: tuple[float, float, float], connectivity: int = 8,
-                 inplace: bool = False, fill_holes: bool | None = None) -> tuple[np.ndarray, str]:
+                 inplace: bool = False) -> tuple[np.ndarray, str]:
     """The part of ``candidate`` (bool (nz, ny, nx)) joined to the seeds through necks >= ``neck_mm``.
 
     ``seeds_zyx``: int (n, 3) voxels of the object known to be right (the seed, or the
     seed slice's object). Works on the candidate's bounding box only, with at most three
     box-sized uint8 arrays alive at once; ``inplace=True`` writes the result into
-    ``candidate`` (no full-size copy). ``fill_holes``: as in :func:`cut_necks_2d`, per slice. Returns (bool mask of the candidate's shape,
+    ``candidate`` (no full-size copy). Returns (bool mask of the candidate's shape,
     status as in :func:`cut_necks_2d`).
     """
     cand = np.asarray(candidate, bool)
@@ -210,8 +199,7 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     ys = np.flatnonzero(cand.any(axis=(0, 2)))
     xs = np.flatnonzero(cand.any(axis=(0, 1)))
     box = (slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1))
-    raw = np.ascontiguousarray(cand[box])
-    sub = raw if fill_holes is None else fill_holes_2d(raw)
+    sub = np.ascontiguousarray(cand[box])
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3) - np.array([zs[0], ys[0], xs[0]])
     seeds = seeds[np.all((seeds >= 0) & (seeds < np.array(sub.shape)), axis=1)]
     er = morph_ball(sub, r, spacing, erode=True)
@@ -220,20 +208,21 @@ def cut_necks_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, neck_mm: float
     core &= sub
     hit = seeds[core[tuple(seeds.T)]] if len(seeds) else seeds
     if not len(hit):
-        if fill_holes:
-            cand = cand if inplace else cand.copy()
-            cand[box] = sub
         return cand, "thin"
     kept = fill3d_seeds(core, hit, connectivity=connectivity)
     del core
-    back = morph_ball(kept, r, spacing, erode=False)
-    del kept
-    back &= sub
-    got = fill3d_seeds(back, hit, connectivity=connectivity)
-    del back
+    got = grow_back(kept, hit, sub, r, spacing, connectivity=connectivity)
     status = "cut" if np.count_nonzero(got) < np.count_nonzero(sub) else "ok"
-    if fill_holes is False:
-        got &= raw
     out = cand if inplace else np.zeros(cand.shape, bool)
     out[box] = got
     return out, status
+
+
+def grow_back(kept: np.ndarray, seeds: np.ndarray, region: np.ndarray, radius_mm: float,
+              spacing: tuple[float, float, float], *, connectivity: int = 8) -> np.ndarray:
+    """The part of ``region`` within ``radius_mm`` of ``kept`` that the seeds reach: an opening's core
+    given back its rim (bool, the shape of ``region``; ``kept`` is consumed)."""
+    back = morph_ball(kept, radius_mm, spacing, erode=False)
+    del kept
+    back &= region
+    return fill3d_seeds(back, seeds, connectivity=connectivity)
