@@ -141,8 +141,12 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
     except Exception as exc:
         ws.post_message(JobFailed("Segmentation", str(exc)))
         return
+    _done(run, proposal)
+
+
+def _done(run: PropagationRun, proposal) -> None:
     run.proposal = proposal
-    ws.post_message(JobDone("propagation", run))
+    run.ws.post_message(JobDone("propagation", run))
 
 
 def start_propagation(ws, direction: str) -> None:
@@ -193,8 +197,7 @@ def _work(run: PropagationRun, settings) -> None:
     except Exception as exc:
         ws.post_message(JobFailed("Propagation", str(exc)))
         return
-    run.proposal = proposal
-    ws.post_message(JobDone("propagation", run))
+    _done(run, proposal)
 
 
 def finished(ws, run: PropagationRun) -> None:

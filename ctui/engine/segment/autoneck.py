@@ -285,13 +285,10 @@ def cut_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, width_mm: float, spa
     if width_mm <= 0 or not cand.any():
         return (fill_holes_2d(cand) if fill_holes else cand.copy()), "ok"
     r = width_mm / 2.0
-    zs = np.flatnonzero(cand.any(axis=(1, 2)))
-    ys = np.flatnonzero(cand.any(axis=(0, 2)))
-    xs = np.flatnonzero(cand.any(axis=(0, 1)))
-    box = (slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1))
+    box = _bbox3(cand)
     raw = np.ascontiguousarray(cand[box])
     filled = fill_holes_2d(raw)
-    org = np.array([zs[0], ys[0], xs[0]])
+    org = np.array([b.start for b in box])
     sub_seeds = seeds - org
     sub_seeds = sub_seeds[np.all((sub_seeds >= 0) & (sub_seeds < np.array(raw.shape)), axis=1)]
     core = morph_ball(filled, r, spacing, erode=True)

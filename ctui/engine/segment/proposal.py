@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.segment.selection import Segmentation
+from ctui.engine.segment.selection import _bbox2d as _bbox  # noqa: F401 - one 2D box function
 
 
 @dataclass
@@ -130,11 +131,3 @@ def _replace_object(seg: Segmentation, oid: int, offset: tuple[int, int, int], m
     changed = int(np.count_nonzero(vals != cur))
     seg.apply_region(box, vals, label=f"segment object {oid}")  # type: ignore[arg-type]
     return changed
-
-
-def _bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
-    rows = np.flatnonzero(mask.any(axis=1))
-    if rows.size == 0:
-        return None
-    cols = np.flatnonzero(mask.any(axis=0))
-    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
