@@ -11,7 +11,8 @@ Rows (same seed for all):
 * ``ctui auto``       ctui segment defaults, no range (range from the seed's neighbourhood), slice / 3d
 * ``ctui range``      ctui segment defaults with the organ's range, slice / 3d
 * ``ctui neck5``      the previous default (fixed 5 mm neck) with the range, slice / 3d
-* ``ctui grow+bg``    ctui segment --method grow with the range and background seeds
+* ``ctui grow+bg``    ctui segment --method grow with the range and background seeds (and with --neck 0:
+                      the edge competition alone)
 * ``sitk connected``  SimpleITK ConnectedThreshold, seed + range
 * ``sitk confidence`` SimpleITK ConfidenceConnected, seed (multiplier 2.5, radius 2, 4 iterations)
 * ``skimage rw``      scikit-image random_walker on the in-range region with the same background seeds
@@ -184,6 +185,8 @@ def main() -> int:
                 print(row(name, f"{label} {mode}", got, ref, vol.spacing, t))
         got, t = timed(ctui_run, vol, seed, rng, method="grow", background=bg)
         print(row(name, f"ctui grow+bg({len(bg)})", got, ref, vol.spacing, t))
+        got, t = timed(ctui_run, vol, seed, rng, method="grow", background=bg, neck_mm=0.0)
+        print(row(name, "ctui grow+bg neck 0", got, ref, vol.spacing, t))
         if args.no_peers:
             continue
         for label, f in (("sitk connected", sitk_connected), ("sitk confidence", sitk_confidence)):
