@@ -5,7 +5,7 @@ Manifest: a CSV with one row per job and the columns
 =============  ==========================================================================
 series         series folder/file (anything ``ctui open`` loads); required
 seed           "X,Y,Z" voxel (column, row, slice); required
-range          "LO:HI" in-range values (HU for CT); required
+range          "LO:HI" in-range values (HU for CT); empty or "auto": from the seed's neighbourhood
 method         "fill" (default), "grow" or "levelset" (:func:`ctui.engine.actions.segment.segment`)
 mode           "slice" (propagation slice by slice, default) or "3d"
 background     "X,Y,Z[;X,Y,Z]" background seeds (outside the object)
@@ -71,7 +71,7 @@ class Job:
     row: int
     series: str
     seed: tuple[int, int, int]
-    range: tuple[float, float]
+    range: tuple[float, float] | None
     method: str = "fill"
     mode: str = "slice"
     background: list[tuple[int, int, int]] = field(default_factory=list)
@@ -105,7 +105,9 @@ def _xyz(text: str, what: str) -> tuple[int, int, int]:
     return x, y, z
 
 
-def _range(text: str) -> tuple[float, float]:
+def _range(text: str) -> tuple[float, float] | None:
+    if text.strip().lower() in ("", "auto"):
+        return None  # the segment action takes the range from the seed's neighbourhood
     a, b = parse_pair(text, "range", example="150:300")
     if a > b:
         raise CtuiError(f"range {text!r}: LO is above HI")
@@ -151,10 +153,10 @@ def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[
         cols = [c.strip().lower() for c in reader.fieldnames or []]
     except csv.Error as exc:
         raise CtuiError(f"not a readable CSV manifest ({exc})", path=p) from None
-    missing = [c for c in ("series", "seed", "range") if c not in cols]
+    missing = [c for c in ("series", "seed") if c not in cols]
     if missing:
-        raise CtuiError(f"the manifest lacks the column(s) {', '.join(missing)} (columns: series, seed, range, "
-                        "optional method, background, filter, outdir, sections, name)", path=p)
+        raise CtuiError(f"the manifest lacks the column(s) {', '.join(missing)} (columns: series, seed, "
+                        "optional range, background, filter, outdir, sections, name)", path=p)
     reader.fieldnames = cols
     try:
         return [_job(n, row, p.parent.resolve(), default_outdir) for n, row in enumerate(reader, start=1)]
@@ -198,7 +200,8 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
         pipeline = Pipeline([parse_filter_spec(s) for s in job.filters], domain="hu")
     except ValueError as exc:
         raise CtuiError(f"filter: {exc}") from None
-    res = segment(volume, [job.seed], [job.range], background=job.background, pipeline=pipeline,
+    res = segment(volume, [job.seed], [job.range] if job.range is not None else [], background=job.background,
+                  pipeline=pipeline,
                   options=SegmentOptions(method=job.method, mode=job.mode), names=[job.name])
     return res.segmentation.labels, pipeline.to_dict(), propagation_record(res.settings)
 
@@ -207,7 +210,8 @@ def run_job(job: Job) -> dict:
     """Run one job (on a Dask worker); returns its RESULTS row. Never raises: a failure is a row."""
     t0, c0 = time.perf_counter(), time.process_time()
     row: dict[str, Any] = {"job": job.key, "name": job.name, "series": job.series, "seed": ",".join(map(str, job.seed)),
-                           "range": f"{job.range[0]:g}:{job.range[1]:g}", "method": f"{job.method}/{job.mode}"}
+                           "range": "auto" if job.range is None else f"{job.range[0]:g}:{job.range[1]:g}",
+                           "method": f"{job.method}/{job.mode}"}
     try:
         if job.error:
             raise CtuiError(job.error)
