@@ -18,21 +18,16 @@ def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity:
     70%-noisy block and a few ms on solid objects, against about 0.4 s for
     ``scipy.ndimage.label`` of the whole mask (equal results: tests/test_propagate.py).
     A plain voxel-by-voxel depth-first numba fill was slower than scipy (cache misses)
-    and was dropped. scipy is the fallback when numba is missing.
+    and was dropped. scipy labels instead when numba is missing, and for small volumes while numba
+    is not loaded yet (:data:`SMALL_FILL`).
     """
     inr = np.ascontiguousarray(inrange, dtype=bool)
     start = start_mask.astype(bool) & inr[z]
-    kernel = _scanline_kernel()
-    if kernel is None:  # pragma: no cover - numba is a declared dependency
-        from scipy import ndimage
-
-        lab, n = ndimage.label(inr, structure=_structure(connectivity))
-        keep = np.zeros(n + 1, bool)
-        keep[np.unique(lab[z][start])] = True
-        keep[0] = False
-        return keep[lab]
     yx = np.argwhere(start)
     seeds = np.column_stack([np.full(len(yx), z), yx]).astype(np.int32)
+    kernel = _scanline_kernel() if (_SCAN or inr.size > SMALL_FILL) else None
+    if kernel is None:
+        return _label_fill(inr, seeds, connectivity)
     out = np.zeros(inr.shape, np.uint8)
     kernel(inr.view(np.uint8), seeds, out, connectivity == 8)
     return out.view(bool)
@@ -121,6 +116,19 @@ def _scanline_kernel():
     return _SCAN[0]
 
 
+def _label_fill(inr: np.ndarray, seeds: np.ndarray, connectivity: int) -> np.ndarray:
+    """:func:`fill3d_seeds` by scipy's labelling (the same connectivity as the scanline fill)."""
+    from scipy import ndimage  # scipy is loaded by the engine anyway; kept next to its one use here
+
+    if not len(seeds):
+        return np.zeros(inr.shape, bool)
+    lab, n = ndimage.label(inr, structure=_structure(connectivity))
+    keep = np.zeros(n + 1, bool)
+    keep[lab[tuple(seeds.T)]] = True
+    keep[0] = False
+    return keep[lab]
+
+
 def _structure(connectivity: int) -> np.ndarray:
     st = np.zeros((3, 3, 3), bool)
     st[1] = True if connectivity == 8 else np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
@@ -128,19 +136,19 @@ def _structure(connectivity: int) -> np.ndarray:
     return st
 
 
+#: Below this many voxels, while numba is not loaded yet, scipy's labelling fills instead: importing numba
+#: and loading the cached kernel costs 0.5-0.7 s a process, scipy.ndimage.label 10-30 ms per million voxels
+#: (a kidney from one seed on a small series: 1.2 -> 0.4 s CPU for the whole command).
+SMALL_FILL = 2_000_000
+
+
 def fill3d_seeds(inrange: np.ndarray, seeds_zyx: np.ndarray, *, connectivity: int = 8) -> np.ndarray:
     """Voxels of ``inrange`` (bool (nz, ny, nx)) connected to any seed (int (n, 3) z, y, x). bool, same shape."""
     inr = np.ascontiguousarray(inrange, dtype=bool)
     seeds = np.asarray(seeds_zyx, dtype=np.int32).reshape(-1, 3)
-    kernel = _scanline_kernel()
-    if kernel is None:  # pragma: no cover - numba is a declared dependency
-        from scipy import ndimage
-
-        lab, n = ndimage.label(inr, structure=_structure(connectivity))
-        keep = np.zeros(n + 1, bool)
-        keep[lab[tuple(seeds.T)]] = True
-        keep[0] = False
-        return keep[lab]
+    kernel = _scanline_kernel() if (_SCAN or inr.size > SMALL_FILL) else None
+    if kernel is None:
+        return _label_fill(inr, seeds, connectivity)
     out = np.zeros(inr.shape, np.uint8)
     if len(seeds):
         kernel(inr.view(np.uint8), np.ascontiguousarray(seeds), out, connectivity == 8)
