@@ -404,6 +404,8 @@ def _seed_text(ws, t: Text) -> None:
     t.append(f"{describe(s)}\n", style="dim")
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
     cache = getattr(ws, "seed_range_cache", None)
+    if not hasattr(ws, "run_worker"):  # no screen around it (a test of the text): no range
+        return
     if cache is None or cache[0] != key:
         ws.seed_range_cache = (key, None)
 
