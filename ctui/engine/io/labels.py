@@ -36,6 +36,7 @@ from ctui.engine.core.colors import object_color_float
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.volume import Volume
+from ctui.engine.io.series.nrrd_data import inflate_bounded
 
 #: Largest expansion deflate (gzip/zlib) can achieve; bounds decompressed sizes.
 DEFLATE_MAX_RATIO = 1032
@@ -400,20 +401,7 @@ def _read_compressed(p: Path, fh, header, sizes, dtype: np.dtype, encoding: str,
     else:
         dec = bz2.BZ2Decompressor()
     want = need + skip + 1  # one byte more than declared reveals oversized streams
-    out = bytearray()
-    chunk = 1 << 20
-    is_bz2 = isinstance(dec, bz2.BZ2Decompressor)
-    while len(out) < want and not dec.eof:
-        if is_bz2:
-            src = fh.read(chunk) if dec.needs_input else b""
-            if not src and dec.needs_input:
-                break
-            out += dec.decompress(src, max_length=want - len(out))
-        else:
-            src = dec.unconsumed_tail or fh.read(chunk)
-            if not src:
-                break
-            out += dec.decompress(src, want - len(out))
+    out = inflate_bounded(fh, dec, want)
     if len(out) > need + skip:
         raise FormatError(f"{p}: compressed data holds more than the {need} bytes the header declares")
     if not dec.eof:

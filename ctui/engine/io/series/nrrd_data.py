@@ -14,7 +14,7 @@ import bz2
 import os
 import zlib
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -63,22 +63,27 @@ def _skip_lines(fh: BinaryIO, n: int, *, path: Path) -> None:
 def _inflate(fh: BinaryIO, encoding: str, want: int, *, path: Path) -> bytes:
     """At most ``want`` bytes of a gzip/zlib or bzip2 stream (reads the input in chunks)."""
     dec = bz2.BZ2Decompressor() if encoding.startswith("bz") else zlib.decompressobj(zlib.MAX_WBITS | 32)
-    out = bytearray()
-    chunk = 1 << 20
     try:
-        while len(out) < want and not dec.eof:
-            if isinstance(dec, bz2.BZ2Decompressor):
-                src = fh.read(chunk) if dec.needs_input else b""
-                if not src and dec.needs_input:
-                    break
-                out += dec.decompress(src, max_length=want - len(out))
-            else:
-                src = dec.unconsumed_tail or fh.read(chunk)
-                if not src:
-                    break
-                out += dec.decompress(src, want - len(out))
+        return inflate_bounded(fh, dec, want)
     except (OSError, EOFError, ValueError, zlib.error) as exc:
         raise LoadError(f"corrupted {encoding} NRRD data ({' '.join(str(exc).split())[:100]})", path=path) from None
+
+
+def inflate_bounded(fh: BinaryIO, dec: Any, want: int, *, chunk: int = 1 << 20) -> bytes:
+    """At most ``want`` bytes out of the decompressor ``dec`` (zlib or bz2) fed from ``fh`` in chunks: a
+    stream that inflates past what a header declares stops there (``dec.eof`` tells whether it ended)."""
+    out = bytearray()
+    while len(out) < want and not dec.eof:
+        if isinstance(dec, bz2.BZ2Decompressor):
+            src = fh.read(chunk) if dec.needs_input else b""
+            if not src and dec.needs_input:
+                break
+            out += dec.decompress(src, max_length=want - len(out))
+        else:
+            src = dec.unconsumed_tail or fh.read(chunk)
+            if not src:
+                break
+            out += dec.decompress(src, want - len(out))
     return bytes(out)
 
 
