@@ -59,15 +59,10 @@ class ImageView(Widget):
         self.token = token
         if spacing_yx is not None:
             self.spacing_yx = (float(spacing_yx[0]), float(spacing_yx[1]))
-        if zoom is not None:
-            self.zoom = float(zoom)
-        if center is not None:
-            self.center = center
-        if cursor is not ...:
-            self.cursor = cursor
-        self._invalidate()
+        self.set_view(zoom=zoom, center=center, cursor=cursor)
 
     def set_view(self, *, zoom=None, center=None, cursor=...) -> None:
+        """Change the zoom, centre (x, y) or cursor (x, y) or None; repaints."""
         if zoom is not None:
             self.zoom = float(zoom)
         if center is not None:

@@ -296,16 +296,10 @@ class Segmentation(EditMixin):
         Unless ``overwrite``, voxels of other objects are kept. One undo step; returns
         the number of voxels that changed.
         """
-        if mask.ndim == 2:
-            mask = mask[None]
-        bb = _bbox3d(mask)
-        if bb is None:
+        got = self._placed(mask, offset)
+        if got is None:
             return 0
-        (z0, z1), (y0, y1), (x0, x1) = bb
-        oz, oy, ox = offset
-        box = (slice(oz + z0, oz + z1), slice(oy + y0, oy + y1), slice(ox + x0, ox + x1))
-        m = mask[z0:z1, y0:y1, x0:x1]
-        region = self.labels[box]
+        box, m, region = got
         if overwrite:
             write = m
         else:
@@ -316,18 +310,25 @@ class Segmentation(EditMixin):
         self.apply_region(box, new, label=label or f"paint object {object_id}")
         return changed
 
-    def erase(self, mask: np.ndarray, *, offset: tuple[int, int, int] = (0, 0, 0), object_id: int | None = None) -> int:
-        """Set voxels under ``mask`` to 0 (only of ``object_id`` if given). One undo step."""
+    def _placed(self, mask: np.ndarray, offset: tuple[int, int, int]):
+        """(box in the labels, the mask cropped to its bounding box, the labels there) of a bool mask (2D or 3D)
+        placed at ``offset`` (z, y, x); None when the mask is empty."""
         if mask.ndim == 2:
             mask = mask[None]
         bb = _bbox3d(mask)
         if bb is None:
-            return 0
+            return None
         (z0, z1), (y0, y1), (x0, x1) = bb
         oz, oy, ox = offset
         box = (slice(oz + z0, oz + z1), slice(oy + y0, oy + y1), slice(ox + x0, ox + x1))
-        m = mask[z0:z1, y0:y1, x0:x1]
-        region = self.labels[box]
+        return box, mask[z0:z1, y0:y1, x0:x1], self.labels[box]
+
+    def erase(self, mask: np.ndarray, *, offset: tuple[int, int, int] = (0, 0, 0), object_id: int | None = None) -> int:
+        """Set voxels under ``mask`` to 0 (only of ``object_id`` if given). One undo step."""
+        got = self._placed(mask, offset)
+        if got is None:
+            return 0
+        box, m, region = got
         if object_id is not None:
             m = m & (region == object_id)
         new = np.where(m, np.uint8(0), region)
