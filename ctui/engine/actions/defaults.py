@@ -31,6 +31,9 @@ ANIMATION_FPS = 15.0
 FLY_FRAMES = 48
 FLY_FOV_DEG = 70.0
 MAX_RENDER_SIDE = 8192
+#: A wire view draws at most this many triangles (a decimated copy beyond it: lines that dense draw as a solid,
+#: and a 5 M-face wire turntable took minutes on a software renderer)
+WIRE_MAX_FACES = 400_000
 
 #: Drift check: running-median fit over this many slices.
 DRIFT_FIT = "median"

@@ -18,6 +18,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.rendermodes import SURFACE_MODES, VOLUME_MODES
 from ctui.engine.io.project import load_project
 from ctui.engine.measure.centreline import centreline
+from ctui.engine.mesh.meshtools import decimate
 from ctui.engine.mesh.surface import isosurface
 from ctui.engine.render import (Light, Scene, SceneMesh, SceneVolume, SlicePlane, get_renderer, save_animation,
                                 save_flythrough, save_png, turntable_frames)
@@ -89,6 +90,22 @@ def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = N
     return []
 
 
+def _wire_budget(meshes: list, opened: Opened) -> list:
+    """The meshes, decimated together to at most ``defaults.WIRE_MAX_FACES`` triangles for a wire view
+    (each its share), with a note in ``opened.notes``."""
+    total = sum(int(m.n_faces) for m in meshes)
+    if total <= defaults.WIRE_MAX_FACES:
+        return meshes
+    out = []
+    for m in meshes:
+        d = decimate(m, max(4, int(m.n_faces * defaults.WIRE_MAX_FACES / total)))
+        d.object_id, d.meta = m.object_id, dict(m.meta)
+        out.append(d)
+    opened.notes.append(f"wire view of {total} triangles drawn from a decimated copy of "
+                        f"{sum(int(m.n_faces) for m in out)} (denser lines draw as a solid)")
+    return out
+
+
 def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[int] | None = None,
                 iso: float | None = None, opacity: float | None = None, azimuth: float = defaults.RENDER_AZIMUTH,
                 elevation: float = defaults.RENDER_ELEVATION, roll: float = 0.0, zoom: float = 1.0,
@@ -100,6 +117,8 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
     kind = opened.kind
     mode = mode or ("dvr" if kind == "series" and iso is None else "surface")
     meshes = scene_meshes(opened, mode=mode, objects=objects, iso=iso)
+    if mode == "wire":
+        meshes = _wire_budget(meshes, opened)
     volume = opened.volume
     if mode in VOLUME_MODES and volume is None:
         raise CtuiError(f"mode {mode} needs a series (volume), not a {kind}", path=opened.path, option="mode")
