@@ -9,19 +9,24 @@ and the volume V(r) of what stays joined to the seed is recorded. While r is sma
 than the bridges, V(r) is the organ plus its leaks; at the radius where the widest
 bridge stops carrying the front, V(r) drops by a large factor (the leak goes); above
 it, V(r) shrinks only slowly as the organ's own thin parts go, until r nears the
-organ's half-thickness. The chosen radius is the one just after the last drop larger
-than ``JUMP`` among radii up to ``MAX_FRACTION`` of the local depth (the half-thickness
-of the in-range region around the seed): the widest result before the volume jumps,
-as airway-tree segmentation detects explosions.
+organ's half-thickness. The chosen radius is the one just after the last drop that is a
+leak going: a drop by at least ``JUMP`` and by at least the square root of the largest drop
+of the sweep, that removes at least ``LEAK_BALLS`` balls of the local depth (a rim or a cap
+rounded off by the opening is smaller), among radii up to ``MAX_FRACTION`` of the local
+depth (the half-thickness of the in-range region near the seed): the widest result before
+the volume jumps, as airway-tree segmentation detects explosions. The opened region at that
+radius also bounds where propagation may go (:class:`Region`); :func:`cut_3d`/:func:`cut_2d`
+cut at the chosen width by the same rule at full resolution.
 
 Holes (noise pixels out of range inside an organ, the renal sinus, vessels in the
 liver) are filled slice by slice before the opening, so they do not eat the organ from
-inside; :func:`ctui.engine.segment.necks.cut_necks_3d` does the same with ``fill_holes``.
+inside; the result keeps holes up to ``HOLE_MM2`` a slice when asked (``fill_holes``).
 
 Measured on ``../shared/data/totalseg_example/ct_abdomen_3mm.nii.gz`` (one seed at each
-organ's deepest point, its 5-95th percentile range, 3D): fixed 5 mm neck Dice 0.08-0.64;
-this choice kidney right 0.88, kidney left 0.93, spleen 0.90, liver 0.88
-(benchmarks/organs.py prints the full table).
+organ's deepest point, 3D): a fixed 5 mm neck with each organ's own 5-95th percentile range
+gave Dice 0.08-0.64; this choice with no range given: kidney right 0.900, kidney left 0.941,
+spleen 0.898, liver 0.895 (benchmarks/organs.py prints the full table, slice mode and the
+peers included).
 
 The sweep runs on a box around the seed resampled to about ``SWEEP_MM`` voxels (the
 chosen width is a physical size; coarse voxels find it as well and keep the cost of a
