@@ -36,7 +36,7 @@ from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
-from ctui.engine.segment.methods import METHODS, Job, inrange_volume  # noqa: F401 - inrange_volume: API
+from ctui.engine.segment.methods import METHODS, Job
 from ctui.engine.segment.propagate import PropagationSettings
 from ctui.engine.segment.seeding import RangeChoice, auto_width, seed_range, seed_voxels
 from ctui.engine.segment.selection import (
