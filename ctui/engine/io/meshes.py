@@ -23,7 +23,7 @@ import numpy as np
 from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import FormatError
 from ctui.engine.core.limits import check_allocation
-from ctui.engine.core.meshdata import Mesh
+from ctui.engine.core.meshdata import Mesh, face_cross
 
 STL_HEADER = b"ctui".ljust(80, b" ")
 FORMATS = (".stl", ".ply", ".obj")
@@ -48,12 +48,7 @@ def _write_stl_records(fh, v: np.ndarray, f: np.ndarray, chunk: int = 1 << 16) -
         fc = f[s0:s0 + chunk]
         rec = np.empty(len(fc), _STL_DTYPE)
         rec["v"] = v[fc]
-        ax, ay, az = (vt[k][fc[:, 0]] for k in range(3))
-        ux, uy, uz = (vt[k][fc[:, 1]] - c for k, c in zip(range(3), (ax, ay, az)))
-        wx, wy, wz = (vt[k][fc[:, 2]] - c for k, c in zip(range(3), (ax, ay, az)))
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
+        _a, _b, _c, nx, ny, nz = face_cross(vt, fc)
         ln = np.sqrt(nx * nx + ny * ny + nz * nz)
         ln[ln == 0] = 1.0
         n = rec["normal"]

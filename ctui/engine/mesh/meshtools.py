@@ -21,7 +21,7 @@ from typing import Iterable
 
 import numpy as np
 
-from ctui.engine.core.meshdata import Mesh, signed_volume_mm3
+from ctui.engine.core.meshdata import Mesh, face_cross, signed_volume_mm3
 from ctui.engine.mesh import jit
 
 _KEEP = object()
@@ -231,12 +231,7 @@ def _area_and_volume_terms(v: np.ndarray, f: np.ndarray, chunk: int = 1 << 18) -
     area = 0.0
     for s0 in range(0, len(f), chunk):
         fc = f[s0:s0 + chunk]
-        ax, ay, az = (vt[k][fc[:, 0]] for k in range(3))
-        ux, uy, uz = (vt[k][fc[:, 1]] - c for k, c in zip(range(3), (ax, ay, az)))
-        wx, wy, wz = (vt[k][fc[:, 2]] - c for k, c in zip(range(3), (ax, ay, az)))
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
+        ax, ay, az, nx, ny, nz = face_cross(vt, fc)
         area += 0.5 * float(np.sqrt(nx * nx + ny * ny + nz * nz).sum())
         terms[s0:s0 + chunk] = (ax * nx + ay * ny + az * nz) / 6.0
     return area, terms
