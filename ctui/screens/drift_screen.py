@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from textual import work
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Label, Static
@@ -17,6 +16,7 @@ from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.keytable import keys
 from ctui.screens.messages import Call
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
@@ -29,13 +29,13 @@ class DriftScreen(GuardMixin, Screen):
     DriftScreen #dr-plots Label { height: 1; }
     DriftScreen #dr-info { width: 40; padding: 0 1; background: $panel; }
     """
-    BINDINGS = [
-        Binding("a", "apply", "Apply correction"),
-        Binding("u", "undo", "Undo correction"),
-        Binding("p", "phase", "Centroid/phase estimate"),
-        Binding("s", "save_plot", "Save PNG"),
-        Binding("escape,d", "close", "Back"),
-    ]
+    BINDINGS = keys("""
+    a         apply      Apply correction
+    u         undo       Undo correction
+    p         phase      Centroid/phase estimate
+    s         save_plot  Save PNG
+    escape,d  close      Back
+    """)
 
     def __init__(self, session) -> None:
         super().__init__()

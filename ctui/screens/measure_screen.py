@@ -12,7 +12,6 @@ import math
 import numpy as np
 from textual import on, work
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
@@ -24,6 +23,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
+from ctui.screens.keytable import keys
 from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
@@ -74,12 +74,12 @@ class MeasureScreen(GuardMixin, Screen):
     MeasureScreen.narrow #ms-info { width: 30; }
     MeasureScreen #ms-status { height: auto; max-height: 3; background: $boost; padding: 0 1; }
     """
-    BINDINGS = [
-        Binding("c", "sections", "Sections of selected"),
-        Binding("g", "toggle_grey", "Sections: mask / grey levels"),
-        Binding("s", "save", "Save CSV+PNG"),
-        Binding("escape,M", "close", "Back"),
-    ]
+    BINDINGS = keys("""
+    c         sections     Sections of selected
+    g         toggle_grey  Sections: mask / grey levels
+    s         save         Save CSV+PNG
+    escape,M  close        Back
+    """)
 
     def __init__(self, session) -> None:
         super().__init__()

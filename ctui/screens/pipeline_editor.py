@@ -8,7 +8,6 @@ import numpy as np
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Footer, Label, OptionList, Static
@@ -16,6 +15,7 @@ from textual.widgets.option_list import Option
 
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.keytable import keys
 from ctui.screens.messages import Call
 
 MORPHOLOGY = ("closing", "opening", "erode", "dilate", "conservative")
@@ -48,19 +48,19 @@ class KernelEditor(GuardMixin, ModalScreen[list | None]):
     KernelEditor { align: center middle; }
     KernelEditor > Vertical { width: auto; min-width: 40; height: auto; border: round $accent; background: $surface; padding: 0 1; }
     """
-    BINDINGS = [
-        Binding("up,k", "mv(0,-1)", "Up", show=False),
-        Binding("down,j", "mv(0,1)", "Down", show=False),
-        Binding("left,h", "mv(-1,0)", "Left", show=False),
-        Binding("right,l", "mv(1,0)", "Right", show=False),
-        Binding("space", "toggle", "Toggle cell"),
-        Binding("plus,equals_sign", "resize(2)", "Bigger"),
-        Binding("minus", "resize(-2)", "Smaller"),
-        Binding("f", "fill(1)", "All on"),
-        Binding("c", "fill(0)", "All off"),
-        Binding("enter", "accept", "Accept"),
-        Binding("escape", "cancel", "Cancel"),
-    ]
+    BINDINGS = keys("""
+    up,k              mv(0,-1)    Up           hidden
+    down,j            mv(0,1)     Down         hidden
+    left,h            mv(-1,0)    Left         hidden
+    right,l           mv(1,0)     Right        hidden
+    space             toggle      Toggle cell
+    plus,equals_sign  resize(2)   Bigger
+    minus             resize(-2)  Smaller
+    f                 fill(1)     All on
+    c                 fill(0)     All off
+    enter             accept      Accept
+    escape            cancel      Cancel
+    """)
 
     def __init__(self, kernel=None, size: int = 3) -> None:
         super().__init__()
@@ -146,20 +146,20 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
     PipelineEditor .pe-prev { width: 1fr; }
     PipelineEditor .pe-prev Label { height: 1; color: $text-muted; }
     """
-    BINDINGS = [
-        Binding("a", "add", "Add step"),
-        Binding("delete,x", "remove", "Remove"),
-        Binding("e", "edit", "Params"),
-        Binding("K", "kernel", "Kernel editor"),
-        Binding("s", "stage", "Stage 1/2"),
-        Binding("space", "toggle", "On/off"),
-        Binding("shift+up,U", "move(-1)", "Move up"),
-        Binding("shift+down,D", "move(1)", "Move down"),
-        Binding("m", "domain", "HU/8-bit", show=False),
-        Binding("pageup", "slice(1)", "Slice +1", show=False),
-        Binding("pagedown", "slice(-1)", "Slice -1", show=False),
-        Binding("escape,f", "close", "Done"),
-    ]
+    BINDINGS = keys("""
+    a             add        Add step
+    delete,x      remove     Remove
+    e             edit       Params
+    K             kernel     Kernel editor
+    s             stage      Stage 1/2
+    space         toggle     On/off
+    shift+up,U    move(-1)   Move up
+    shift+down,D  move(1)    Move down
+    m             domain     HU/8-bit       hidden
+    pageup        slice(1)   Slice +1       hidden
+    pagedown      slice(-1)  Slice -1       hidden
+    escape,f      close      Done
+    """)
 
     def __init__(self, session) -> None:
         super().__init__()

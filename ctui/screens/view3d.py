@@ -11,7 +11,6 @@ import time
 import numpy as np
 from textual import on, work
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import Static
@@ -28,6 +27,7 @@ from ctui.engine.actions.render import centreline  # the function the fly-throug
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
+from ctui.screens.keytable import keys
 from ctui.screens.messages import JobDone, JobFailed, Status
 from ctui.screens.session import safe_cwd
 
@@ -50,27 +50,27 @@ class View3DScreen(GuardMixin, Screen):
     View3DScreen #v3-info { width: 30; padding: 0 1; background: $panel; }
     View3DScreen #v3-status { height: 1; background: $boost; padding: 0 1; }
     """
-    BINDINGS = [
-        Binding("left", "orbit(-15,0)", "Orbit left 15°", show=False),
-        Binding("right", "orbit(15,0)", "Orbit right 15°", show=False),
-        Binding("up", "orbit(0,15)", "Orbit up 15°", show=False),
-        Binding("down", "orbit(0,-15)", "Orbit down 15°", show=False),
-        Binding("shift+left", "light(-15,0)", "Light left", show=False),
-        Binding("shift+right", "light(15,0)", "Light right", show=False),
-        Binding("shift+up", "light(0,15)", "Light up", show=False),
-        Binding("shift+down", "light(0,-15)", "Light down", show=False),
-        Binding("plus,equals_sign", "zoom(1.25)", "Zoom in 3D", show=False),
-        Binding("minus", "zoom(0.8)", "Zoom out 3D", show=False),
-        Binding("m", "mode", "Mode: surface/wire/transparent/MIP/DVR"),
-        Binding("c", "method", "Contours/MC"),
-        Binding("S", "shadows", "Shadows", show=False),
-        Binding("p", "slice_plane", "Slice plane", show=False),
-        Binding("s", "save", "Save PNG"),
-        Binding("t", "turntable", "Turntable"),
-        Binding("f", "fly", "Fly through object"),
-        Binding("F", "fly_save", "Save fly-through GIF", show=False),
-        Binding("escape,r", "close", "Back"),
-    ]
+    BINDINGS = keys("""
+    left              orbit(-15,0)  Orbit left 15°                          hidden
+    right             orbit(15,0)   Orbit right 15°                         hidden
+    up                orbit(0,15)   Orbit up 15°                            hidden
+    down              orbit(0,-15)  Orbit down 15°                          hidden
+    shift+left        light(-15,0)  Light left                              hidden
+    shift+right       light(15,0)   Light right                             hidden
+    shift+up          light(0,15)   Light up                                hidden
+    shift+down        light(0,-15)  Light down                              hidden
+    plus,equals_sign  zoom(1.25)    Zoom in 3D                              hidden
+    minus             zoom(0.8)     Zoom out 3D                             hidden
+    m                 mode          Mode: surface/wire/transparent/MIP/DVR
+    c                 method        Contours/MC
+    S                 shadows       Shadows                                 hidden
+    p                 slice_plane   Slice plane                             hidden
+    s                 save          Save PNG
+    t                 turntable     Turntable
+    f                 fly           Fly through object
+    F                 fly_save      Save fly-through GIF                    hidden
+    escape,r          close         Back
+    """)
 
     def __init__(self, session, *, image=None) -> None:
         """image: a fixed RGB image to show instead of rendering (snapshot tests)."""

@@ -6,80 +6,80 @@ from __future__ import annotations
 
 import numpy as np
 from rich.text import Text
-from textual.binding import Binding
 
 from ctui.screens import planes
 from ctui.screens.imageview import ImageView
+from ctui.screens.keytable import keys
 from ctui.screens.session import VIEWS
 
-BINDINGS = [
-    Binding("left,h", "move(-1,0)", "Cursor left", show=False),
-    Binding("right,l", "move(1,0)", "Cursor right", show=False),
-    Binding("up,k", "move(0,-1)", "Cursor up", show=False),
-    Binding("down,j", "move(0,1)", "Cursor down", show=False),
-    Binding("shift+left,H", "move(-10,0)", "Cursor left 10", show=False),
-    Binding("shift+right,L", "move(10,0)", "Cursor right 10", show=False),
-    Binding("shift+up,K", "move(0,-10)", "Cursor up 10", show=False),
-    Binding("shift+down,J", "move(0,10)", "Cursor down 10", show=False),
-    Binding("ctrl+left", "pan(-1,0)", "Pan left", show=False),
-    Binding("ctrl+right", "pan(1,0)", "Pan right", show=False),
-    Binding("ctrl+up", "pan(0,-1)", "Pan up", show=False),
-    Binding("ctrl+down", "pan(0,1)", "Pan down", show=False),
-    Binding("pageup", "slice(1)", "Slice +1"),
-    Binding("pagedown", "slice(-1)", "Slice -1"),
-    Binding("home", "slice_to('first')", "First slice", show=False),
-    Binding("end", "slice_to('last')", "Last slice", show=False),
-    Binding("g", "goto", "Go to slice", show=False),
-    Binding("1", "plane('axial')", "Axial view", show=False),
-    Binding("2", "plane('sagittal')", "Sagittal view", show=False),
-    Binding("3", "plane('coronal')", "Coronal view", show=False),
-    Binding("0", "ortho", "2x2: axial, sagittal, coronal, 3D", show=False),
-    Binding("backslash", "toggle_panel", "Side panel on/off"),
-    Binding("w", "window_cycle", "Window preset", show=False),
-    Binding("W", "window_set", "Set window C/W", show=False),
-    Binding("plus,equals_sign", "zoom(1)", "Zoom in", show=False),
-    Binding("minus", "zoom(-1)", "Zoom out", show=False),
-    Binding("v", "view_cycle", "Stage view"),
-    Binding("V", "grid", "2x2 pipeline views", show=False),
-    Binding("f", "filters", "Filters"),
-    Binding("enter", "fill", "Fill"),
-    Binding("space", "dab", "Paint a brush dab", show=False),
-    Binding("b", "pen('brush')", "Brush down/up (moving paints)", show=False),
-    Binding("E", "pen('eraser')", "Eraser down/up (moving erases)", show=False),
-    Binding("comma", "brush_size(-1)", "Brush smaller", show=False),
-    Binding("full_stop", "brush_size(1)", "Brush larger", show=False),
-    Binding("R", "edit_mode", "Mode add/replace/subtract", show=False),
-    Binding("i", "limits", "Limits: slice range, HU range", show=False),
-    Binding("s", "stop_slice", "Stop at this slice", show=False),
-    Binding("I", "keep_largest", "Keep largest island", show=False),
-    Binding("X", "remove_islands", "Remove islands under N voxels", show=False),
-    Binding("F", "fill_between", "Fill between slices", show=False),
-    Binding("t", "tools", "Edit tools"),
-    Binding("left_square_bracket", "tolerance(-1)", "Tolerance -", show=False),
-    Binding("right_square_bracket", "tolerance(1)", "Tolerance +", show=False),
-    Binding("T", "range_edit", "Edit range/tolerance", show=False),
-    Binding("c", "connectivity", "4/8 connectivity", show=False),
-    Binding("m", "prop_mode", "Propagation slice/3D", show=False),
-    Binding("n", "new_object", "New object"),
-    Binding("tab", "cycle_object", "Next object", show=False, priority=True),
-    Binding("N", "rename_object", "Rename object", show=False),
-    Binding("delete", "clear_object", "Clear object", show=False),
-    Binding("u", "undo", "Undo"),
-    Binding("U", "undo(True)", "Redo", show=False),
-    Binding("less_than_sign", "propagate('backward')", "Propagate back", show=False),
-    Binding("greater_than_sign", "propagate('forward')", "Propagate fwd", show=False),
-    Binding("S", "segment_here", "Segment from cursor"),
-    Binding("G", "segment_panel", "Segmentation options"),
-    Binding("p", "propagate('both')", "Propagate"),
-    Binding("a", "accept", "Accept proposal", show=False),
-    Binding("x", "reject", "Reject proposal", show=False),
-    Binding("escape", "cancel", "Cancel job / lift brush", show=False),
-    Binding("d", "drift", "Drift"),
-    Binding("r", "render3d", "3D"),
-    Binding("M", "measure", "Measure"),
-    Binding("e", "export", "Export"),
-    Binding("o", "open", "Open", show=False),
-]
+BINDINGS = keys("""
+left,h                move(-1,0)             Cursor left                        hidden
+right,l               move(1,0)              Cursor right                       hidden
+up,k                  move(0,-1)             Cursor up                          hidden
+down,j                move(0,1)              Cursor down                        hidden
+shift+left,H          move(-10,0)            Cursor left 10                     hidden
+shift+right,L         move(10,0)             Cursor right 10                    hidden
+shift+up,K            move(0,-10)            Cursor up 10                       hidden
+shift+down,J          move(0,10)             Cursor down 10                     hidden
+ctrl+left             pan(-1,0)              Pan left                           hidden
+ctrl+right            pan(1,0)               Pan right                          hidden
+ctrl+up               pan(0,-1)              Pan up                             hidden
+ctrl+down             pan(0,1)               Pan down                           hidden
+pageup                slice(1)               Slice +1
+pagedown              slice(-1)              Slice -1
+home                  slice_to('first')      First slice                        hidden
+end                   slice_to('last')       Last slice                         hidden
+g                     goto                   Go to slice                        hidden
+1                     plane('axial')         Axial view                         hidden
+2                     plane('sagittal')      Sagittal view                      hidden
+3                     plane('coronal')       Coronal view                       hidden
+0                     ortho                  2x2: axial, sagittal, coronal, 3D  hidden
+backslash             toggle_panel           Side panel on/off
+w                     window_cycle           Window preset                      hidden
+W                     window_set             Set window C/W                     hidden
+plus,equals_sign      zoom(1)                Zoom in                            hidden
+minus                 zoom(-1)               Zoom out                           hidden
+v                     view_cycle             Stage view
+V                     grid                   2x2 pipeline views                 hidden
+f                     filters                Filters
+enter                 fill                   Fill
+space                 dab                    Paint a brush dab                  hidden
+b                     pen('brush')           Brush down/up (moving paints)      hidden
+E                     pen('eraser')          Eraser down/up (moving erases)     hidden
+comma                 brush_size(-1)         Brush smaller                      hidden
+full_stop             brush_size(1)          Brush larger                       hidden
+R                     edit_mode              Mode add/replace/subtract          hidden
+i                     limits                 Limits: slice range, HU range      hidden
+s                     stop_slice             Stop at this slice                 hidden
+I                     keep_largest           Keep largest island                hidden
+X                     remove_islands         Remove islands under N voxels      hidden
+F                     fill_between           Fill between slices                hidden
+t                     tools                  Edit tools
+left_square_bracket   tolerance(-1)          Tolerance -                        hidden
+right_square_bracket  tolerance(1)           Tolerance +                        hidden
+T                     range_edit             Edit range/tolerance               hidden
+c                     connectivity           4/8 connectivity                   hidden
+m                     prop_mode              Propagation slice/3D               hidden
+n                     new_object             New object
+tab                   cycle_object           Next object                        hidden priority
+N                     rename_object          Rename object                      hidden
+delete                clear_object           Clear object                       hidden
+u                     undo                   Undo
+U                     undo(True)             Redo                               hidden
+less_than_sign        propagate('backward')  Propagate back                     hidden
+greater_than_sign     propagate('forward')   Propagate fwd                      hidden
+S                     segment_here           Segment from cursor
+G                     segment_panel          Segmentation options
+p                     propagate('both')      Propagate
+a                     accept                 Accept proposal                    hidden
+x                     reject                 Reject proposal                    hidden
+escape                cancel                 Cancel job / lift brush            hidden
+d                     drift                  Drift
+r                     render3d               3D
+M                     measure                Measure
+e                     export                 Export
+o                     open                   Open                               hidden
+""")
 
 
 class NavMixin:

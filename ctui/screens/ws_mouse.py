@@ -24,13 +24,13 @@ Every display <-> voxel conversion goes through :mod:`ctui.screens.planes`.
 from __future__ import annotations
 
 import cv2
-from textual.binding import Binding
 
 from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions.edit import review
 from ctui.screens import planes
 from ctui.screens.imageview import ImageView
+from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_tools import ToolsMixin
 
@@ -45,17 +45,17 @@ SEED_COLOR = (0, 230, 255)
 BOX_COLOR = (255, 150, 0)
 POLY_COLOR = (255, 220, 60)
 
-MOUSE_BINDINGS = [
-    Binding("z", "click_fills", "Click fills on/off", show=False),
-    Binding("B", "background_seed", "Background seed at the cursor (again: remove)", show=False),
-    Binding("y", "box_corner", "ROI box: a corner at the cursor (or drag)", show=False),
-    Binding("Y", "box_clear", "ROI box off", show=False),
-    Binding("right_curly_bracket", "mark(1)", "Next marked slice of the proposal", show=False),
-    Binding("left_curly_bracket", "mark(-1)", "Previous marked slice of the proposal", show=False),
-    Binding("C", "cut_here", "Cut the proposal at this slice", show=False),
-    Binding("A", "accept_to_here", "Accept the proposal from the seed to here", show=False),
-    Binding("P", "scissors_point", "Scissors polygon: a point at the cursor (then clicks add points)", show=False),
-]
+MOUSE_BINDINGS = keys("""
+z                    click_fills      Click fills on/off                                                hidden
+B                    background_seed  Background seed at the cursor (again: remove)                     hidden
+y                    box_corner       ROI box: a corner at the cursor (or drag)                         hidden
+Y                    box_clear        ROI box off                                                       hidden
+right_curly_bracket  mark(1)          Next marked slice of the proposal                                 hidden
+left_curly_bracket   mark(-1)         Previous marked slice of the proposal                             hidden
+C                    cut_here         Cut the proposal at this slice                                    hidden
+A                    accept_to_here   Accept the proposal from the seed to here                         hidden
+P                    scissors_point   Scissors polygon: a point at the cursor (then clicks add points)  hidden
+""")
 
 
 def _plane_of(ws, widget) -> str:
