@@ -245,12 +245,16 @@ def run_parallel(
         return failures
     with ThreadPoolExecutor(max_workers=nt, thread_name_prefix="ctui-load") as pool:
         futs = {pool.submit(_safe, work, k, t): k for k, t in enumerate(tasks)}
-        for done, fut in enumerate(as_completed(futs), start=1):
-            r = fut.result()
-            if r:
-                failures.append((futs[fut], r))
-            if progress:
-                progress(done, total)
+        try:
+            for done, fut in enumerate(as_completed(futs), start=1):
+                r = fut.result()
+                if r:
+                    failures.append((futs[fut], r))
+                if progress:
+                    progress(done, total)
+        except BaseException:  # progress raised Cancelled (or Ctrl+C): the slices not started are dropped
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
     failures.sort()
     return failures
 
