@@ -17,6 +17,19 @@ from collections.abc import Callable
 HUGE = 1e9
 
 
+def command(subparsers: argparse._SubParsersAction, name: str, run: Callable[[argparse.Namespace], int], *,
+            help: str, description: str, epilog: str | None = None,
+            raw: bool = False) -> argparse.ArgumentParser:
+    """The parser of ``ctui NAME``: its one-line ``help`` (in ``ctui --help``), its
+    ``description`` and examples (``epilog``), and ``run`` as the function it calls.
+    ``raw``: the description and examples keep their line breaks (examples on several
+    lines); else argparse rewraps them."""
+    formatter = argparse.RawDescriptionHelpFormatter if raw else argparse.HelpFormatter
+    p = subparsers.add_parser(name, help=help, description=description, epilog=epilog, formatter_class=formatter)
+    p.set_defaults(func=run)
+    return p
+
+
 def number(name: str, lo: float = -HUGE, hi: float = HUGE, *, integer: bool = False,
            above: bool = False) -> Callable[[str], float | int]:
     """An argparse ``type``: a finite number in ``[lo, hi]`` (``above``: ``lo`` excluded),

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import command
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "batch",
+    p = command(
+        subparsers, "batch", run,
         help="segment, measure and mesh many series from a manifest, on Dask",
         description="Run one job per MANIFEST.csv row: columns series, seed (\"X,Y,Z\"), range (\"LO:HI\"), "
         "optional method (fill|grow|levelset), mode (slice|3d), background (\"X,Y,Z;...\"), filter "
@@ -19,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog="Example: ctui batch jobs.csv --out results.csv --workers 4\n"
         "manifest: series,seed,range,outdir\n"
         "          scans/a,\"94,81,40\",150:300,out",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        raw=True,
     )
     p.add_argument("manifest", help="the jobs, one CSV row each")
     p.add_argument("--out", required=True, metavar="RESULTS.csv", help="results table (one row per job)")
@@ -29,7 +31,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="local cluster: N worker processes (default: CPU count, at most 4)")
     p.add_argument("--threads", action="store_true", help="local cluster: threads instead of processes")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import command
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "demo",
+    p = command(
+        subparsers, "demo", run,
         help="write the synthetic CT phantom series (the bundled sample) to OUTDIR",
         description="Write the synthetic CT phantom used as ctui's sample data: a DICOM CT series "
         "(uint16, intercept -1024, shuffled file names) with a body, two contrast-enhanced "
@@ -18,7 +20,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--noise", type=float, default=8.0, help="noise sigma in HU (default 8)")
     p.add_argument("--no-drift", action="store_true", help="leave out the drifted slices")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

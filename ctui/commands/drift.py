@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from ctui.commands._args import number
+from ctui.commands._args import command, number
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.segment import add_segmentation_args
 
-    p = subparsers.add_parser(
-        "drift",
+    p = command(
+        subparsers, "drift", run,
         help="per-slice centroids of segmented objects and slices that drifted",
         description="Compute each object's centroid on every slice, fit a smooth curve along the "
         "slices and flag slices deviating more than --threshold mm (patient motion between slices). "
@@ -35,7 +35,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write a project with the drift corrections recorded (undoable; data unchanged)")
     p.add_argument("--plot", metavar="PNG", help="write a PNG plot of centroids and deviations")
     p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.set_defaults(func=run)
 
 
 def _source(args: argparse.Namespace):

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import command
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "edit",
+    p = command(
+        subparsers, "edit", run,
         help="3D edits of an object: keep/remove the island at a voxel, scissors, smoothing",
         description="Edit one object of a project as the TUI's edit tools do, in this order: keep "
         "(--keep-island) or remove (--remove-island) the island through a voxel, scissors (--cut inside|outside "
@@ -19,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog="Examples: ctui edit kidney.ctui --keep-island 120,88,40 --project kidney2.ctui\n"
         "          ctui edit liver.ctui --object 2 --box 100,80,10,180,160,40 --cut outside --project out.ctui\n"
         "          ctui edit spleen.ctui --smooth closing:4 --json --project out.ctui",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        raw=True,
     )
     p.add_argument("path", help="a .ctui project")
     p.add_argument("--object", type=int, default=None, metavar="N", help="object id (default: the only/first object)")
@@ -35,7 +37,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--smooth", default=None, metavar="METHOD:MM", help="median, opening or closing with a ball of MM mm")
     p.add_argument("--project", required=True, metavar="OUT.ctui", help="the edited project (a new file)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.set_defaults(func=run)
 
 
 def _err(msg: str, path: str | None = None):

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from ctui.commands._args import number
+from ctui.commands._args import command, number
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.engine.actions.formats import FORMATS  # the registry: plain data, cheap to import
 
-    p = subparsers.add_parser(
-        "export",
+    p = command(
+        subparsers, "export", run,
         help=f"write a project's objects as {', '.join(f.title for f in FORMATS.values())}",
         description="Export the objects of INPUT (a .ctui project, or a label file: DICOM-SEG, RTSTRUCT, "
         ".nii, .nii.gz, .nrrd, placed on --series when given). dicom-seg and rtstruct reference the "
@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog="Examples: ctui export kidney.ctui --format dicom-seg --out kidney-seg.dcm\n"
         "          ctui export labels.nii.gz --series scan/ --format rtstruct --out rt.dcm\n"
         "          ctui export kidney.ctui --format csv --out volumes.csv",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        raw=True,
     )
     p.add_argument("input", help="a .ctui project or a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)")
     p.add_argument("--format", required=True, choices=tuple(FORMATS), help="output format")
@@ -36,7 +36,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--keep-identifiers", action="store_true",
                    help="DICOM exports: keep the patient name, ID and birth date of the source series")
     p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ctui.commands._args import command
+
 
 def add_load_options(p: argparse.ArgumentParser, *, series: bool = True) -> None:
     """Loader options shared by the commands that read a series (``series``: add --series too;
@@ -36,8 +38,8 @@ def load_kwargs(args: argparse.Namespace) -> dict:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "info",
+    p = command(
+        subparsers, "info", run,
         help="describe a series: shape, spacing, orientation, series, skipped files, warnings",
         description="Load PATH (DICOM folder/files, image stack, multi-page TIFF, raw, MetaImage) and "
         "print its shape, spacing, orientation, modality, value range, window, the series found, each "
@@ -46,7 +48,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("path", nargs="+", help="folder, file(s) or glob pattern")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     add_load_options(p)
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,15 +5,15 @@ from __future__ import annotations
 import argparse
 import math
 
-from ctui.commands._args import HUGE, number
+from ctui.commands._args import HUGE, command, number
 
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.engine.actions import defaults  # no imports of its own: --help stays fast
 
-    p = subparsers.add_parser(
-        "measure",
+    p = command(
+        subparsers, "measure", run,
         help="volumes, areas, centreline and cross-sections of a segmented object",
         description="Measure one object: voxel and mesh (Gauss theorem) volumes, surface area; with "
         "--path, cross-sections along an automatic centreline or a given path (area, equivalent, "
@@ -24,7 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog='Examples: ctui measure seg.nii.gz --object 2 --path auto --step 0.5 --plot sec.png --json\n'
         '          ctui measure vessel.ctui --path "10,20,5;12,25,40" --between 10,30 --csv sec.csv\n'
         '          ctui measure seg.nrrd --path="-12,20,5;-14,25,40"   (use = when the path starts with -)',
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        raw=True,
     )
     p.add_argument("input", help="a .ctui project, a label volume (.nii/.nii.gz/.nrrd) or a mesh (.stl/.ply/.obj)")
     p.add_argument("--object", type=number("--object", 0, 65535, integer=True), default=None, metavar="N",
@@ -60,7 +60,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "series or a NIfTI/NRRD/MetaImage CT: its grey levels give HU statistics and --partial-volume); "
                    "the two geometries must match (affines within 2%% of a voxel)")
     p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.set_defaults(func=run)
 
 
 def _floats(text: str, n: int | None, what: str) -> list[float]:

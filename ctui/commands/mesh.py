@@ -16,15 +16,15 @@ from __future__ import annotations
 
 import argparse
 
-from ctui.commands._args import number
+from ctui.commands._args import command, number
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.commands.info import add_load_options
     from ctui.engine.actions import defaults  # plain constants: cheap for --help
 
-    p = subparsers.add_parser(
-        "mesh",
+    p = command(
+        subparsers, "mesh", run,
         help="surface of a series (--iso), a project's objects or an MRIC file, written as STL/PLY/OBJ",
         description="Build a closed triangle surface in patient mm and write it atomically. INPUT: a series "
         "with --iso VALUE (marching cubes), a .ctui project or label file (object surfaces: smoothed "
@@ -47,7 +47,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     add_load_options(p)
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

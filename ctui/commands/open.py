@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import os
 
+from ctui.commands._args import command
+
 GRAPHICS = ("auto", "sixel", "kitty", "halfblock", "ascii")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "open",
+    p = command(
+        subparsers, "open", run,
         help="open the TUI on a series, or resume a .ctui project",
         description="Open the terminal app on PATH (any series `load` accepts), or resume a "
         "PROJECT.ctui. With no PATH: the bundled sample series.",
@@ -24,7 +26,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", default=None, metavar="FILE",
                    help="open a label file over the series PATH for editing: DICOM-SEG, RTSTRUCT, .nii, .nii.gz, "
                    ".nrrd (e.g. from 3D Slicer or TotalSegmentator); its geometry must match the series'")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

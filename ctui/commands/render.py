@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ctui.commands._args import number
+from ctui.commands._args import command, number
 
 
 
@@ -14,8 +14,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from ctui.engine.actions import defaults
     from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 
-    p = subparsers.add_parser(
-        "render",
+    p = command(
+        subparsers, "render", run,
         help="render a mesh, project or series to PNG / turntable GIF (offscreen, EGL)",
         description="Render offscreen (moderngl on EGL: no display needed). INPUT is a mesh file "
         "(STL/PLY/OBJ), a .ctui project (its segmented objects) or a series (DICOM folder, image stack, "
@@ -63,7 +63,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", metavar="FILE", default=None,
                    help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     add_load_options(p)
-    p.set_defaults(func=run)
 
 
 def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ctui.commands._args import HUGE, finite_list, number
+from ctui.commands._args import HUGE, command, finite_list, number
 
 FILTER_HELP = (
     "filter step NAME[:key=value,...], repeatable, run in order (stage 1 steps, then stage 2). "
@@ -140,8 +140,8 @@ def parse_box(text: str | None):
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "segment",
+    p = command(
+        subparsers, "segment", run,
         help="objects from seeds and an HU range: fill + propagation, grow, or level set",
         description="Fill each object from its seed on the seed slice (after the filter pipeline), "
         "propagate it slice by slice (or in 3D) keeping only what joins it through necks wider than --neck mm, "
@@ -160,7 +160,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with a .ctui PATH and no --seed: the objects --interpolate/--keep-largest/--min-island "
                         "edit, e.g. 1,3 (default: all); write the result with --project NEW.ctui")
     p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.set_defaults(func=run)
 
 
 # ----------------------------------------------------------------------------- helpers
