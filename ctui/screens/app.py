@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from textual import events, on, work
+from textual.worker import get_current_worker
 from textual.app import App, SystemCommand
 from textual.binding import Binding
 from textual.screen import Screen
@@ -22,9 +23,11 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions import project
 from ctui.engine.actions.mesh import warm_up
 from ctui.engine.actions.project import source_load_options
+from ctui.engine.actions.series import preview
+from ctui.engine.core.progress import Cancelled
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.graphics import colour_advice
-from ctui.screens.loading import LoadingScreen
+from ctui.screens.loading import LoadingScreen, PreviewReady
 from ctui.screens.messages import JobProgress, LoadFailed, SessionReady
 from ctui.screens.projects import project_from_session, session_from_project
 from ctui.screens.session import Session, load_volume, safe_cwd, sample_source
@@ -33,6 +36,9 @@ __all__ = ["AUTOSAVE_SECONDS", "CtuiApp", "LoadingScreen", "project_from_session
 
 AUTOSAVE_SECONDS = 180.0
 
+
+#: a series with fewer voxels loads about as fast as its middle slice: no preview first
+PREVIEW_MIN_VOXELS = 16_000_000
 
 SIDECARS = (".json", ".txt", ".md", ".csv", ".xml", ".html", ".pdf", ".log", ".yaml", ".yml", ".py", ".sh")
 
@@ -121,28 +127,61 @@ class CtuiApp(App):
             self.errors.append(str(message))
         super().notify(str(message), title=title, severity=severity, timeout=timeout, markup=markup)
 
-    @work(thread=True, exclusive=True, group="load")
-    def load_worker(self, path: str | None, options: dict | None = None) -> None:
-        options = dict(self.load_options if options is None else options)
+    def _load_progress_of(self):
+        """The load worker's progress callback: posts JobProgress, raises Cancelled once the
+        worker is cancelled (Esc on the loading screen, or another load started)."""
+        worker = get_current_worker()
 
         def progress(*a: Any) -> None:
+            if worker.is_cancelled:
+                raise Cancelled()
             if len(a) >= 2 and a[1]:
                 self.post_message(JobProgress("Loading", float(a[0]), float(a[1])))
 
+        return worker, progress
+
+    def _post_preview(self, worker, path: str, options: dict, project_labels=None) -> Any:
+        """Read and post the middle slice of ``path`` (a large series) before the rest; the
+        Preview or None. ``project_labels``: a project's objects, drawn over it."""
         try:
+            pv = preview(path, min_voxels=PREVIEW_MIN_VOXELS, **options)
+        except Exception:  # the full read reports whatever is wrong with the input
+            return None
+        if pv is None or worker.is_cancelled:
+            return None
+        lab = None
+        if project_labels is not None and project_labels.shape == (pv.depth, *pv.volume.shape[1:]):
+            lab = project_labels[pv.z]
+        self.post_message(PreviewReady(path, pv, lab))
+        return pv
+
+    @on(PreviewReady)
+    def _preview_ready(self, msg: PreviewReady) -> None:
+        if isinstance(self.screen, LoadingScreen) and self.screen.reading:
+            self.screen.show_preview(msg)
+
+    def cancel_load(self) -> None:
+        """Stop the running load (its worker raises Cancelled at its next slice)."""
+        self.workers.cancel_group(self, "load")
+
+    @work(thread=True, exclusive=True, group="load")
+    def load_worker(self, path: str | None, options: dict | None = None) -> None:
+        options = dict(self.load_options if options is None else options)
+        worker, progress = self._load_progress_of()
+        try:
+            src = path if path is not None else sample_source()
+            self._post_preview(worker, src, options)
             vol = load_volume(path, progress=progress, **options)
+        except Cancelled:
+            return
         except CtuiError as exc:
             self.post_message(LoadFailed(path, [str(exc)], options))
             return
         except Exception as exc:  # a loader bug must not become a traceback
             self.post_message(LoadFailed(path, [f"{type(exc).__name__}: {exc}"]))
             return
-        src = path
-        if src is None:
-            try:
-                src = sample_source()
-            except CtuiError:
-                src = ""
+        if worker.is_cancelled:
+            return
         self.post_message(SessionReady(Session(vol, source_path=str(src or ""), source_options=options)))
 
     @on(JobProgress)
@@ -170,21 +209,27 @@ class CtuiApp(App):
 
     @work(thread=True, exclusive=True, group="load")
     def load_project_worker(self, path: str) -> None:
+        worker, progress = self._load_progress_of()
         try:
             proj = project.load_project(path)
             if series_available(proj):  # an empty source path must not load the current folder
-                vol = load_volume(proj.source_path, **source_load_options(proj))
+                opts = source_load_options(proj)
+                self._post_preview(worker, proj.source_path, opts, proj.labels)
+                vol = load_volume(proj.source_path, progress=progress, **opts)
                 check_source(proj, vol, path)  # a series whose voxels changed is refused
             else:  # the series moved: the objects on the recorded geometry, no grey levels
                 vol = labels_only_volume(proj, path)
             sess = session_from_project(proj, vol, path)
+        except Cancelled:
+            return
         except CtuiError as exc:
             self.post_message(LoadFailed(path, [str(exc)]))
             return
         except Exception as exc:
             self.post_message(LoadFailed(path, [f"{type(exc).__name__}: {exc}"]))
             return
-        self.post_message(SessionReady(sess))
+        if not worker.is_cancelled:
+            self.post_message(SessionReady(sess))
 
     def _start_workspace(self, session: Session, *, recovery: bool = True) -> None:
         from ctui.screens.workspace import WorkspaceScreen

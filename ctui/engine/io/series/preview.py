@@ -25,6 +25,7 @@ from typing import Any
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.volume import Volume
+from ctui.engine.io.series._common import list_files
 
 __all__ = ["Preview", "preview"]
 
@@ -65,8 +66,6 @@ def preview(path: Any, *, min_voxels: int = 0, **options: Any) -> Preview | None
         if files is None:
             if single is None or not single.is_dir():
                 return None
-            from ctui.engine.io.series._common import list_files
-
             files = list_files(single, skipped=[])
             base: Path | None = single
         else:
@@ -105,7 +104,7 @@ def _dicom(files: list[Path], *, base: Path | None, label: Any, min_voxels: int,
 
 
 def _volume_file(p: Path, *, min_voxels: int, spacing: Any, memory_limit: int | None) -> Preview | None:
-    from ctui.engine.io.series import _load_volume_file, _with_series
+    from ctui.engine.io.series import _load_volume_file, _with_series  # the package imports this lazily
     from ctui.engine.io.series.sampled import _declared  # the header's shape, as ctui info samples it
 
     d = _declared(p)

@@ -1,0 +1,88 @@
+"""The TUI shows a series' middle slice before the rest is read, with progress, then swaps in
+the full series at that slice; Esc cancels a load. The full read is held back (an Event)
+until the preview has been seen, so the order is certain on any machine."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from conftest import shared
+from ctui.screens import app as app_mod
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp, LoadingScreen
+from ctui.screens.testing import wait_for, wait_workspace
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(app_mod, "PREVIEW_MIN_VOXELS", 0)  # the real data set is small: preview it anyway
+
+
+def _held_load(monkeypatch) -> tuple[threading.Event, list]:
+    """The full read waits for ``go``; ``progress`` gets the worker's progress calls."""
+    go = threading.Event()
+    calls: list = []
+    real = app_mod.load_volume
+
+    def held(path, *, progress=None, **options):
+        assert go.wait(60), "the test never released the full read"
+        if progress is not None:
+            progress(0, 1)  # a cancelled worker raises here
+            calls.append(1)
+        return real(path, progress=progress, **options)
+
+    monkeypatch.setattr(app_mod, "load_volume", held)
+    return go, calls
+
+
+def _preview_shown(app) -> bool:
+    scr = app.screen
+    return isinstance(scr, LoadingScreen) and scr.preview is not None and bool(scr.query("#load-preview"))
+
+
+async def test_preview_then_full_series(monkeypatch):
+    path = shared("ct_head_phantom_philips")
+    go, _ = _held_load(monkeypatch)
+    app = CtuiApp(str(path))
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda: _preview_shown(app), what="the preview slice")
+        scr = app.screen
+        pv = scr.preview
+        caption = str(scr.query_one("#load-caption").render())
+        assert f"z {pv.z}/{pv.depth - 1}" in caption and "preview" in caption
+        shown = scr.query_one("#load-preview").rgb.copy()
+        assert app.workspace is None  # the rest is not read yet
+        go.set()
+        await wait_workspace(pilot, app)
+        s = app.session
+        assert s.volume.shape[0] == pv.depth and s.z == pv.z  # the workspace opens on the previewed slice
+        assert np.array_equal(s.volume.data[pv.z], pv.volume.data[0])
+        # the workspace draws that slice exactly as the preview did
+        plane = app.workspace.main_view
+        assert np.array_equal(plane.rgb if plane.rgb.ndim == 3 else np.repeat(plane.rgb[..., None], 3, 2), shown)
+        assert not app.internal_errors and not app.errors
+
+
+async def test_esc_cancels_the_load(monkeypatch):
+    path = shared("ct_head_phantom_philips")
+    go, calls = _held_load(monkeypatch)
+    app = CtuiApp(str(path))
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda: _preview_shown(app), what="the preview slice")
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not app.screen.reading
+        assert "cancelled" in str(app.screen.query_one("#load-title").render())
+        go.set()
+        for w in list(app.workers):
+            if w.group == "load":
+                await w.wait()
+        await pilot.pause(0.2)
+        assert app.workspace is None and not calls  # the full read stopped at its first progress call
+        assert not app.internal_errors
