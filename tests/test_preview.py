@@ -65,3 +65,19 @@ def test_cancelled_progress_stops_the_load():
     with pytest.raises(Cancelled):
         load(p, progress=progress)
     assert len(seen) == 3
+
+
+def test_load_after_preview_reads_each_header_once(monkeypatch):
+    from ctui.engine.io.series import dicom_headers
+
+    p = shared("ct_head_phantom_philips")
+    calls = []
+    real = dicom_headers.read_header
+    monkeypatch.setattr(dicom_headers, "read_header", lambda f, **kw: calls.append(f) or real(f, **kw))
+    pv = preview(p)
+    n = len(calls)
+    full = load(p)
+    assert len(calls) == n >= full.shape[0]  # the load used the preview's headers
+    assert np.array_equal(pv.volume.data[0], full.data[pv.z])
+    load(p)  # used once only: the next load reads them again
+    assert len(calls) == 2 * n

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -526,12 +527,23 @@ def _multiframe(ds: Any, base: Frame, nframes: int) -> list[Frame]:
 
 # ===================================================================== grouping
 def read_headers(
-    files: Sequence[Path], *, base: Path | None = None, progress: Callable[[int, int], Any] | None = None
+    files: Sequence[Path], *, base: Path | None = None, progress: Callable[[int, int], Any] | None = None,
+    remember: bool = False,
 ) -> tuple[dict[str, Series], list[dict[str, str]], set[str]]:
-    """Headers of all ``files``: series by UID, skipped files, identifiers seen.
+    """Headers of all ``files``: series by UID, skipped files, identifiers seen. ``remember``:
+    keep them for the next call in this thread (used once, if the files are unchanged).
 
     A file whose header claims more pixel bytes than the process may allocate (free
     RAM, RLIMIT_AS, cgroup limit) is skipped with that reason, naming the file."""
+    kept = getattr(_KEPT, "last", None)  # one use only, in the thread that kept it
+    _KEPT.last = None
+    key = _files_key(files, base) if kept is not None or remember else None
+    if kept is not None and key is not None and kept[0] == key:  # the preview read these files just now
+        _, series0, skipped0, ids0 = kept
+        if progress and files:
+            progress(len(files), len(files))
+        return ({u: Series(s.uid, list(s.frames), list(s.skipped), list(s.warnings), set(s.files))
+                 for u, s in series0.items()}, [dict(d) for d in skipped0], set(ids0))
     memory = int(0.9 * available_memory())
     series: dict[str, Series] = {}
     skipped: list[dict[str, str]] = []
@@ -552,7 +564,25 @@ def read_headers(
             s.files.add(str(p))
         if progress and (k % 16 == 15 or k + 1 == total):
             progress(k + 1, total)
+    if remember and key is not None:
+        _KEPT.last = (key, {u: Series(s.uid, list(s.frames), list(s.skipped), list(s.warnings), set(s.files))
+                            for u, s in series.items()}, [dict(d) for d in skipped], set(ids))
     return series, skipped, ids
+
+
+#: headers kept by ``read_headers(remember=True)`` (the TUI's preview) for the next read of the
+#: same unchanged files in the same thread (the full load right after it), then dropped
+_KEPT = threading.local()
+
+
+def _files_key(files: Sequence[Path], base: Path | None) -> tuple | None:
+    """The files' names, sizes, modification times and inodes (None: one could not be
+    stat'ed): equal keys mean headers read before still hold."""
+    try:
+        return (str(base), tuple(str(p) for p in files),
+                tuple((st.st_size, st.st_mtime_ns, st.st_ino) for st in (os.stat(p) for p in files)))
+    except OSError:
+        return None
 
 
 def _ordered_series(series: dict[str, Series]) -> list[Series]:

@@ -81,7 +81,7 @@ def _dicom(files: list[Path], *, base: Path | None, label: Any, min_voxels: int,
            spacing: Any = None, resample: bool = True, memory_limit: int | None = None) -> Preview | None:
     from ctui.engine.io.series import _finite, dicom  # the DICOM loader loads when DICOM files are met
 
-    found, _, ids = dicom.read_headers(files, base=base)
+    found, _, ids = dicom.read_headers(files, base=base, remember=True)  # the full load reads them once
     if not found:
         return None
     ordered = dicom._ordered_series(found)
