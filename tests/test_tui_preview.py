@@ -86,3 +86,31 @@ async def test_esc_cancels_the_load(monkeypatch):
         await pilot.pause(0.2)
         assert app.workspace is None and not calls  # the full read stopped at its first progress call
         assert not app.internal_errors
+
+
+async def test_project_preview_shows_its_objects(monkeypatch, tmp_path):
+    from ctui.engine.actions.project import new_project, save_project
+    from ctui.engine.actions.series import load
+
+    path = shared("ct_head_phantom_philips")
+    vol = load(path)
+    labels = np.zeros(vol.shape, np.uint8)
+    z = vol.shape[0] // 2
+    labels[z, 200:300, 200:300] = 1
+    proj = new_project(vol, source_path=path, labels=labels, objects=[{"id": 1, "name": "box"}])
+    save_project(tmp_path / "p.ctui", proj)
+    go, _ = _held_load(monkeypatch)
+    app = CtuiApp(project=str(tmp_path / "p.ctui"))
+    async with app.run_test(size=(120, 40)) as pilot:
+        def coloured() -> bool:  # the preview, then the object drawn over it
+            if not _preview_shown(app):
+                return False
+            rgb = app.screen.query_one("#load-preview").rgb
+            return bool(rgb is not None and (rgb[..., 0] != rgb[..., 1]).any())
+
+        await wait_for(pilot, coloured, what="the preview with the project's object")
+        assert app.screen.preview.z == z
+        go.set()
+        await wait_workspace(pilot, app)
+        assert app.session.z == z and int(app.session.seg.labels[z, 250, 250]) == 1
+        assert not app.internal_errors and not app.errors

@@ -140,11 +140,12 @@ class CtuiApp(App):
 
         return worker, progress
 
-    def _post_preview(self, worker, path: str, options: dict, project_labels=None) -> Any:
-        """Read and post the middle slice of ``path`` (a large series) before the rest; the
-        Preview or None. ``project_labels``: a project's objects, drawn over it."""
+    def _post_preview(self, worker, path: str, options: dict, project_labels=None, pv=None) -> Any:
+        """Read (unless ``pv`` is that Preview already) and post the middle slice of ``path`` (a
+        large series) before the rest; the Preview or None. ``project_labels``: a project's
+        objects, drawn over it."""
         try:
-            pv = preview(path, min_voxels=PREVIEW_MIN_VOXELS, **options)
+            pv = pv or preview(path, min_voxels=PREVIEW_MIN_VOXELS, **options)
         except Exception:  # the full read reports whatever is wrong with the input
             return None
         if pv is None or worker.is_cancelled:
@@ -211,10 +212,14 @@ class CtuiApp(App):
     def load_project_worker(self, path: str) -> None:
         worker, progress = self._load_progress_of()
         try:
+            head = project.load_project(path, with_labels=False)  # project.json: the series to preview
+            pv = self._post_preview(worker, head.source_path, source_load_options(head)) \
+                if series_available(head) else None
             proj = project.load_project(path)
+            if pv is not None and proj.labels is not None:  # the objects over the preview
+                self._post_preview(worker, head.source_path, {}, proj.labels, pv)
             if series_available(proj):  # an empty source path must not load the current folder
                 opts = source_load_options(proj)
-                self._post_preview(worker, proj.source_path, opts, proj.labels)
                 vol = load_volume(proj.source_path, progress=progress, **opts)
                 check_source(proj, vol, path)  # a series whose voxels changed is refused
             else:  # the series moved: the objects on the recorded geometry, no grey levels

@@ -254,8 +254,9 @@ def _expect(cond: bool, p: Path, msg: str) -> None:
         raise FormatError(f"{p}: not a valid ctui project: {msg}")
 
 
-def load_project(path: str | os.PathLike) -> Project:
-    """Load a ``.ctui`` project (or autosave) written by :func:`save_project`.
+def load_project(path: str | os.PathLike, *, with_labels: bool = True) -> Project:
+    """Load a ``.ctui`` project (or autosave) written by :func:`save_project`; without its
+    labels (``labels`` None: project.json only, validated) unless ``with_labels``.
 
     Raises
     ------
@@ -270,7 +271,7 @@ def load_project(path: str | os.PathLike) -> Project:
             head = fh.read(4)
         _expect(head == b"PK\x03\x04", p, "not a zip archive" if len(head) == 4 else "file is empty or truncated")
         with zipfile.ZipFile(p) as zf:
-            return _load_zip(p, zf, st.st_size)
+            return _load_zip(p, zf, st.st_size, with_labels=with_labels)
     except FormatError:
         raise
     except MemoryError:
@@ -282,7 +283,7 @@ def load_project(path: str | os.PathLike) -> Project:
         raise FormatError(f"{p}: corrupted ctui project ({msg})") from None
 
 
-def _load_zip(p: Path, zf: zipfile.ZipFile, file_size: int) -> Project:
+def _load_zip(p: Path, zf: zipfile.ZipFile, file_size: int, *, with_labels: bool = True) -> Project:
     infos = {i.filename: i for i in zf.infolist()}
     _expect(JSON_MEMBER in infos, p, f"{JSON_MEMBER} is missing")
     ji = infos[JSON_MEMBER]
@@ -294,7 +295,7 @@ def _load_zip(p: Path, zf: zipfile.ZipFile, file_size: int) -> Project:
         raise FormatError(f"{p}: not a valid ctui project: {JSON_MEMBER} is not JSON ({exc})") from None
     version, geometry = validate(meta, p)
     window = meta.get("window")
-    labels = _read_labels(p, zf, infos, meta.get("labels"), file_size)
+    labels = _read_labels(p, zf, infos, meta.get("labels"), file_size) if with_labels else None
     return Project(
         source_path=meta.get("source_path") or "",
         source_options=meta.get("source_options") or {},
