@@ -69,11 +69,13 @@ def _run(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str, float
     return dt, usage.ru_utime + usage.ru_stime, lines[-1] if lines else "", usage.ru_maxrss / 1024
 
 
-def tui_paint(path: Path, env: dict, cwd: Path, *, timeout: float = 60.0) -> float | None:
-    """Seconds from starting ``python -m ctui PATH`` in a private tmux (100 x 30) to a painted
-    workspace (the status line's "Slice"), read with capture-pane every 50 ms."""
+def tui_paint(path: Path, env: dict, cwd: Path, *, timeout: float = 60.0) -> tuple[float | None, float | None]:
+    """Seconds from starting ``python -m ctui PATH`` in a private tmux (100 x 30) to the
+    series' first slice on screen (the loading screen's preview, or the workspace when no
+    preview was shown: small series, older trees) and to a painted workspace (the status
+    line's "Slice"), read with capture-pane every 50 ms."""
     if shutil.which("tmux") is None:
-        return None
+        return None, None
     sock = ["tmux", "-L", f"ctui-e2e-{uuid.uuid4().hex[:6]}"]
     env = {k: v for k, v in env.items() if k not in ("TMUX", "TMUX_PANE")}
     work = tempfile.mkdtemp()
@@ -82,14 +84,18 @@ def tui_paint(path: Path, env: dict, cwd: Path, *, timeout: float = 60.0) -> flo
            f"--graphics halfblock {path}; sleep 30")
     t0 = time.monotonic()
     subprocess.run(sock + ["new-session", "-d", "-s", "e2e", "-x", "100", "-y", "30", cmd], check=True, env=env)
+    first = None
     try:
         while time.monotonic() - t0 < timeout:
             out = subprocess.run(sock + ["capture-pane", "-p", "-t", "e2e"], capture_output=True, text=True,
                                  env=env).stdout
+            t = time.monotonic() - t0
+            if first is None and "preview:" in out:
+                first = t
             if "Slice" in out:
-                return time.monotonic() - t0
+                return (first if first is not None else t), t
             time.sleep(0.05)
-        return None
+        return first, None
     finally:
         subprocess.run(sock + ["kill-server"], capture_output=True, env=env)
         shutil.rmtree(work, ignore_errors=True)
@@ -168,14 +174,19 @@ def run_suite(args, *, make_series, peer_source: str) -> None:
             results[(name, t.name)] = _median([t.run(a, cold=cold) for _ in range(args.repeat)])
         if "warm cache" in name:  # the peer right beside ctui's big mesh
             peer_runs = [_run(peer_cmd, trees[-1].env, ROOT) for _ in range(args.repeat)]
-    tui: dict[tuple[str, str], float | None] = {}
+    tui: dict[tuple[str, str], tuple[float | None, float | None]] = {}
     if not args.no_tui:
-        for what in ("series", "project"):
+        big_proj = {t.name: tmp / f"big-{t.name}.ctui" for t in trees}
+        for t in trees:  # a project of the big series (its body, grown from the centre: a large object)
+            t.run(["segment", str(series), "--seed", f"{shape[2] // 2},{shape[1] // 2},{shape[0] // 2}",
+                   "--range=-200:200", "--project", str(big_proj[t.name])])
+        for what in ("series", "project", "big project"):
             for t in trees:
-                p = proj[t.name] if what == "project" else series
+                p = {"series": series, "project": proj[t.name], "big project": big_proj[t.name]}[what]
                 runs = [tui_paint(p, t.env, t.root) for _ in range(args.repeat)]
-                ok = [r for r in runs if r is not None]
-                tui[(what, t.name)] = statistics.median(ok) if ok else None
+                med = [statistics.median(ok) if ok else None
+                       for ok in ([r[i] for r in runs if r[i] is not None] for i in (0, 1))]
+                tui[(what, t.name)] = (med[0], med[1])
     _print(rows, trees, results, _median(peer_runs), tui)
     shutil.rmtree(tmp, ignore_errors=True)
 
@@ -197,8 +208,10 @@ def _print(rows, trees, results, peer, tui) -> None:
                       f"cpu {c / peer[1]:.2f}  ({line[:80]})")
     print(f"  peer: {peer[2][:90]}")
     if tui:
-        for what in ("series", "project"):
-            cells = "".join(f"  {t.name} {tui[(what, t.name)]:.2f} s" if tui[(what, t.name)] is not None
-                            else f"  {t.name} never" for t in trees)
-            label = "the big series" if what == "series" else "the kidney project"
-            print(f"TUI painted workspace, {label:20s}{cells}")
+        fmt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
+        for what in ("series", "project", "big project"):
+            cells = "".join(f"  {t.name}: first slice {fmt(tui[(what, t.name)][0])}, workspace "
+                            f"{fmt(tui[(what, t.name)][1])}" for t in trees)
+            label = {"series": "the big series", "project": "the kidney project",
+                     "big project": "a project of the big series"}[what]
+            print(f"TUI, {label:28s}{cells}")

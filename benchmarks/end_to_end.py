@@ -25,7 +25,8 @@ on the big series (warm and cold numba cache) beside the SimpleITK + VTK script,
 segment`` + ``ctui mesh`` of a kidney (the TotalSegmentator abdomen of ``/work/shared/data``
 written as DICOM, seeded at the right kidney's deepest voxel), ``ctui measure`` without and
 with sections (``--path auto``), ``ctui export --format dicom-seg``, and the TUI's time to a
-painted workspace (series and project; tmux, wall only). With ``--base TREE`` (an older
+painted workspace and to the first slice on screen (the loading screen's preview) for the
+series, the kidney project and a project of the big series (tmux, wall only). With ``--base TREE`` (an older
 checkout: ``git worktree add /tmp/ctui-base fa2b183``) every row also runs that tree
 (``PYTHONPATH``), interleaved run by run, for before/after figures from the same run::
 
