@@ -54,8 +54,10 @@ def test_one_seed_one_organ(abdomen, organ, with_range, mode):
     got = res.segmentation.labels == res.objects[0].id
     d, ratio = dice(got, ref), got.sum() / ref.sum()
     assert d >= 0.85, f"{organ}: Dice {d:.3f}"
-    # the goal is 15%; the right kidney (slice mode, no range) and the liver with its range reach 1.17-1.23
-    assert 0.85 <= ratio <= 1.25, f"{organ}: volume ratio {ratio:.2f}"
+    # the goal, 15%, holds everywhere but the liver with its 5-95th percentile range in 3D (1.16: the
+    # unenhanced vena cava, portal vein and stomach wall touch it broadly at the liver's own values)
+    top = 1.17 if (organ, with_range, mode) == ("liver", True, "3d") else 1.15
+    assert 0.85 <= ratio <= top, f"{organ}: volume ratio {ratio:.2f}"
     obj = res.objects[0]
     assert obj.neck["mode"] == "auto" and obj.neck["width_mm"] > 0 and obj.neck["reason"]
     assert (obj.auto_range is None) == with_range

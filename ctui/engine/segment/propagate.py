@@ -322,8 +322,43 @@ def iter_propagation(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int,
                 break
             prev = cur
             zz += step
+    if s.neck_rule == "sweep" and s.neck_mm > 0 and not prop.cancelled:
+        _cut_slices_3d(prop, z, start_mask, s, tuple(float(v) for v in volume.spacing))
     prop.timings["total"] = time.perf_counter() - t_start
     return prop
+
+
+def _cut_slices_3d(prop: Proposal, z: int, start_mask: np.ndarray, s: PropagationSettings,
+                   spacing: tuple[float, float, float]) -> None:
+    """The automatic guard's 3D cut over the slice-by-slice result, in place: each slice's 2D cut sees only its
+    own plane, so a pocket as wide as the neck in-plane but short across the slices (the renal pelvis at
+    the hilum) passes it. Right kidney, slice mode, no range (benchmarks/organs.py): Dice 0.876 -> 0.896,
+    volume 1.12x -> 0.95x the reference."""
+    got = prop.mask3d()
+    if got is None:
+        return
+    (z0, y0, x0), m = got
+    yx = np.argwhere(start_mask[y0:y0 + m.shape[1], x0:x0 + m.shape[2]])
+    seeds = np.column_stack([np.full(len(yx), z - z0), yx])
+    t0 = time.perf_counter()
+    kept, status = cut_3d(m, seeds, width_mm=s.neck_mm, spacing=spacing, fill_holes=s.fill_holes,
+                          connectivity=s.connectivity)
+    kept[z - z0] |= m[z - z0]  # the seed slice keeps what was drawn
+    if status == "cut":
+        _record_cuts_3d(prop, m & ~kept, kept, z0)
+        for k in range(m.shape[0]):
+            zz = z0 + k
+            if zz not in prop.masks:
+                continue
+            area = int(np.count_nonzero(kept[k]))
+            if area == 0:
+                del prop.masks[zz], prop.areas[zz]
+                continue
+            bb = _bbox(kept[k])
+            assert bb is not None
+            prop.masks[zz] = (y0 + bb[0], x0 + bb[2], kept[k, bb[0]:bb[1], bb[2]:bb[3]].copy())
+            prop.areas[zz] = area
+    prop.timings["necks_3d"] = time.perf_counter() - t0
 
 
 def _outside_box(inr: np.ndarray, box: tuple[tuple[int, int], ...], y0: int, x0: int) -> None:
