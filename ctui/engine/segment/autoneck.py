@@ -24,9 +24,9 @@ inside; the result keeps holes up to ``HOLE_MM2`` a slice when asked (``fill_hol
 
 Measured on ``../shared/data/totalseg_example/ct_abdomen_3mm.nii.gz`` (one seed at each
 organ's deepest point, 3D): a fixed 5 mm neck with each organ's own 5-95th percentile range
-gave Dice 0.08-0.64; this choice with no range given: kidney right 0.900, kidney left 0.941,
-spleen 0.898, liver 0.895 (benchmarks/organs.py prints the full table, slice mode and the
-peers included).
+gave Dice 0.08-0.64; this choice with no range given: kidney right 0.900, kidney left 0.939,
+spleen 0.898, liver 0.896, volumes 0.96-1.10x the reference (benchmarks/organs.py prints the
+full table, slice mode and the peers included).
 
 The sweep runs on a box around the seed resampled to about ``SWEEP_MM`` voxels (the
 chosen width is a physical size; coarse voxels find it as well and keep the cost of a
