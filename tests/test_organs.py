@@ -114,3 +114,15 @@ def test_grow_with_background_seeds_gives_the_kidney(abdomen, neck):
     got = res.segmentation.labels == res.objects[0].id
     assert dice(got, ref) >= 0.88
     assert 0.9 <= got.sum() / ref.sum() <= 1.1
+
+
+@pytest.mark.shared_data
+def test_mixed_neighbourhood_warns():
+    """A seed in a contrast-enhanced kidney (cortex ~250 HU beside medulla ~100 HU; the aorta CT's field of view
+    holds its upper pole) gives an automatic range that spans several tissues: the fill takes the liver and
+    the muscles (over 800 mL), and the result must say why instead of returning it silently."""
+    vol = load(shared("totalseg_example") / "ct_aorta_1p5mm.nii.gz")
+    res = segment(vol, [(14, 92, 2)], [], options=SegmentOptions(mode="3d"))
+    obj = res.objects[0]
+    assert obj.volume_ml > 500
+    assert any("not uniform" in w and "give a range" in w for w in obj.warnings), obj.warnings

@@ -410,6 +410,12 @@ def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed
     return notes
 
 
+# an automatic range whose neighbourhood spreads more than this many times the image noise mixes tissues
+# (real CT, benchmarks/organs.py seeds: kidneys, spleen, liver 1.0-1.2x unenhanced; a kidney's cortex and
+# medulla in a contrast phase 1.8x, the aorta's lumen beside its thrombus 3.8x)
+MIXED_NEIGHBOURHOOD = 1.5
+
+
 def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: SegmentOptions) -> list[str]:
     """Warnings for results that are probably wrong: collapsed, or many times what the seed suggests."""
     out = []
@@ -420,6 +426,11 @@ def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: Se
     if start.neck is not None and start.width <= 0 and not start.neck.reason.startswith("no leak"):
         out.append(f"the leak guard is off for this object ({start.neck.reason}): check it for leaks, or force "
                    "a neck width")
+    rc = start.auto_range
+    if rc is not None and rc.noise > 0 and rc.sd > MIXED_NEIGHBOURHOOD * rc.noise:
+        out.append(f"the seed's neighbourhood is not uniform (spread {rc.sd:.0f}, {rc.sd / rc.noise:.1f}x the image "
+                   f"noise), so the automatic range [{rc.low:g}, {rc.high:g}] may take in several tissues: give "
+                   "a range, or move the seed into the object's even part")
     depth = start.neck.depth_mm if start.neck is not None else 0.0
     if depth > 0:
         ball_ml = 4.0 / 3.0 * np.pi * depth ** 3 / 1000.0

@@ -46,10 +46,11 @@ class RangeChoice:
     voxels: int
     hist: list[int] = field(default_factory=list)
     edges: list[float] = field(default_factory=list)
+    noise: float = 0.0  # the image noise sd near the seed (neighbour differences), same units
 
     def to_dict(self) -> dict[str, Any]:
         return {"low": round(self.low, 3), "high": round(self.high, 3), "median": round(self.median, 3),
-                "sd": round(self.sd, 3), "voxels": self.voxels, "hist": list(self.hist),
+                "sd": round(self.sd, 3), "noise": round(self.noise, 3), "voxels": self.voxels, "hist": list(self.hist),
                 "edges": [round(e, 3) for e in self.edges]}
 
 
@@ -86,7 +87,7 @@ def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float =
     edges = np.linspace(med - 4 * sd, med + 4 * sd, HIST_BINS + 1)
     hist = np.histogram(np.clip(vals, edges[0], edges[-1]), bins=edges)[0]
     return RangeChoice(low=lo, high=hi, median=med, sd=sd, voxels=int(vals.size), hist=[int(h) for h in hist],
-                       edges=[float(e) for e in edges])
+                       edges=[float(e) for e in edges], noise=float(noise))
 
 
 def seed_voxels(inrange: np.ndarray, seed_zyx: tuple[int, int, int]) -> np.ndarray:
