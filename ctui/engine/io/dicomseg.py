@@ -24,6 +24,7 @@ convention; :mod:`ctui.engine.io.imports` places them on a series' grid.
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui import __version__
 from ctui.engine.core.atomic import atomic_path
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
@@ -199,8 +201,6 @@ def _segment_description(n: int, obj: dict) -> Any:
     import highdicom as hd
     from pydicom.sr.codedict import codes
 
-    from ctui import __version__
-
     return hd.seg.SegmentDescription(
         segment_number=n,
         segment_label=obj["name"][:64],
@@ -229,12 +229,10 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     masks : {object id: bool (z, y, x)} full masks of objects that overlap others (imported
         segments): then every segment is written from its own mask, overlaps kept.
 
-    Returns the written path. Raises CtuiError when ``labels`` holds no object.
+    Returns the written path. Raises CtuiError when ``labels`` holds no object. Single-frame
+    source images: built with pydicom (:mod:`ctui.engine.io.segwriter`); one multi-frame
+    source image: with highdicom.
     """
-    import highdicom as hd
-
-    from ctui import __version__
-
     require_references(sources, what="DICOM-SEG", path=path)  # never invents the UIDs it points at
     lab = np.asarray(labels)
     masks = masks or {}
@@ -251,8 +249,19 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
         seg_array = lut[lab]
     if len(sources) == 1 and seg_array.shape[0] > 1:
         seg_array = _multiframe_order(seg_array, sources[0])
-    descs = [_segment_description(n, o) for n, o in enumerate(objs, start=1)]
     report(progress, 0.2, 1.0, "DICOM-SEG: frames")
+    if int(sources[0].get("NumberOfFrames", 1) or 1) == 1:  # single-frame images: pydicom alone (segwriter)
+        from ctui.engine.io.segwriter import build_seg  # loaded with its format
+
+        try:
+            seg = build_seg(seg_array, sources, objs, series_description=series_description, version=__version__)
+        except (ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:  # a source lacks an attribute
+            raise CtuiError(f"cannot write a DICOM-SEG over this series ({' '.join(str(exc).split())[:200]})",
+                            path=getattr(sources[0], "filename", None)) from None
+        return _save(seg, path, keep_identifiers, progress)
+    import highdicom as hd
+
+    descs = [_segment_description(n, o) for n, o in enumerate(objs, start=1)]
     try:
         seg = hd.seg.Segmentation(
             source_images=_prepared(sources, keep_identifiers), pixel_array=seg_array,
@@ -265,6 +274,10 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     except (ValueError, TypeError, AttributeError, KeyError) as exc:  # highdicom's checks of the source images
         raise CtuiError(f"cannot write a DICOM-SEG over this series ({' '.join(str(exc).split())[:200]})",
                         path=getattr(sources[0], "filename", None)) from None
+    return _save(seg, path, keep_identifiers, progress)
+
+
+def _save(seg: Any, path: str | os.PathLike, keep_identifiers: bool, progress: Progress | None) -> Path:
     blank_identifiers(seg, keep=keep_identifiers)
     report(progress, 0.9, 1.0, "DICOM-SEG: writing")
     p = Path(path)
@@ -279,8 +292,6 @@ def _prepared(sources: Sequence[Any], keep: bool) -> list[Any]:
 
     Only the first image's patient and study modules are copied, so only it is changed (a copy).
     """
-    import copy
-
     first = copy.deepcopy(sources[0])
     for kw in (*TYPE2_IDENTIFIERS, "StudyDate", "StudyTime"):
         if kw not in first:

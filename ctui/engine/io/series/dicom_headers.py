@@ -10,9 +10,11 @@ against the file's size before anything is built or allocated.
 from __future__ import annotations
 
 import io
+import logging
 import os
 import struct
 import threading
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -256,8 +258,6 @@ def _quiet_pydicom() -> None:
     global _QUIET
     if _QUIET:
         return
-    import logging
-
     from pydicom import config
 
     config.settings.reading_validation_mode = config.IGNORE
@@ -272,8 +272,6 @@ def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[
     validation warnings about malformed values are silenced: bad values are judged
     here (a skip with a reason, or a default with a Volume warning).
     """
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
