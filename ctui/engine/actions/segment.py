@@ -38,7 +38,7 @@ from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
 from ctui.engine.segment.methods import METHODS, Job
 from ctui.engine.segment.propagate import PropagationSettings
-from ctui.engine.segment.seeding import RangeChoice, auto_width, seed_range, seed_voxels
+from ctui.engine.segment.seeding import RangeChoice, auto_width, denoised, seed_range, seed_voxels
 from ctui.engine.segment.selection import (
     Segmentation,
     fill_range,
@@ -111,6 +111,7 @@ class ObjectResult:
     neck: dict[str, Any] = field(default_factory=dict)  # {"mode": "auto" | "fixed" | "off", "width_mm", "reason", ...}
     auto_range: dict[str, Any] | None = None  # the seed's neighbourhood statistics when the range was automatic
     cuts: list[dict[str, Any]] = field(default_factory=list)  # {"slice", "voxels", "mm": [x, y, z] patient LPS}
+    denoise: str = ""  # what the fill ran on besides the pipeline: "median 3x3" on a noisy series
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "voxels": self.voxels, "volume_ml": round(self.volume_ml, 4),
@@ -118,7 +119,7 @@ class ObjectResult:
                 "seed": list(self.seed), "range": [round(float(v), 3) for v in self.range],
                 "range_source": "auto" if self.auto_range is not None else "given", "auto_range": self.auto_range,
                 "stops": dict(self.stops), "neck": dict(self.neck), "cuts": list(self.cuts),
-                "neck_cut_slices": list(self.necks)}
+                "neck_cut_slices": list(self.necks), "denoise": self.denoise}
 
     def message(self) -> str:
         """One line for the TUI's message bar and the CLI: what was made and how the leak guard chose."""
@@ -130,7 +131,8 @@ class ObjectResult:
         if self.cuts:
             zs = sorted({c["slice"] for c in self.cuts})
             where = f", cut at slice{'s' if len(zs) > 1 else ''} " + ",".join(map(str, zs[:6])) + ("..." if len(zs) > 6 else "")
-        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, range {rng}, {guard}{where}"
+        noise = f", filled on a {self.denoise} (noise)" if self.denoise else ""
+        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, range {rng}{noise}, {guard}{where}"
 
 
 @dataclass
@@ -177,6 +179,8 @@ class _Start:
     auto_range: RangeChoice | None
     neck: NeckChoice | None  # the automatic choice; None when the width was given
     width: float  # mm; 0: no neck cut
+    pipe: Pipeline  # what the fill thresholds: the user's pipeline, or a median of it on a noisy series
+    denoise: str = ""  # what was added for noise ("median 3x3"), empty when nothing
 
 
 def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
@@ -202,9 +206,13 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
         lo, hi = fill_range(0.0, low=th[0], high=th[1])
     else:
         lo, hi = fill_range(float(final[y, x]), tolerance=float(th))
+    smooth = denoised(volume, pipe, seed, lo, hi)
+    if smooth is not None:
+        pipe, final = smooth, smooth.final_slice(volume, z)
     value = float(final[y, x])
     if not lo <= value <= hi:
-        raise CtuiError(f"seed {x},{y},{z}: its value {value:g} (the value fills use{', after the filters' if pipe.active_steps() else ''}) "
+        how = ", after a 3x3 median for the noise" if smooth is not None else ", after the filters" if pipe.active_steps() else ""
+        raise CtuiError(f"seed {x},{y},{z}: its value {value:g} (the value fills use{how}) "
                         f"is outside the range [{lo:g}, {hi:g}]")
     labels = None if opts.overwrite else seg.labels
     if opts.neck_mm is None:
@@ -232,7 +240,8 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     if int(mask.sum()) < opts.min_area:
         raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
                         f"{opts.min_area} px")
-    return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width)
+    return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width, pipe=pipe,
+                  denoise="median 3x3" if smooth is not None else "")
 
 
 def _box_mask2d(box: tuple[slice, slice, slice], shape: tuple[int, ...]) -> np.ndarray:
@@ -288,14 +297,14 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     for i, (seed, th) in enumerate(zip(fg, ths)):  # validate everything before the first change
         report(progress, 0, 1, f"seed {i + 1}: range and leak guard")
         fills.append(_seed_fill(volume, pipe, seg, free[i], seed, th, opts))
-    notes = _check_background(volume, pipe, fg, bg, fills, same_region_ok=opts.method == "grow")
+    notes = _check_background(volume, fg, bg, fills, same_region_ok=opts.method == "grow")
     results, settings = [], []
     for i, (seed, start) in enumerate(zip(fg, fills)):
         oid = free[i]
         sub = _scaled(progress, i, len(fg))
         if oid not in seg.objects:
             seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
-        res, st = _one(volume, pipe, seg, oid, seed, start, bg, opts, sub)
+        res, st = _one(volume, start.pipe, seg, oid, seed, start, bg, opts, sub)
         res.warnings[:0] = notes
         results.append(res)
         settings.append(st)
@@ -359,13 +368,15 @@ def _neck_report(opts: SegmentOptions, start: _Start) -> dict[str, Any]:
 def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, start: _Start,
          bg: list[Seed], opts: SegmentOptions, progress: Progress | None) -> tuple[ObjectResult, dict[str, Any]]:
     res = ObjectResult(id=oid, seed=seed, range=start.rng, neck=_neck_report(opts, start),
-                       auto_range=None if start.auto_range is None else start.auto_range.to_dict())
+                       auto_range=None if start.auto_range is None else start.auto_range.to_dict(),
+                       denoise=start.denoise)
     s = _settings(opts, start, volume.data.shape)
     spacing = tuple(float(v) for v in volume.spacing)
     info = seg.objects[oid]
     info.seeds.append(seed)
     info.settings.update({"low": start.rng[0], "high": start.rng[1], "connectivity": opts.connectivity,
-                          "method": opts.method, "neck": res.neck, "fill_holes": opts.fill_holes})
+                          "method": opts.method, "neck": res.neck, "fill_holes": opts.fill_holes,
+                          "denoise": start.denoise})
     if bg:
         info.settings["background"] = [list(b) for b in bg]
     job = Job(volume=volume, pipe=pipe, seg=seg, oid=oid, seed=seed, start=start.mask, settings=s, background=bg,
@@ -389,7 +400,7 @@ def suggest_range(volume: Any, seed: Sequence[int], *, pipeline: Pipeline | None
     return seed_range(volume, pipeline or Pipeline(), (x, y, z))
 
 
-def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed], fills: list[_Start], *,
+def _check_background(volume: Any, fg: list[Seed], bg: list[Seed], fills: list[_Start], *,
                       same_region_ok: bool = False) -> list[str]:
     """Refuse a background seed inside a seed's own slice object (unless the method shares a region along
     its edges: ``grow``); warn about one that cannot act."""
@@ -403,8 +414,9 @@ def _check_background(volume: Any, pipe: Pipeline, fg: list[Seed], bg: list[Seed
     lo = min(f.rng[0] for f in fills)
     hi = max(f.rng[1] for f in fills)
     for b in bg:
-        v = float(pipe.final_slice(volume, b[2])[b[1], b[0]])
-        if not lo <= v <= hi:
+        vals = [float(f.pipe.final_slice(volume, b[2])[b[1], b[0]]) for f in fills]
+        if not any(f.rng[0] <= v <= f.rng[1] for f, v in zip(fills, vals)):
+            v = vals[0]
             notes.append(f"background seed {b[0]},{b[1]},{b[2]} (value {v:g}) is outside the range "
                          f"[{lo:g}, {hi:g}], so it cannot stop anything: place it in the neighbour the object leaks into")
     return notes
@@ -429,7 +441,7 @@ def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: Se
     rc = start.auto_range
     if rc is not None and rc.noise > 0 and rc.sd > MIXED_NEIGHBOURHOOD * rc.noise:
         out.append(f"the seed's neighbourhood is not uniform (spread {rc.sd:.0f}, {rc.sd / rc.noise:.1f}x the image "
-                   f"noise), so the automatic range [{rc.low:g}, {rc.high:g}] may take in several tissues: give "
+                   f"noise), so the automatic range [{rc.low:.0f}, {rc.high:.0f}] may take in several tissues: give "
                    "a range, or move the seed into the object's even part")
     depth = start.neck.depth_mm if start.neck is not None else 0.0
     if depth > 0:

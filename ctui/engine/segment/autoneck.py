@@ -131,15 +131,17 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     dt = ndimage.distance_transform_edt(cand, sampling=sp)
     depth = _local_depth(dt, cs, sp)
     radii = _radii(dt, cand, depth * max_fraction, min(sp))
-    vols: list[int] = []
-    used: list[float] = []
+    # the unopened region is the sweep's first point: on a noisy series the in-range voxels join the organ to
+    # everything around it through one-voxel bridges, which the narrowest opening already cuts
+    vols: list[int] = [int(np.count_nonzero(cand))]
+    used: list[float] = [0.0]
     for r in radii:
         v = _opened_volume(cand, dt, cs, r, sp)
         if v == 0:
             break
         used.append(r)
         vols.append(v)
-    if not vols:
+    if len(vols) < 2:
         return NeckChoice(0.0, depth_mm=depth, reason="the region is thinner than the narrowest width swept")
     drops = [vols[i - 1] / vols[i] for i in range(1, len(vols))]
     # a leak going takes a piece of at least LEAK_BALLS balls of the local depth (a rim or a cap rounded off

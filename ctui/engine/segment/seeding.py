@@ -11,6 +11,16 @@
   :func:`ctui.engine.segment.autoneck.choose_width` on it.
 * :func:`seed_voxels`: the seed and its in-range neighbours (one voxel around it): a seed
   on a noise voxel still starts the object.
+* :func:`denoised`: on a noisy series a tissue whose values lie within the noise of a bound
+  of the range (the liver at ~80 HU beside a range from 120 HU, noise ~36 HU) shows as in-range
+  specks, and specks bridge the organ into it one voxel at a time (at a 13% density they
+  percolate in 3D). When more than ``SPECKLE`` of the in-range pixels within ``SPECKLE_MM``
+  of the seed on its slice are specks of under 4 pixels, the fill runs on a 3 x 3 median of
+  each slice. Measured on the contrast CT of ``totalseg_example`` (1.5 mm), seeds in the right
+  kidney's upper pole with ``--range 120:400``: specks 0.03-0.07 of the in-range pixels, 653 mL
+  over all 164 slices (slice mode) without the median, 8.4 mL over slices 0-9 (the pole that
+  field of view holds) with it. The unenhanced abdomen's organs (benchmarks/organs.py seeds,
+  their 5-95th percentile or automatic ranges): specks 0-0.01, filled unchanged.
 
 Values are in the pipeline's domain (HU by default). Seeds are (x, y, z) = (column, row,
 slice), as on the command line; internal arrays are (z, y, x).
@@ -22,16 +32,20 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.segment.autoneck import NeckChoice, choose_width, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
+from ctui.engine.segment.pipeline import Pipeline, Step
 from ctui.engine.segment.selection import in_range
 
 RANGE_BALL_MM = 10.0
 RANGE_K = 2.0
 HIST_BINS = 16
+SPECKLE = 0.025  # share of the in-range pixels near the seed in specks above which the fill runs on a median
+SPECKLE_MM = 20.0
 
 
 @dataclass
@@ -88,6 +102,26 @@ def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float =
     hist = np.histogram(np.clip(vals, edges[0], edges[-1]), bins=edges)[0]
     return RangeChoice(low=lo, high=hi, median=med, sd=sd, voxels=int(vals.size), hist=[int(h) for h in hist],
                        edges=[float(e) for e in edges], noise=float(noise))
+
+
+def denoised(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, high: float) -> Any | None:
+    """A copy of ``pipe`` with a 3 x 3 median of each slice when the range speckles around the seed (x, y, z):
+    more than SPECKLE of the in-range pixels within SPECKLE_MM on the seed's slice are specks of under 4
+    pixels (noise straddling a bound); None otherwise, and always when the pipeline has filters of its own
+    (the user's filters decide)."""
+    if pipe.active_steps():
+        return None
+    x, y, z = seed
+    _dz, dy, dx = (float(v) for v in volume.spacing)
+    ry, rx = max(2, int(SPECKLE_MM / dy)), max(2, int(SPECKLE_MM / dx))
+    y0, x0 = max(y - ry, 0), max(x - rx, 0)
+    img = pipe.final_region(volume, z, y0, y + ry + 1, x0, x + rx + 1, window=pipe.window_for(volume))
+    inr = in_range(img, low, high)
+    n, lab, stats, _c = cv2.connectedComponentsWithStats(inr.view(np.uint8), connectivity=8)
+    specks = int(stats[1:, cv2.CC_STAT_AREA][stats[1:, cv2.CC_STAT_AREA] < 4].sum()) if n > 1 else 0
+    if specks <= SPECKLE * max(int(np.count_nonzero(inr)), 1):
+        return None
+    return Pipeline([Step(name="median", params={"size": 3})], domain=pipe.domain, window=pipe.window)
 
 
 def seed_voxels(inrange: np.ndarray, seed_zyx: tuple[int, int, int]) -> np.ndarray:
