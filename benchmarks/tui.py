@@ -133,10 +133,10 @@ async def bench_brush(vol, size, n: int) -> list[float]:
         await pilot.press("b")
         for i in range(n + 3):
             key = "l"  # always onto new pixels (a step back over the stroke paints nothing: no new frame)
-            version = ws._labels_version
+            version = ws.volumes.version
             t0 = time.perf_counter()
             await pilot.press(key)
-            dt = await _wait_frame(pilot, stamps, t0, lambda: ws._labels_version > version and mv.painted[1] > t0)
+            dt = await _wait_frame(pilot, stamps, t0, lambda: ws.volumes.version > version and mv.painted[1] > t0)
             if i >= 3:
                 times.append(dt)
             await pilot.pause(0.01)

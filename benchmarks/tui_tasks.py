@@ -107,8 +107,8 @@ async def _wait_proposal(pilot, ws, timeout: float = 300.0) -> bool:
     end = time.monotonic() + timeout
     await pilot.pause(0.05)
     while time.monotonic() < end:
-        if ws._prop is None:
-            return ws.proposal is not None
+        if not ws.jobs.segmenting:
+            return ws.pending.proposal is not None
         await pilot.pause(0.05)
     return False
 
@@ -120,9 +120,9 @@ async def _review(c: Counter, ws, truth_mask: np.ndarray) -> None:
     for _ in range(12):
         before = s.z
         await c.press("right_curly_bracket")
-        if s.z == before or ws.proposal is None:
+        if s.z == before or ws.pending.proposal is None:
             return
-        prop = ws.proposal.slice_mask(s.z)
+        prop = ws.pending.proposal.slice_mask(s.z)
         ref = truth_mask[s.z]
         if prop.any() and dice(prop, ref) < 0.5:
             await c.press("C")

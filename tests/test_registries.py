@@ -179,20 +179,17 @@ def test_drift_labels_must_match_the_series_geometry(tmp_path, sample_dir, capsy
 def test_side_panel_shows_long_object_names_in_full():
     """An object's name is not cut to 10 characters: a long one gets a line of its own."""
     from ctui.screens.ws_keys import panel_text
+    from ctui.screens.ws_state import ObjectVolumes, ViewState
 
     s = _session("nifti")
     s.seg.objects[1].name = "kidney_left_lower_pole"
     s.seg.add_object("liver")
 
     class Ws:  # what panel_text reads of the workspace
-        grid_mode = ortho_mode = False
-        _window_name = None
-
         def __init__(self, session):
             self.s = session
-
-        def _object_volumes(self):
-            return {1: 0.1}
+            self.viewstate = ViewState()
+            self.volumes = ObjectVolumes()
 
     text = panel_text(Ws(s)).plain
     assert "kidney_left_lower_pole" in text and " liver " in text

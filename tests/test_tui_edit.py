@@ -130,8 +130,8 @@ async def test_stop_at_slice_limits_propagation():
         await pilot.press("g", *str(z0 - 3), "enter", "s")  # and 3 below
         assert s.limits.slices == (z0 - 3, z0 + 5)
         await pilot.press("g", *str(z0), "enter", "p")
-        await wait_for(pilot, lambda: ws.proposal is not None, what="the proposal")
-        assert ws.proposal.slices == (z0 - 3, z0 + 5)
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, what="the proposal")
+        assert ws.pending.proposal.slices == (z0 - 3, z0 + 5)
         await pilot.press("a")
         zs = np.flatnonzero((s.seg.labels == 1).any(axis=(1, 2)))
         assert (zs.min(), zs.max()) == (z0 - 3, z0 + 5)
@@ -190,11 +190,11 @@ async def test_sagittal_and_coronal_views_with_orientation_and_aspect():
         assert mv.rgb.shape[:2] == (20, 40)
         # the 2x2 layout: three planes and the 3D cell
         await pilot.press("0")
-        assert ws.ortho_mode
+        assert ws.viewstate.ortho_mode
         for p in planes.PLANES:
             await wait_for(pilot, lambda p=p: ws.query_one(f"#o-{p}").rgb is not None, what=p)
         await pilot.press("0", "1")
-        assert s.plane == "axial" and not ws.ortho_mode
+        assert s.plane == "axial" and not ws.viewstate.ortho_mode
         assert not app.internal_errors
 
 
@@ -206,7 +206,7 @@ async def test_proposal_drawn_apart_from_accepted_voxels():
         ws = app.workspace
         s.range_ = (200.0, 400.0)
         await pilot.press("enter", "p")
-        await wait_for(pilot, lambda: ws.proposal is not None, what="the proposal")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, what="the proposal")
         await pilot.press("pageup")
         img = ws.plane_image("axial")
         assert (img == planes.PROPOSAL_EDGE).all(axis=2).any()  # the yellow outline of a proposal

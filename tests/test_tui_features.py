@@ -38,12 +38,12 @@ async def test_views_grid_window_zoom_pan():
         await pilot.press("v")
         assert s.view == "intermediate"
         await pilot.press("V")
-        assert ws.grid_mode
+        assert ws.viewstate.grid_mode
         views = {v: ws.query_one(f"#g-{v}", ImageView) for v in ("original", "overlay", "intermediate", "final")}
         await wait_for(pilot, lambda: all(iv.rgb is not None and iv.size.width > 0 for iv in views.values()), what="4 views")
         await wait_for(pilot, lambda: views["final"].token is not None and views["final"].token[1] == "final", what="final view")
         await pilot.press("V")
-        assert not ws.grid_mode
+        assert not ws.viewstate.grid_mode
         # window presets cycle and a typed window
         w0 = s.window
         await pilot.press("w", "w")
@@ -62,10 +62,10 @@ async def test_views_grid_window_zoom_pan():
         await pilot.pause()
         vm = mv.view_map
         assert vm is not None and vm.sx > 1  # magnified
-        c0 = ws.pan_center
+        c0 = ws.viewstate.pan_center
         await pilot.press("ctrl+right")
         await pilot.pause()
-        assert ws.pan_center[0] > c0[0]
+        assert ws.viewstate.pan_center[0] > c0[0]
         await pilot.press("minus", "minus")
         assert s.zoom == 1
         assert not app.errors
@@ -198,7 +198,7 @@ async def test_command_palette_lists_actions_and_help_lists_keys():
         cmd = next(c for c in app.get_system_commands(app.screen) if c.title == "2x2 pipeline views")
         await cmd.callback()
         await pilot.pause()
-        assert app.workspace.grid_mode
+        assert app.workspace.viewstate.grid_mode
         await pilot.press("question_mark")
         await pilot.pause()
         assert type(app.screen).__name__ == "TextScreen"
@@ -277,13 +277,13 @@ async def test_propagation_3d_mode_and_reject():
         # reject first: labels unchanged
         before = int((s.seg.labels == 1).sum())
         await pilot.press("p")
-        await wait_for(pilot, lambda: ws.proposal is not None, what="proposal")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, what="proposal")
         await pilot.press("x")
         await pilot.pause()
-        assert ws.proposal is None and int((s.seg.labels == 1).sum()) == before
+        assert ws.pending.proposal is None and int((s.seg.labels == 1).sum()) == before
         # then accept: the kidney's analytic volume within 3%
         await pilot.press("p")
-        await wait_for(pilot, lambda: ws.proposal is not None, what="proposal")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, what="proposal")
         await pilot.press("a")
         await pilot.pause()
         ml = int((s.seg.labels == 1).sum()) * s.volume.voxel_volume_mm3() / 1000

@@ -318,11 +318,11 @@ async def test_shift_drag_pans_and_ortho_click_sets_plane():
         await pilot.press("plus", "plus")
         assert s.zoom == 4.0
         await pilot.pause()
-        c0 = ws.pan_center or ws._view_center()
+        c0 = ws.viewstate.pan_center or ws._view_center()
         cursor = s.zyx
         w, h = ws.main_view.size
         await drag(pilot, "#main", [(w // 2, h // 2), (w // 2 + 8, h // 2), (w // 2 + 16, h // 2)], shift=True)
-        c1 = ws.pan_center
+        c1 = ws.viewstate.pan_center
         assert c1 is not None and c1[0] < c0[0] - 2 and abs(c1[1] - c0[1]) < 1  # dragged right: the view moves left
         assert s.zyx == cursor  # panning does not move the cursor
         # the 2x2 layout: a click in the sagittal view moves y and z, keeps x, makes it the active plane
@@ -353,8 +353,8 @@ async def test_roi_box_confines_fill_and_propagation():
         await pilot.press("p")
         from ctui.screens.testing import wait_for
 
-        await wait_for(pilot, lambda: ws._prop is None and ws.proposal is not None, what="the proposal")
-        got = ws.proposal.mask3d()
+        await wait_for(pilot, lambda: not ws.jobs.segmenting and ws.pending.proposal is not None, what="the proposal")
+        got = ws.pending.proposal.mask3d()
         (z0, y0, x0), m = got
         pz, py, px = np.nonzero(m)
         assert (pz + z0).min() >= z - 3 and (pz + z0).max() <= z + 3

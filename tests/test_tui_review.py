@@ -60,7 +60,7 @@ async def test_strip_jumps_cut_and_accept_to_here():
         s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
         strip = ws.query_one("#strip", ReviewStrip)
         assert not strip.display or "on" not in strip.classes
-        ws.proposal = _leaky_proposal(s.shape)
+        ws.pending.show(_leaky_proposal(s.shape))
         ws.refresh_view()
         await pilot.pause()
         assert "on" in strip.classes and strip.profile[15] == 300 and strip.profile[10] == 100
@@ -77,11 +77,11 @@ async def test_strip_jumps_cut_and_accept_to_here():
         # C at slice 14: the leak is cut off
         s.z = 14
         await pilot.press("C")
-        assert ws.proposal.slices == (11, 14) and ws.proposal.voxels == 400
+        assert ws.pending.proposal.slices == (11, 14) and ws.pending.proposal.voxels == 400
         # A at slice 12: accept from the seed to here
         s.z = 12
         await pilot.press("A")
-        assert ws.proposal is None
+        assert ws.pending.proposal is None
         assert s.seg.voxels(1) == 300 and s.seg.slice_range(1) == (10, 12)
         # no proposal: the strip reviews the object itself (three slices)
         assert "on" in strip.classes and list(strip.profile[9:14]) == [0, 100, 100, 100, 0]
@@ -103,10 +103,10 @@ async def test_strip_reviews_an_accepted_object():
         sq[10:20, 10:20] = True
         s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
         s.seg.objects[1].seeds.append((15, 15, 10))  # as Enter records it: the review walks out from the seed
-        ws.proposal = _leaky_proposal(s.shape)
+        ws.pending.show(_leaky_proposal(s.shape))
         ws.refresh_view()
         await pilot.press("a")  # accept it all, leak included
-        assert ws.proposal is None and s.seg.voxels(1) == 100 + 400 + 300 + 600
+        assert ws.pending.proposal is None and s.seg.voxels(1) == 100 + 400 + 300 + 600
         strip = ws.query_one("#strip", ReviewStrip)
         assert "on" in strip.classes and strip.profile[15] == 300
         await pilot.press("right_curly_bracket")

@@ -62,7 +62,7 @@ async def test_tui_segment_equals_cli(tmp_path, capsys, mode):
         want = f"Seed range here {lo:.0f}..{hi:.0f}"  # the range S will use, before the fill, as the CLI reports it
         await wait_for(pilot, lambda: want in str(panel_text(ws)), what="the seed range in the side panel")
         await pilot.press("S")
-        await wait_for(pilot, lambda: ws.proposal is not None, timeout=120, what="the proposal")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=120, what="the proposal")
         status = str(ws.query_one("#status").render())
         assert "neck" in status and "auto" in status
         await pilot.press("a")

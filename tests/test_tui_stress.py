@@ -207,7 +207,7 @@ async def test_quit_during_propagation(monkeypatch):
         await pilot.press("p")
         await pilot.pause(0.05)
         assert not app.errors, app.errors
-        assert app.workspace._prop is not None, "propagation finished too fast for this test"
+        assert app.workspace.jobs.segmenting, "propagation finished too fast for this test"
         await pilot.press("q")  # unsaved work: asks first
         await pilot.pause()
         assert type(app.screen).__name__ == "ChoiceScreen"
@@ -309,15 +309,15 @@ async def test_edits_wait_while_propagation_runs(monkeypatch):
         s.range_ = ((o["hu"] + 40) / 2, o["hu"] + 200)
         await pilot.press("enter", "p")
         await pilot.pause(0.05)
-        assert ws._prop is not None
+        assert ws.jobs.segmenting
         labels = s.seg.labels.copy()
         await pilot.press("enter", "u", "U", "pageup", "pagedown")  # edits refused, navigation works
-        assert ws._prop is not None  # the keys were handled while the propagation still runs
+        assert ws.jobs.segmenting  # the keys were handled while the propagation still runs
         assert np.array_equal(s.seg.labels, labels)
         await pilot.press("escape")
         # p segments through actions.segment: a cancelled segmentation leaves no proposal and changes nothing
-        await wait_for(pilot, lambda: ws._prop is None, what="the cancelled segmentation")
-        assert ws.proposal is None
+        await wait_for(pilot, lambda: not ws.jobs.segmenting, what="the cancelled segmentation")
+        assert ws.pending.proposal is None
         assert np.array_equal(s.seg.labels, labels)
         assert not app.internal_errors
 

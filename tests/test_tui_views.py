@@ -57,7 +57,7 @@ async def test_3d_cell_shows_shaded_objects_and_follows_edits():
         assert np.unique(img[red][:, 0]).size > 10  # shaded: many levels of red
         area = red.sum()
         # an edit (a bigger object) redraws the cell
-        version = ws._labels_version
+        version = ws.volumes.version
         s.seg.labels[:, 4:36, 4:36] = np.maximum(s.seg.labels[:, 4:36, 4:36], 1)
         ws.labels_changed()
         await wait_for(pilot, lambda: iv.token == ("3d", version + 1) and iv.rgb is not img, what="the redraw",

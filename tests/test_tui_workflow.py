@@ -62,7 +62,7 @@ async def test_open_filter_select_propagate_export_project(tmp_path):
 
         # p: propagate both ways, then accept
         await pilot.press("p")
-        await wait_for(pilot, lambda: app.workspace.proposal is not None, what="the propagation proposal")
+        await wait_for(pilot, lambda: app.workspace.pending.proposal is not None, what="the propagation proposal")
         await pilot.press("a")
         await pilot.pause()
         vox = int((s.seg.labels == s.current).sum())
@@ -132,7 +132,7 @@ async def test_render_3d_shows_rendered_pixels(tmp_path):
         await goto_voxel(pilot, app, z, y, x)
         s.range_ = ((kid["hu"] + 40) / 2, kid["hu"] + 200)
         await pilot.press("enter", "p")
-        await wait_for(pilot, lambda: app.workspace.proposal is not None, what="proposal")
+        await wait_for(pilot, lambda: app.workspace.pending.proposal is not None, what="proposal")
         await pilot.press("a", "r")
         v3 = app.screen
         await wait_for(pilot, lambda: v3.last_image is not None, timeout=60, what="the first 3D image")

@@ -207,9 +207,7 @@ def bindings_help(screen) -> str:
             for k in key.split(","):
                 k = k.strip()
                 try:
-                    from textual.binding import Binding as _B
-
-                    d = screen.app.get_key_display(_B(k, action, desc or ""))
+                    d = screen.app.get_key_display(Binding(k, action, desc or ""))
                 except Exception:
                     d = k
                 shown.append(d if d == k else f"{d} ({k})")

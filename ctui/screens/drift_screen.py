@@ -14,6 +14,7 @@ from ctui.engine.actions.drift import drift_check
 from ctui.engine.actions.formats import output_name
 from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
+from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
@@ -159,8 +160,6 @@ class DriftScreen(GuardMixin, Screen):
         self.analyse()
 
     def action_save_plot(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         if self.report is None:
             return
 

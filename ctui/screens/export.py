@@ -11,7 +11,9 @@ import numpy as np
 
 from ctui.engine.actions.export import ExportResult, available_formats, export
 from ctui.engine.actions.formats import FORMATS, output_name
-from ctui.engine.core.atomic import check_output
+from ctui.engine.core.atomic import check_output, write_bytes
+from ctui.screens.cells import physical_image
+from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 from ctui.screens.projects import opened_of
 from ctui.screens.session import safe_cwd
 from ctui.screens.ws_jobs import run_job
@@ -65,7 +67,6 @@ def export_session(session, kind: str, path: str, *, progress=None) -> ExportRes
 def export_image(rgb: np.ndarray, path: str):
     import cv2  # OpenCV: loaded when a PNG is written, not when the TUI starts
 
-    from ctui.engine.core.atomic import write_bytes
 
     ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]) if rgb.ndim == 3 else rgb)
     if not ok:
@@ -81,7 +82,6 @@ def run_export(ws, kind: str, path: str) -> str:
         rgb = ws.main_view.rgb
         if rgb is None:
             raise ValueError("no image shown")
-        from ctui.screens.cells import physical_image
 
         rgb = physical_image(rgb, ws.main_view.spacing_yx)  # the physical aspect, as on screen
         export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
@@ -92,8 +92,6 @@ def run_export(ws, kind: str, path: str) -> str:
 
 
 def export_dialog(ws) -> None:
-    from ctui.screens.dialogs import ChoiceScreen, PromptScreen
-
     app = ws.app
     items, note = menu_items(ws.s)
     suffixes = {k: (IMAGE[2] if k == IMAGE[0] else FORMATS[k.split(":")[0]].suffix) for k, _ in items}

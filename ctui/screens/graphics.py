@@ -22,6 +22,7 @@ owns stdin.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 
 MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
@@ -97,8 +98,6 @@ def tmux_rgb(env=None) -> bool | None:
     """Inside tmux: whether tmux passes 24-bit colour to the terminal it is drawn on
     (its client's features name RGB or Tc); None outside tmux or when tmux does not say
     (a detached session, tmux before 3.2)."""
-    import subprocess
-
     env = os.environ if env is None else env
     if not env.get("TMUX"):
         return None

@@ -9,6 +9,11 @@ group comes from :data:`ACTION_TASK` (by action name), else from words in its ac
 
 from __future__ import annotations
 
+import itertools
+from pathlib import Path
+
+from ctui.engine.core.atomic import write_text
+
 TASKS = ("Segment", "Review", "Edit", "Views", "3D and measure", "Files", "Navigate", "More")
 
 #: action name (without arguments) -> task, in the order shown within the task
@@ -142,8 +147,6 @@ def _cell(keys: str, desc: str, key_w: int, width: int) -> str:
 def _balanced(blocks: list[list], ncol: int) -> list[list]:
     """The blocks in order split into at most ``ncol`` columns, the tallest as short as
     possible (every split tried: a handful of groups)."""
-    import itertools
-
     n = len(blocks)
     best, best_h = [sum(blocks, [])], sum(len(b) for b in blocks)
     for k in range(1, min(ncol, n)):
@@ -189,6 +192,7 @@ def task_help(nodes, *, width: int | None = None) -> str:
 
 def workspace_nodes():
     """The workspace's and the app's bindings, as the ``?`` help and the README list them."""
+    # both import this module (through keybar): imported at the top, it would be a cycle
     from ctui.screens.app import CtuiApp
     from ctui.screens.workspace import WorkspaceScreen
 
@@ -207,9 +211,6 @@ def markdown_table(nodes=None) -> str:
 def write_readme(path) -> bool:
     """Replace the table between ``<!-- keys:start -->`` and ``<!-- keys:end -->`` in a
     README with :func:`markdown_table`; True when it changed."""
-    from pathlib import Path
-
-    from ctui.engine.core.atomic import write_text
 
     text = Path(path).read_text(encoding="utf-8")
     head, rest = text.split("<!-- keys:start -->\n", 1)

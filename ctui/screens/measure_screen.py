@@ -20,11 +20,12 @@ from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.measure import find_steps, measure_object, save_sections
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
+from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
 from ctui.screens.keytable import keys
-from ctui.screens.messages import JobDone, JobFailed, Status
+from ctui.screens.messages import JobFailed, MeasuredRow, Saved, SectionsFailed, SectionsReady, Status
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
 
@@ -122,18 +123,24 @@ class MeasureScreen(GuardMixin, Screen):
 
     @on(JobFailed)
     def _failed(self, msg: JobFailed) -> None:
-        if msg.what.startswith("Sections"):
-            self.sections_pending = None
         self.app.notify(f"{msg.what}: {msg.reason}", severity="error")
 
-    @on(JobDone)
-    def _done(self, msg: JobDone) -> None:
-        if msg.kind == "row":
-            self._add_row(msg.info["oid"], msg.result)
-        elif msg.kind == "sections":
-            self._show_sections(msg.info["oid"], msg.result)
-        elif msg.kind == "saved":
-            self.app.notify(str(msg.result))
+    @on(SectionsFailed)
+    def _sections_failed(self, msg: SectionsFailed) -> None:
+        self.sections_pending = None
+        self.app.notify(f"Sections of object {msg.oid}: {msg.reason}", severity="error")
+
+    @on(MeasuredRow)
+    def _row(self, msg: MeasuredRow) -> None:
+        self._add_row(msg.oid, msg.stats)
+
+    @on(SectionsReady)
+    def _sections_ready(self, msg: SectionsReady) -> None:
+        self._show_sections(msg.oid, msg.result)
+
+    @on(Saved)
+    def _saved(self, msg: Saved) -> None:
+        self.app.notify(msg.text)
 
     @work(thread=True, exclusive=True, group="measure")
     def measure(self) -> None:
@@ -160,7 +167,7 @@ class MeasureScreen(GuardMixin, Screen):
             st["volume_pv_ml"] = res.volume_ml.get("partial_volume")
             st["warnings"] = list(res.warnings)
             measured[oid] = st
-            self.post_message(JobDone("row", st, oid=oid))
+            self.post_message(MeasuredRow(oid, st))
         self.post_message(Status("c: sections along the centreline of the selected object; s saves"))
         tub = [oid for oid, st in measured.items() if is_tubular(st)]
         if tub:
@@ -221,9 +228,9 @@ class MeasureScreen(GuardMixin, Screen):
         try:
             res = measure_object(opened_of(self.s), object=oid, path="auto", partial_volume=self.grey)
         except Exception as exc:
-            self.post_message(JobFailed(f"Sections of object {oid}", str(exc)))
+            self.post_message(SectionsFailed(oid, str(exc)))
             return
-        self.post_message(JobDone("sections", res, oid=oid))
+        self.post_message(SectionsReady(oid, res))
 
     def _show_sections(self, oid: int, res) -> None:
         # the cross-sections only (as `ctui measure` reports them): caps, branches and
@@ -265,8 +272,6 @@ class MeasureScreen(GuardMixin, Screen):
         self._status(f"Sections of object {oid}: {len(rows)} along {length:.0f} mm")
 
     def action_save(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         if not self.sections:
             if self.sections_pending is not None:
                 msg = f"Sections of object {self.sections_pending} are still being computed: s once they show"
@@ -295,7 +300,7 @@ class MeasureScreen(GuardMixin, Screen):
         except Exception as exc:
             self.post_message(JobFailed("Not saved", str(exc)))
             return
-        self.post_message(JobDone("saved", f"Saved {path} and {png}"))
+        self.post_message(Saved(f"Saved {path} and {png}"))
 
     def action_close(self) -> None:
         self.app.pop_screen()

@@ -8,6 +8,7 @@ of updating widgets that are gone (the NoMatches '#ms-status' / '#v3-status' rac
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from textual.message import Message
@@ -24,31 +25,125 @@ class JobProgress(Message):
         self.total = None if total is None else float(total)
 
 
+# The messages below are dataclasses: their fields are the constructor's arguments, in
+# order (Textual's Message finishes its set-up in __post_init__); eq=False keeps each
+# message equal only to itself, as Textual expects.
+event = dataclass(eq=False)
+
+
+@event
 class Status(Message):
     """One line for the screen's status bar."""
 
-    def __init__(self, text: str) -> None:
-        super().__init__()
-        self.text = text
+    text: str
 
 
+@event
 class JobFailed(Message):
-    """A worker failed: ``what`` did not happen because of ``reason`` (shown as an error)."""
+    """A worker failed: ``what`` did not happen because of ``reason`` (shown as an error;
+    ``reason`` "cancelled": the user cancelled it)."""
 
-    def __init__(self, what: str, reason: str) -> None:
-        super().__init__()
-        self.what = what
-        self.reason = reason
+    what: str
+    reason: str
 
 
-class JobDone(Message):
-    """A worker finished: ``kind`` names the job, ``result`` is its value."""
+@event
+class SegmentationFailed(Message):
+    """The workspace's segmentation or propagation (``what``) failed because of ``reason``
+    ("cancelled": Escape): no proposal."""
 
-    def __init__(self, kind: str, result: Any = None, **info: Any) -> None:
-        super().__init__()
-        self.kind = kind
-        self.result = result
-        self.info = info
+    what: str
+    reason: str
+
+
+@event
+class SectionsFailed(Message):
+    """The sections of object ``oid`` could not be computed (measure screen)."""
+
+    oid: int
+    reason: str
+
+
+@event
+class JobFinished(Message):
+    """A workspace job (an export...) finished: ``text`` for a notification and the status line."""
+
+    text: str
+
+
+@event
+class StageViewsReady(Message):
+    """The pipeline's views (``SliceViews``) of slice ``z`` for the request ``token``."""
+
+    z: int
+    token: int
+    views: Any
+
+
+@event
+class CellRendered(Message):
+    """The 2x2 layout's 3D cell: an RGB ``image`` (None: nothing to show) and its ``caption``."""
+
+    image: Any
+    caption: str
+
+
+@event
+class ProposalReady(Message):
+    """A segmentation run (``screens.propagation.PropagationRun``) ended with its proposal."""
+
+    run: Any
+
+
+@event
+class MeshesReady(Message):
+    """The 3D view's surfaces (object id -> mesh), built in ``dt`` seconds."""
+
+    meshes: dict
+    dt: float
+
+
+@event
+class FrameReady(Message):
+    """A rendered RGB ``image`` of the 3D view's request ``req``, rendered in ``dt`` seconds."""
+
+    image: Any
+    req: int
+    dt: float
+
+
+@event
+class FlyFrame(Message):
+    """Frame ``i`` of ``n`` of the 3D view's fly-through (request ``req``), rendered in ``dt`` seconds."""
+
+    image: Any
+    req: int
+    i: int
+    n: int
+    dt: float
+
+
+@event
+class Saved(Message):
+    """A file was written: ``text`` says what and where."""
+
+    text: str
+
+
+@event
+class MeasuredRow(Message):
+    """The measure screen's figures (``stats``: a row of the table) of object ``oid``."""
+
+    oid: int
+    stats: dict
+
+
+@event
+class SectionsReady(Message):
+    """The centreline sections (a ``MeasureResult``) of object ``oid``."""
+
+    oid: int
+    result: Any
 
 
 class LabelsChanged(Message):

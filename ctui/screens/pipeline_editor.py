@@ -13,6 +13,9 @@ from textual.screen import ModalScreen
 from textual.widgets import Footer, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
+from ctui.engine.actions.series import FILTERS, PARAMS
+from ctui.screens.dialogs import ChoiceScreen, PromptScreen
+from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
@@ -220,9 +223,6 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
 
     # ------------------------------------------------------------ actions
     def action_add(self) -> None:
-        from ctui.engine.actions.series import FILTERS, PARAMS
-        from ctui.screens.dialogs import ChoiceScreen, PromptScreen
-
         def chose(name: str | None) -> None:
             if not name:
                 return
@@ -252,8 +252,6 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         self._changed(i)
 
     def action_edit(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         i = self._index()
         if i is None:
             return
@@ -342,8 +340,6 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         self.post_message(Call(self._show, z, views))
 
     def _show(self, z: int, views) -> None:
-        from ctui.screens import planes
-
         pv = planes.plane_view(self.s.volume, planes.slice_plane(self.s.volume))  # the patient's frame
         cursor = planes.cursor_in(pv, self.s.zyx, self.s.shape)
         for wid, arr in (("#pe-inter", views.intermediate), ("#pe-final", views.final)):

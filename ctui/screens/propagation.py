@@ -18,7 +18,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Cancelled
 from ctui.engine.segment import propagate
 from ctui.engine.segment.selection import Segmentation
-from ctui.screens.messages import JobDone, JobFailed, JobProgress
+from ctui.screens.messages import JobProgress, ProposalReady, SegmentationFailed
 from ctui.screens.segpanel import describe, options_for
 
 
@@ -74,10 +74,10 @@ def object_seed(session) -> tuple[int, int, int] | None:
 
 def _idle(ws) -> bool:
     """Whether nothing runs and nothing waits for a or x; otherwise says so."""
-    if ws._prop is not None:
+    if ws.jobs.segmenting:
         ws.app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
         return False
-    if getattr(ws, "proposal", None) is not None:
+    if ws.pending.proposal is not None:
         ws.app.notify("Accept (a) or reject (x) the pending proposal first", severity="warning")
         return False
     return True
@@ -96,7 +96,7 @@ def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | N
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
-    ws.track_propagation(run)
+    ws.jobs.segmentation_started(run)
     ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})", 0, 100)
     ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
                   name="segment")
@@ -136,17 +136,17 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
         proposal.seed = tuple(seed)  # type: ignore[attr-defined]
         proposal.object_settings = dict(res.segmentation.objects[oid].settings)  # type: ignore[attr-defined]
     except Cancelled:
-        ws.post_message(JobFailed("Segmentation", "cancelled"))
+        ws.post_message(SegmentationFailed("Segmentation", "cancelled"))
         return
     except Exception as exc:
-        ws.post_message(JobFailed("Segmentation", str(exc)))
+        ws.post_message(SegmentationFailed("Segmentation", str(exc)))
         return
     _done(run, proposal)
 
 
 def _done(run: PropagationRun, proposal) -> None:
     run.proposal = proposal
-    run.ws.post_message(JobDone("propagation", run))
+    run.ws.post_message(ProposalReady(run))
 
 
 def start_propagation(ws, direction: str) -> None:
@@ -168,7 +168,7 @@ def start_propagation(ws, direction: str) -> None:
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
-    ws.track_propagation(run)
+    ws.jobs.segmentation_started(run)
     ws.show_progress(f"Propagating object {s.current} {direction}", 0, s.shape[0])
     ws.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
 
@@ -195,16 +195,16 @@ def _work(run: PropagationRun, settings) -> None:
                                                   progress=progress, cancel=run.event)
         clip_to_slices(proposal, s.limits.slices)
     except Exception as exc:
-        ws.post_message(JobFailed("Propagation", str(exc)))
+        ws.post_message(SegmentationFailed("Propagation", str(exc)))
         return
     _done(run, proposal)
 
 
 def finished(ws, run: PropagationRun) -> None:
-    ws.track_propagation(None)
+    ws.jobs.segmentation_ended()
     ws.show_progress(None)
     p = run.proposal
-    ws.proposal = p
+    ws.pending.show(p)
     rng = p.slices
     secs = time.perf_counter() - run.started
     extra = "; ".join(p.warnings())
@@ -224,26 +224,20 @@ def finished(ws, run: PropagationRun) -> None:
 
 
 def accept(ws) -> None:
-    p = getattr(ws, "proposal", None)
-    if p is None:
+    """``a``: the pending proposal goes into the segmentation (one undo step)."""
+    if ws.pending.proposal is None:
         ws.app.notify("No pending propagation", timeout=2)
         return
-    n = p.accept(ws.s.seg)
-    info = ws.s.seg.objects.get(p.object_id)
-    if info is not None and getattr(p, "seed", None) is not None:
-        if tuple(p.seed) not in [tuple(v) for v in info.seeds]:
-            info.seeds.append(tuple(p.seed))
-        info.settings.update(getattr(p, "object_settings", {}))
-    ws.proposal = None
+    n, p = ws.pending.accept(ws.s.seg)
     ws.labels_changed()
     ws.set_status(f"Accepted: {n} voxels added to object {p.object_id} (u undoes)")
     ws.refresh_view()
 
 
 def reject(ws) -> None:
-    if getattr(ws, "proposal", None) is None:
+    """``x``: the pending proposal is dropped."""
+    if ws.pending.clear() is None:
         ws.app.notify("No pending propagation", timeout=2)
         return
-    ws.proposal = None
     ws.set_status("Propagation rejected")
     ws.refresh_view()

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.core.volume import Volume
-from ctui.engine.core.windows import CT_PRESETS, apply_window
+from ctui.engine.core.windows import CT_PRESETS, apply_window, auto_window
 from ctui.engine.actions import series as loaders
-from ctui.engine.actions.edit import EditLimits
+from ctui.engine.actions.edit import EditLimits, brush_radius_px
 from ctui.engine.actions.series import Pipeline, Segmentation
 
 VIEWS = ("original", "overlay", "intermediate", "final")
@@ -135,8 +135,6 @@ class Session:
 
     def brush_px(self, axis: int = 0) -> float:
         """The brush radius in pixels of the finer in-plane spacing of the plane across ``axis``."""
-        from ctui.engine.actions.edit import brush_radius_px
-
         return brush_radius_px(self.brush, self.volume.spacing, axis)
 
     def toggle_background_seed(self, zyx: tuple[int, int, int] | None = None) -> bool:
@@ -188,7 +186,5 @@ class Session:
         if self.volume.modality == "CT":
             items += list(CT_PRESETS.items())
         else:
-            from ctui.engine.core.windows import auto_window
-
             items.append(("auto", auto_window(self.volume.data, modality=self.volume.modality)))
         return items  # type: ignore[return-value]

@@ -5,6 +5,12 @@ from __future__ import annotations
 
 import time
 
+from textual.events import MouseMove, MouseScrollDown, MouseScrollUp
+from textual.widgets import OptionList
+
+from ctui.screens import planes
+from ctui.screens.graphics import cell_pixels
+
 
 async def wait_for(pilot, predicate, *, timeout: float = 90.0, what: str = "condition") -> None:
     """Pause the pilot until ``predicate()`` is true (or raise TimeoutError)."""
@@ -54,7 +60,6 @@ async def answer_prompt(pilot, text: str) -> None:
 async def choose(pilot, option_id: str) -> None:
     """Pick an option by id in the focused OptionList (a ChoiceScreen)."""
     await pilot.pause()
-    from textual.widgets import OptionList
 
     ol = pilot.app.screen.query_one(OptionList)
     ids = [ol.get_option_at_index(i).id for i in range(ol.option_count)]
@@ -66,8 +71,6 @@ async def choose(pilot, option_id: str) -> None:
 def cell_of_voxel(app, zyx, widget_id: str = "#main", plane: str | None = None) -> tuple[int, int]:
     """(column, row) offset in the widget ``widget_id`` of the cell showing voxel ``zyx`` (z, y, x)
     on ``plane`` (the session's plane), through :mod:`ctui.screens.planes` and the view's map."""
-    from ctui.screens import planes
-
     ws = app.workspace
     iv = ws.query_one(widget_id)
     s = app.session
@@ -75,8 +78,6 @@ def cell_of_voxel(app, zyx, widget_id: str = "#main", plane: str | None = None) 
     c, r = planes.cursor_in(pv, tuple(zyx), s.shape)
     xd, yd = iv.view_map.to_display(c, r)
     if iv.mode in ("sixel", "kitty"):
-        from ctui.screens.graphics import cell_pixels
-
         cw, ch = cell_pixels()
         return int(xd // cw), int(yd // ch)
     return int(xd), int(yd // 2)
@@ -86,8 +87,6 @@ async def drag(pilot, widget_id: str, cells: list[tuple[int, int]], *, button: i
                meta: bool = False, control: bool = False) -> None:
     """Press at the first cell of ``cells`` (offsets in ``widget_id``), move through the
     others with the button held, release at the last."""
-    from textual.events import MouseMove
-
     await pilot.mouse_down(widget_id, offset=cells[0], button=button, shift=shift, meta=meta, control=control)
     for c in cells[1:]:
         await pilot._post_mouse_events([MouseMove], widget_id, offset=c, button=button, shift=shift, meta=meta,
@@ -97,7 +96,5 @@ async def drag(pilot, widget_id: str, cells: list[tuple[int, int]], *, button: i
 
 async def wheel(pilot, widget_id: str, offset: tuple[int, int] = (2, 2), *, up: bool = True, control: bool = False) -> None:
     """One wheel notch over ``widget_id`` (Ctrl held with ``control``)."""
-    from textual.events import MouseScrollDown, MouseScrollUp
-
     await pilot._post_mouse_events([MouseScrollUp if up else MouseScrollDown], widget_id, offset=offset,
                                    control=control)

@@ -24,11 +24,12 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 from ctui.engine.actions.render import centreline  # the function the fly-through of ctui render uses
+from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
 from ctui.screens.keytable import keys
-from ctui.screens.messages import JobDone, JobFailed, Status
+from ctui.screens.messages import FlyFrame, FrameReady, JobFailed, MeshesReady, Saved, Status
 from ctui.screens.session import safe_cwd
 
 METHODS = defaults.MESH_METHODS  # the surface methods the c key cycles through
@@ -148,7 +149,7 @@ class View3DScreen(GuardMixin, Screen):
         except Exception as exc:
             self.post_message(JobFailed("Surfaces", str(exc)))
             meshes = {}
-        self.post_message(JobDone("meshes", meshes, dt=time.perf_counter() - t0))
+        self.post_message(MeshesReady(meshes, time.perf_counter() - t0))
 
     def _meshes_ready(self, meshes: dict, dt: float) -> None:
         self.meshes = meshes
@@ -198,7 +199,7 @@ class View3DScreen(GuardMixin, Screen):
             msg = str(exc)
             self.post_message(JobFailed("3D render", msg))
             return
-        self.post_message(JobDone("frame", img, req=req, dt=time.perf_counter() - t0))
+        self.post_message(FrameReady(img, req, time.perf_counter() - t0))
 
     # ------------------------------------------------------------------ messages from the workers
     @on(Status)
@@ -211,18 +212,23 @@ class View3DScreen(GuardMixin, Screen):
         self._status(f"{msg.what} failed: {msg.reason}")
         self.app.notify(f"{msg.what}: {msg.reason}", severity="error", timeout=10)
 
-    @on(JobDone)
-    def _done(self, msg: JobDone) -> None:
-        if msg.kind == "meshes":
-            self._busy_since = None
-            self._meshes_ready(msg.result, msg.info["dt"])
-        elif msg.kind == "frame":
-            self._show(msg.result, msg.info["req"], msg.info["dt"])
-        elif msg.kind == "fly":
-            self._show_fly(msg.result, msg.info["req"], msg.info["i"], msg.info["n"], msg.info["dt"])
-        elif msg.kind == "saved":
-            self.app.notify(f"Saved {msg.result}")
-            self._status(f"Saved {msg.result}")
+    @on(MeshesReady)
+    def _meshes_msg(self, msg: MeshesReady) -> None:
+        self._busy_since = None
+        self._meshes_ready(msg.meshes, msg.dt)
+
+    @on(FrameReady)
+    def _frame_msg(self, msg: FrameReady) -> None:
+        self._show(msg.image, msg.req, msg.dt)
+
+    @on(FlyFrame)
+    def _fly_msg(self, msg: FlyFrame) -> None:
+        self._show_fly(msg.image, msg.req, msg.i, msg.n, msg.dt)
+
+    @on(Saved)
+    def _saved_msg(self, msg: Saved) -> None:
+        self.app.notify(f"Saved {msg.text}")
+        self._status(f"Saved {msg.text}")
 
     def _tick(self) -> None:
         """While surfaces are built: what is happening and for how long (never a static message)."""
@@ -303,8 +309,6 @@ class View3DScreen(GuardMixin, Screen):
     def _ask_path(self, title: str, tag: str, suffix: str, what: str, write) -> None:
         """Prompt for an output path (default ``<input stem>-<tag><suffix>`` in the folder ctui
         started from), then ``write(path)`` in a worker; ``what`` names the file in messages."""
-        from ctui.screens.dialogs import PromptScreen
-
         if self.scene is None:
             return
 
@@ -324,7 +328,7 @@ class View3DScreen(GuardMixin, Screen):
         except Exception as exc:
             self.post_message(JobFailed(f"{what.capitalize()} not saved", str(exc)))
             return
-        self.post_message(JobDone("saved", path))
+        self.post_message(Saved(path))
 
     def _scene_now(self):
         scene = self.scene.snapshot()
@@ -395,7 +399,7 @@ class View3DScreen(GuardMixin, Screen):
                     return
                 t0 = time.perf_counter()
                 img = render.get_renderer().submit(render.flythrough_scene(scene, cam), size).result()
-                self.post_message(JobDone("fly", img, req=req, i=i + 1, n=len(cams), dt=time.perf_counter() - t0))
+                self.post_message(FlyFrame(img, req, i + 1, len(cams), time.perf_counter() - t0))
         except Exception as exc:
             self.post_message(JobFailed("3D render", str(exc)))
         finally:

@@ -10,6 +10,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions import edit as et
+from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen, PromptScreen
 from ctui.screens.planes import plane_view
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -22,7 +23,7 @@ class EditMixin:
     # ------------------------------------------------------------------ guards
     def _busy(self) -> bool:
         """Label edits wait while a propagation reads the labels (Escape cancels it)."""
-        if self._prop is not None:
+        if self.jobs.segmenting:
             self.app.notify("A propagation is running: wait for it or press Escape to cancel", severity="warning", timeout=3)
             return True
         return False
@@ -128,8 +129,6 @@ class EditMixin:
 
     # ------------------------------------------------------------------ limits
     def action_limits(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         s = self.s
         nz = s.shape[0]
 
@@ -179,8 +178,6 @@ class EditMixin:
                           "Kept the largest island of object {obj}: {n} voxels removed (u undoes)")
 
     def action_remove_islands(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         def done(val: str | None) -> None:
             if not val:
                 return
@@ -207,8 +204,6 @@ class EditMixin:
         self._edited(f"Filled between slices: {n} voxels added to object {self.s.current} (u undoes)")
 
     def action_tools(self) -> None:
-        from ctui.screens.dialogs import ChoiceScreen
-
         options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels (X)"),
                    ("fill_between", "Fill between slices (F)"),
                    ("keep_island", "Keep the island under the cursor (3D)"),
@@ -245,8 +240,6 @@ class EditMixin:
         self.update_panel()
 
     def action_range_edit(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         def done(val: str | None) -> None:
             if val is None:
                 return
@@ -286,8 +279,6 @@ class EditMixin:
         self.update_panel()
 
     def action_rename_object(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         s = self.s
         s.seg.add_object(object_id=s.current)
         info = s.seg.objects[s.current]
@@ -301,8 +292,6 @@ class EditMixin:
         self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
 
     def action_clear_object(self) -> None:
-        from ctui.screens.dialogs import ConfirmScreen
-
         s = self.s
         if not self._editable():
             return

@@ -11,7 +11,7 @@ from textual.worker import Worker, get_current_worker
 
 from ctui.engine import render
 from ctui.engine.core.progress import Cancelled
-from ctui.screens.messages import JobDone, JobFailed, JobProgress
+from ctui.screens.messages import CellRendered, JobFailed, JobFinished, JobProgress
 
 
 def render_cell(ws, size: tuple[int, int]) -> Worker:
@@ -20,7 +20,7 @@ def render_cell(ws, size: tuple[int, int]) -> Worker:
 
 
 def _render_cell(ws, size: tuple[int, int]) -> None:
-    from ctui.screens.view3d import build_meshes
+    from ctui.screens.view3d import build_meshes  # the 3D view's module (meshing) loads with the first 3D cell
 
     worker = get_current_worker()
     ws.post_message(JobProgress("3D: building surfaces", 0, 2))
@@ -38,10 +38,10 @@ def _render_cell(ws, size: tuple[int, int]) -> None:
         why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, render.EGLUnavailable):
             why = f"no offscreen OpenGL (EGL); apt-get install {render.EGL_PACKAGES}"
-        ws.post_message(JobDone("3d", None, caption=f"[b]3d unavailable[/b]: {why[:150]}"))
+        ws.post_message(CellRendered(None, f"[b]3d unavailable[/b]: {why[:150]}"))
         return
     if not worker.is_cancelled:
-        ws.post_message(JobDone("3d", img, caption=f"3d: {len(meshes)} object(s), r opens the 3D view"))
+        ws.post_message(CellRendered(img, f"3d: {len(meshes)} object(s), r opens the 3D view"))
 
 
 def job_progress(ws, what: str):
@@ -71,6 +71,6 @@ def run_job(ws, fn, *, what: str, name: str) -> Worker:
         except Exception as exc:  # a clear notification, the work stays in memory
             ws.post_message(JobFailed(what, str(exc)))
             return
-        ws.post_message(JobDone("message", msg))
+        ws.post_message(JobFinished(str(msg)))
 
-    return ws.track_job(ws.run_worker(body, thread=True, group="job", name=name))
+    return ws.jobs.track(ws.run_worker(body, thread=True, group="job", name=name))

@@ -8,6 +8,7 @@ import numpy as np
 from rich.text import Text
 
 from ctui.screens import planes
+from ctui.screens.dialogs import PromptScreen
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.session import VIEWS
@@ -96,7 +97,7 @@ class NavMixin:
         if s.tool and s.zyx != before and not self._busy():
             self.stroke(before, s.zyx)
             self.refresh_view()
-        elif self.ortho_mode:
+        elif self.viewstate.ortho_mode:
             self.refresh_view()
         else:
             self._repaint_cursor()
@@ -113,12 +114,8 @@ class NavMixin:
         if s.zoom <= 1:
             self.app.notify("Zoom in (+) first to pan", timeout=2)
             return
-        ny, nx = self._plane_shape(s.plane)
-        cx, cy = self.pan_center or self._view_center()
-        step_x, step_y = nx / s.zoom / 4, ny / s.zoom / 4
-        self.pan_center = (cx + dx * step_x, cy + dy * step_y)
         # panning drags the cursor along so it stays visible
-        self.action_move(int(round(dx * step_x)), int(round(dy * step_y)))
+        self.action_move(*self.viewstate.pan_by(s, dx, dy))
 
     def action_slice(self, d: int) -> None:
         """PageUp/PageDown: the next plane along the current view's normal (z for axial)."""
@@ -138,8 +135,6 @@ class NavMixin:
         self.refresh_view()
 
     def action_goto(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         last = self.s.shape[0] - 1
 
         def done(val: str | None) -> None:
@@ -161,22 +156,17 @@ class NavMixin:
         s = self.s
         s.zoom = min(max(s.zoom * (2.0 if d > 0 else 0.5), 1.0), 16.0)
         if s.zoom == 1.0:
-            self.pan_center = None
+            self.viewstate.pan_to(None)
         self._repaint_cursor()
 
     # ------------------------------------------------------------------ windows and views
     def action_window_cycle(self) -> None:
-        presets = self.s.window_presets()
-        idx = (getattr(self, "_window_idx", -1) + 1) % len(presets)
-        name, win = presets[idx]
-        self._window_idx, self._window_name = idx, name
-        self.s.window = (float(win[0]), float(win[1]))
+        name, win = self.viewstate.next_window(self.s.window_presets())
+        self.s.window = win
         self.refresh_view()
         self.app.notify(f"Window {name}: C {win[0]:g} W {win[1]:g}", timeout=2)
 
     def action_window_set(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         def done(val: str | None) -> None:
             if not val:
                 return
@@ -189,47 +179,46 @@ class NavMixin:
                 self.app.notify("Window: give centre and width, e.g. '40 400'", severity="error")
                 return
             self.s.window = (c, w)
-            self._window_name = "custom"
+            self.viewstate.window_name = "custom"
             self.refresh_view()
 
         c, w = self.s.window
         self.app.push_screen(PromptScreen("Window centre and width (e.g. 40 400)", f"{c:g} {w:g}"), done)
 
     def _layout(self, *, grid: bool = False, ortho: bool = False) -> None:
-        self.grid_mode, self.ortho_mode = grid, ortho
+        self.viewstate.set_layout(grid=grid, ortho=ortho)
         self.query_one("#grid").set_class(grid, "on")
         self.query_one("#ortho").set_class(ortho, "on")
         self.query_one("#main-box").set_class(grid or ortho, "off")
         for iv in self.query(ImageView):
             iv.token = None
-        self.pan_center = None
         self.refresh_view()
 
     def action_view_cycle(self) -> None:
-        if self.grid_mode:
+        if self.viewstate.grid_mode:
             self._layout()
             return
         self.s.plane = planes.slice_plane(self.s.volume)
         self.s.view = VIEWS[(VIEWS.index(self.s.view) + 1) % len(VIEWS)]
-        self._layout(ortho=self.ortho_mode)
+        self._layout(ortho=self.viewstate.ortho_mode)
 
     def action_grid(self) -> None:
         self.s.plane = planes.slice_plane(self.s.volume)
-        self._layout(grid=not self.grid_mode)
+        self._layout(grid=not self.viewstate.grid_mode)
 
     def action_plane(self, plane: str) -> None:
         """1/2/3: axial, sagittal or coronal (the active plane of the 2x2 layout)."""
         self.s.plane = plane
-        self._layout(ortho=self.ortho_mode)
+        self._layout(ortho=self.viewstate.ortho_mode)
         self.set_status(f"{plane.capitalize()} view: arrows move in it, PageUp/PageDown step across it")
 
     def action_ortho(self) -> None:
-        if not self.ortho_mode and (self.size.width < 100 or self.size.height < 30):
+        if not self.viewstate.ortho_mode and (self.size.width < 100 or self.size.height < 30):
             self.app.notify("The 2x2 layout needs a terminal of at least 100x30: 1/2/3 show one plane",
                             severity="warning", timeout=4)
             return
-        self._layout(ortho=not self.ortho_mode)
-        if self.ortho_mode:
+        self._layout(ortho=not self.viewstate.ortho_mode)
+        if self.viewstate.ortho_mode:
             self.request_3d()
 
     def on_click(self, event) -> None:
@@ -252,18 +241,18 @@ class NavMixin:
 
     # ------------------------------------------------------------------ propagation
     def action_propagate(self, direction: str) -> None:
-        from ctui.screens.propagation import start_propagation
+        from ctui.screens.propagation import start_propagation  # the segmentation engine (scipy) loads with the first segmentation
 
         start_propagation(self, direction)
 
     def action_segment_here(self) -> None:
         """S: the current object from the cursor, with the segmentation panel's options (actions.segment)."""
-        from ctui.screens.propagation import start_segment
+        from ctui.screens.propagation import start_segment  # the segmentation engine (scipy) loads with the first segmentation
 
         start_segment(self, "both")
 
     def action_segment_panel(self) -> None:
-        from ctui.screens.segpanel import SegmentPanel, describe
+        from ctui.screens.segpanel import SegmentPanel, describe  # the segmentation engine (scipy) loads with the first segmentation
 
         def done(ok: bool | None) -> None:
             if ok:
@@ -273,23 +262,21 @@ class NavMixin:
         self.app.push_screen(SegmentPanel(self.s), done)
 
     def action_accept(self) -> None:
-        from ctui.screens.propagation import accept
+        from ctui.screens.propagation import accept  # the segmentation engine (scipy) loads with the first segmentation
 
         if not self._busy():
             accept(self)
 
     def action_reject(self) -> None:
-        from ctui.screens.propagation import reject
+        from ctui.screens.propagation import reject  # the segmentation engine (scipy) loads with the first segmentation
 
         reject(self)
 
     def action_cancel(self) -> None:
-        if self._prop is not None:
-            self._prop.cancel()
+        cancelled = self.jobs.cancel()
+        if cancelled == "segmentation":
             self.set_status("Cancelling propagation...")
-        elif self._job is not None:
-            self._job.cancel()
-            self._job = None
+        elif cancelled == "job":
             self.show_progress(None)
             self.set_status("Cancelled")
         elif self.s.tool:
@@ -299,7 +286,7 @@ class NavMixin:
 
     # ------------------------------------------------------------------ other screens
     def action_filters(self) -> None:
-        from ctui.screens.pipeline_editor import PipelineEditor
+        from ctui.screens.pipeline_editor import PipelineEditor  # a screen's module loads when it first opens: the workspace paints sooner
 
         if self._busy():
             return
@@ -307,26 +294,26 @@ class NavMixin:
 
     def _after_pipeline(self) -> None:
         self.s.dirty = True
-        self._layout(grid=self.grid_mode, ortho=self.ortho_mode)
+        self._layout(grid=self.viewstate.grid_mode, ortho=self.viewstate.ortho_mode)
 
     def action_drift(self) -> None:
-        from ctui.screens.drift_screen import DriftScreen
+        from ctui.screens.drift_screen import DriftScreen  # a screen's module loads when it first opens: the workspace paints sooner
 
         if not self._busy():
             self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
 
     def action_render3d(self) -> None:
-        from ctui.screens.view3d import View3DScreen
+        from ctui.screens.view3d import View3DScreen  # a screen's module loads when it first opens: the workspace paints sooner
 
         self.app.push_screen(View3DScreen(self.s))
 
     def action_measure(self) -> None:
-        from ctui.screens.measure_screen import MeasureScreen
+        from ctui.screens.measure_screen import MeasureScreen  # a screen's module loads when it first opens: the workspace paints sooner
 
         self.app.push_screen(MeasureScreen(self.s))
 
     def action_export(self) -> None:
-        from ctui.screens.export import export_dialog
+        from ctui.screens.export import export_dialog  # a screen's module loads when it first opens: the workspace paints sooner
 
         export_dialog(self)
 
@@ -360,9 +347,10 @@ def panel_text(ws) -> Text:
     t.append(f"  filtered {fv:.4g}\n" if fv is not None else "\n")
     c, w = s.window
     t.append(f"Window C {c:g} W {w:g}")
-    if getattr(ws, "_window_name", None):
-        t.append(f" ({ws._window_name})", style="dim")
-    view = "2x2 pipeline" if ws.grid_mode else ("2x2 planes" if ws.ortho_mode else s.view)
+    vs = ws.viewstate
+    if vs.window_name:
+        t.append(f" ({vs.window_name})", style="dim")
+    view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
     t.append(f"\nView {s.plane} {view}  zoom {s.zoom:g}x\n")
     dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
@@ -396,6 +384,7 @@ _BARS = " ▁▂▃▄▅▆▇█"
 def _seed_text(ws, t: Text) -> None:
     """The segmentation settings (G) and the range S would use at the cursor, with the neighbourhood's
     histogram (a sparkline, the range's part bright)."""
+    # the segmentation engine (scipy) loads in the side panel's first repaint, not before the first paint
     from ctui.engine.actions.segment import suggest_range
     from ctui.screens.segpanel import describe
 
@@ -444,7 +433,7 @@ def _objects_text(ws, t: Text) -> None:
         return
     objs = sorted(getattr(s.seg, "objects", {}) or {})
     area = np.bincount(lab[s.z].ravel(), minlength=11)
-    vols = ws._object_volumes()
+    vols = ws.volumes.of(s)
     px_mm2 = s.volume.spacing[1] * s.volume.spacing[2]
     ids = sorted(set(objs) | set(vols) | {s.current})
     for i in ids:

@@ -29,9 +29,12 @@ from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions.edit import review
 from ctui.screens import planes
+from ctui.screens.dialogs import PromptScreen
+from ctui.screens.graphics import cell_pixels
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
+from ctui.screens.ws_keys import panel_text
 from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -171,7 +174,7 @@ class MouseMixin(ToolsMixin):
             if self.s.zoom <= 1:
                 self.set_status("Zoom in first (+ or Ctrl+wheel) to pan")
                 return
-            self._drag = ("pan", iv, event.screen_x, event.screen_y, self.pan_center or self._view_center())
+            self._drag = ("pan", iv, event.screen_x, event.screen_y, self.viewstate.pan_center or self._view_center())
             iv.capture_mouse()
             return
         got = self._voxel_at(iv, event)
@@ -257,7 +260,7 @@ class MouseMixin(ToolsMixin):
         before = s.zyx
         s.z, s.y, s.x = zyx
         s.clamp()
-        if drag[0] == "paint" and self._prop is None:
+        if drag[0] == "paint" and not self.jobs.segmenting:
             self.stroke(before, s.zyx)
         self.refresh_view()
 
@@ -267,14 +270,12 @@ class MouseMixin(ToolsMixin):
         if vm is None or self.s.zoom <= 1:
             return
         if iv.mode in ("sixel", "kitty"):
-            from ctui.screens.graphics import cell_pixels
-
             cw, ch = (float(v) for v in cell_pixels())
         else:
             cw, ch = 1.0, 2.0  # half blocks: a cell is one pixel wide, two high
         dx = (event.screen_x - sx0) * cw / vm.sx
         dy = (event.screen_y - sy0) * ch / vm.sy
-        self.pan_center = (c0[0] - dx, c0[1] - dy)
+        self.viewstate.pan_to((c0[0] - dx, c0[1] - dy))
         self.refresh_view()
 
     def on_mouse_up(self, event) -> None:
@@ -302,15 +303,13 @@ class MouseMixin(ToolsMixin):
             self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y))
 
     def _panel_click(self, panel, row: int) -> None:
-        from ctui.screens.ws_keys import panel_text
-
         lines = panel_text(self).plain.split("\n")
         if 0 < row < len(lines) and "██" not in lines[row] and lines[row].startswith(" " * 8) and "██" in lines[row - 1]:
             row -= 1  # the figures' line under an object with a long name
         if not 0 <= row < len(lines) or "██" not in lines[row]:
             return
         s = self.s
-        vols = self._object_volumes()
+        vols = self.volumes.of(self.s)
         ids = sorted(set(getattr(s.seg, "objects", {}) or {}) | set(vols) | {s.current})
         k = sum(1 for line in lines[:row] if "██" in line)
         if k < len(ids):
@@ -337,7 +336,7 @@ class MouseMixin(ToolsMixin):
             if got is not None:
                 self.s.plane = got[0]
                 self.s.z, self.s.y, self.s.x = got[1]
-                self.pan_center = None
+                self.viewstate.pan_to(None)
             self.action_zoom(d)
             return
         plane = _plane_of(self, iv)
@@ -348,8 +347,6 @@ class MouseMixin(ToolsMixin):
     # ------------------------------------------------------------------ keys
     def action_goto(self) -> None:
         """g: "Z" goes to slice Z; "X,Y" moves the cursor on this slice; "X,Y,Z" both."""
-        from ctui.screens.dialogs import PromptScreen
-
         s = self.s
         nz, ny, nx = s.shape
 
@@ -428,10 +425,10 @@ class MouseMixin(ToolsMixin):
     def review_source(self):
         """What the strip reviews: the pending proposal, else the current object when it spans
         three slices or more (``review.Stack``, cached per labels version), else None."""
-        if self.proposal is not None:
-            return self.proposal
+        if self.pending.proposal is not None:
+            return self.pending.proposal
         s = self.s
-        key = (self._labels_version, s.current)
+        key = (self.volumes.version, s.current)
         cache = getattr(self, "_object_stack", None)
         if cache is not None and cache[0] == key:
             return cache[1]
@@ -452,7 +449,7 @@ class MouseMixin(ToolsMixin):
         cache = getattr(self, "_marks_cache", None)
         if cache is not None and cache[0] is src:
             return cache[1]
-        seed = self._seed_mask(src) if src is self.proposal else None
+        seed = self._seed_mask(src) if src is self.pending.proposal else None
         found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed)
         self._marks_cache = (src, found)
         return found
@@ -463,7 +460,7 @@ class MouseMixin(ToolsMixin):
         if not strips:
             return
         strip = strips.first(ReviewStrip)
-        p = self.proposal
+        p = self.pending.proposal
         src = p if p is not None else (self.review_source() if self.size.height >= 30 else None)
         if src is None:
             strip.set_class(False, "on")
@@ -480,11 +477,11 @@ class MouseMixin(ToolsMixin):
         s = self.s
         s.z = int(z)
         s.clamp()
-        if not self.ortho_mode:  # the strip's axis is the file's slices: show them
+        if not self.viewstate.ortho_mode:  # the strip's axis is the file's slices: show them
             s.plane = planes.slice_plane(s.volume)
         self.refresh_view()
         why = {m.z: m.why for m in self.review_marks()}.get(s.z)
-        if why and self.proposal is not None:
+        if why and self.pending.proposal is not None:
             self.set_status(f"Slice {s.z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks")
         elif why:
             self.set_status(f"Slice {s.z}: {why}. t: keep the island / scissors on this slice; {{ }} other marks")
@@ -499,26 +496,31 @@ class MouseMixin(ToolsMixin):
             return
         self._go_slice(z)
 
+    def _proposal_to_review(self, none: str):
+        """The pending proposal when one waits and no segmentation runs; else None (``none``:
+        the notification when there is no proposal)."""
+        p = self.pending.proposal
+        if p is None:
+            self.app.notify(none, timeout=2)
+            return None
+        return None if self._busy() else p
+
     def action_cut_here(self) -> None:
-        p = self.proposal
-        if p is None or self._busy():
-            if p is None:
-                self.app.notify("No proposal to cut: p propagates", timeout=2)
+        p = self._proposal_to_review("No proposal to cut: p propagates")
+        if p is None:
             return
         cut = review.cut_at(p, self.s.z, seed_mask=self._seed_mask(p))
-        self.proposal = cut
+        self.pending.show(cut)
         rng = cut.slices
         self.set_status(f"Cut at slice {self.s.z}: {cut.voxels} voxels (was {p.voxels}), "
                         f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
         self.refresh_view()
 
     def action_accept_to_here(self) -> None:
-        from ctui.screens.propagation import accept
+        from ctui.screens.propagation import accept  # the segmentation engine (scipy) loads with the first segmentation
 
-        p = self.proposal
-        if p is None or self._busy():
-            if p is None:
-                self.app.notify("No pending proposal", timeout=2)
+        p = self._proposal_to_review("No pending proposal")
+        if p is None:
             return
-        self.proposal = review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p))
+        self.pending.show(review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p)))
         accept(self)

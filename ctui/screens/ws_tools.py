@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
+from ctui.screens.dialogs import PromptScreen
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 
@@ -88,8 +89,6 @@ class ToolsMixin:
         self._scissors(False, "all")
 
     def action_smooth(self) -> None:
-        from ctui.screens.dialogs import PromptScreen
-
         s = self.s
 
         def done(val: str | None) -> None:
@@ -110,8 +109,6 @@ class ToolsMixin:
 
     def action_box_typed(self) -> None:
         """The ROI box typed as two corners X0,Y0,Z0,X1,Y1,Z1 (as ``ctui segment/edit --box``)."""
-        from ctui.screens.dialogs import PromptScreen
-
         s = self.s
 
         def done(val: str | None) -> None:
