@@ -100,3 +100,38 @@ def test_face_components_equal_scipy():
         assert n == len(uniq)
         np.testing.assert_array_equal(flab, ref)
     assert meshtools._vertex_roots(chain, 2200, max_rounds=1) is None  # not settled: scipy's path then
+
+
+def test_cold_cache_isosurface_imports_no_numba(tmp_path):
+    """An empty numba cache: a big isosurface takes the numpy path without importing numba
+    to learn that nothing is compiled (jit.cache_lacks), and gives the mesh."""
+    out = _python("""
+        import sys
+        import numpy as np
+        from ctui.engine.mesh.marching import marching_cubes
+        z, y, x = np.mgrid[:170, :160, :160]
+        vol = (((z - 85) ** 2 + (y - 80) ** 2 + (x - 80) ** 2) < 60 ** 2).astype(np.int16) * 1000
+        v, f, n = marching_cubes(vol, 500)
+        print(len(f) > 0, "numba" in sys.modules)
+    """, NUMBA_CACHE_DIR=str(tmp_path))
+    assert out.split() == ["True", "False"]
+
+
+def test_cache_probe_looks_where_numba_writes(tmp_path):
+    """cache_lacks looks for the index files numba itself names (folder and file), in a given
+    NUMBA_CACHE_DIR: absent -> lacks; present -> does not lack."""
+    out = _python("""
+        from pathlib import Path
+        from ctui.engine.mesh import jit
+        names = ("_pass_rows", "_pass_count")
+        print(jit.cache_lacks("mc_kernels", names))
+        from ctui.engine.mesh import mc_kernels as k  # imports numba: its own cache paths
+        for name in names:
+            index = Path(getattr(k, name)._cache._cache_file._index_path)
+            index.parent.mkdir(parents=True, exist_ok=True)
+            index.write_bytes(b"")
+        import sys
+        del sys.modules["numba"]  # cache_lacks answers False while numba is imported
+        print(jit.cache_lacks("mc_kernels", names), jit.cache_lacks("mc_kernels", names + ("_finish_vertices",)))
+    """, NUMBA_CACHE_DIR=str(tmp_path))
+    assert out.split() == ["True", "False", "True"]

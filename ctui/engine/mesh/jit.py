@@ -26,6 +26,7 @@ paid already in this process (one more cached kernel then loads in ~20 ms).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 import sys
@@ -153,20 +154,44 @@ def is_compiled(dispatcher: Any, dtype: Any = None) -> bool:
 SMALL_WORK = 4_000_000
 
 
+def cache_lacks(module: str, names: Sequence[str]) -> bool:
+    """True when numba's disk cache surely holds no compiled version of one of the kernels
+    ``names`` of ``ctui/engine/mesh/<module>.py``: its index file
+    (``<module>.<name>-<line>.pyXY.nbi``) is in none of the folders numba would read (its
+    ``NUMBA_CACHE_DIR`` subfolder, else the package's ``__pycache__`` or the user cache of
+    :func:`configure_cache`). Answered without importing numba (0.25 s), so that a cold cache
+    does not pay for numba only to learn that nothing is compiled; False once numba is
+    imported (it answers itself, cheaply)."""
+    if "numba" in sys.modules:
+        return False
+    here = os.path.dirname(os.path.abspath(__file__))  # the kernels' folder, as numba names it
+    sub = f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    folders = [Path(env) / sub] if env else [Path(here) / "__pycache__", user_cache_dir() / sub]
+    tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    folders = [f for f in folders if f.is_dir()]
+    return not all(any(any(f.glob(f"{module}.{name}-*.{tag}.nbi")) for f in folders) for name in names)
+
+
 def use_compiled(dispatchers: Sequence[Any] | Callable[[], Sequence[Any]], dtype: Any = None, *,
-                 work: int | None = None, cheap_when_ready: bool = False) -> bool:
+                 work: int | None = None, cheap_when_ready: bool = False,
+                 cached_in: tuple[str, Sequence[str]] | None = None) -> bool:
     """Whether to run the compiled kernels (all of ``dispatchers`` ready, or forced).
 
     ``dispatchers``: the kernels, or a function returning them (called only when the
     answer needs them, so numba is not imported for small jobs). ``work`` (voxels or
     faces): small jobs take the numpy path in ``auto`` mode unless every kernel is
     already loaded in this process, or (``cheap_when_ready``) numba's target is initialised
-    and the kernels are in the disk cache (same output either way)."""
+    and the kernels are in the disk cache (same output either way). ``cached_in``: (module,
+    kernel names) for :func:`cache_lacks`: when the disk cache surely lacks one, the answer is
+    False without importing numba."""
     m = mode()
     if m != "auto":
         if m == "compiled":
             start_target()
         return m == "compiled"
+    if cached_in is not None and cache_lacks(*cached_in):
+        return False
     small = work is not None and work < SMALL_WORK and not (cheap_when_ready and target_ready())
     if small and "numba" not in sys.modules:  # no kernel can be loaded in this process yet
         return False

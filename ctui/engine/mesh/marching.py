@@ -74,6 +74,7 @@ def _kernel_list() -> tuple:
 
 
 _KERNEL_DTYPES = (np.dtype(np.int16), np.dtype(np.float32))
+_KERNEL_NAMES = ("_pass_rows", "_pass_count", "_pass_generate", "_finish_vertices")  # as _kernel_list
 
 
 def _threshold(data: np.ndarray, level: float):
@@ -154,7 +155,7 @@ def marching_cubes(
     if isinstance(thr, np.int64) and data.dtype != np.int64:
         # level below the dtype's range: everything inside, no surface
         return empty
-    if not jit.use_compiled(_kernel_list, data.dtype, work=int(data.size)):
+    if not jit.use_compiled(_kernel_list, data.dtype, work=int(data.size), cached_in=("mc_kernels", _KERNEL_NAMES)):
         if data.size >= jit.SMALL_WORK:
             jit.compile_in_background()
         return marching_cubes_numpy(data, thr, float(level), m, org, ginv, bool(normals), progress=progress)
