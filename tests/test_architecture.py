@@ -158,3 +158,61 @@ def test_engine_imports_inside_functions_say_why():
                     bad.append(f"{p.relative_to(ROOT)}:{node.lineno} {src[node.lineno - 1].strip()}")
     assert not bad, "imports inside functions without a reason (move them to the top, or say why): " + \
         "; ".join(sorted(set(bad)))
+
+
+# Libraries a function may import without a comment: heavy or optional ones, loaded on first
+# use so that `ctui --help` and the TUI's first paint do not wait for them (the reason, once).
+HEAVY_LIBRARIES = ("scipy", "skimage", "cv2", "numba", "pydicom", "highdicom", "nibabel", "nrrd", "trimesh", "PIL",
+                   "matplotlib", "moderngl", "mapbox_earcut", "fast_simplification", "dask", "distributed",
+                   "psutil", "textual_image", "tifffile", "imageio", "meshio", "vtk", "pyvista", "SimpleITK")
+# Modules whose functions import for start-up time, with the reason (one for the whole module).
+STARTUP_MODULES = {
+    "ctui/cli.py": "`ctui --help` and the argument errors load no engine (numpy): a command imports its work",
+    "ctui/commands/": "`ctui --help` imports every command's module: each `run` imports the engine it needs",
+    "ctui/screens/app.py": "the first frame (the loading screen) is drawn before the workspace, dialogs and help load",
+    "ctui/screens/loading.py": "the loading screen is the first frame: its dialogs load when first asked for",
+}
+
+
+def _import_blocks(src: list[str], fn) -> list[tuple[int, int, str]]:
+    """(first line, last line, module) of each import inside ``fn``, the block being the run of
+    import statements around it with no other line between."""
+    imports = sorted((n.lineno, n.end_lineno, n.module if isinstance(n, ast.ImportFrom) else n.names[0].name)
+                     for n in ast.walk(fn) if isinstance(n, ast.Import) or (isinstance(n, ast.ImportFrom) and not n.level))
+    out = []
+    for k, (a, b, mod) in enumerate(imports):
+        lo, hi = a, b
+        j = k
+        while j > 0 and imports[j - 1][1] == lo - 1:
+            j -= 1
+            lo = imports[j][0]
+        j = k
+        while j + 1 < len(imports) and imports[j + 1][0] == hi + 1:
+            j += 1
+            hi = imports[j][1]
+        out.append((lo, hi, mod or ""))
+    return out
+
+
+def test_imports_inside_functions_say_why():
+    """Every import inside a function in ctui/ is there for start-up time or a heavy/optional
+    library, and says so: a ``#`` comment on the import, on its block of imports or on the line
+    above the block, or the function's docstring about the import; or it imports one of
+    HEAVY_LIBRARIES; or its module is in STARTUP_MODULES. Any other import belongs at the top."""
+    bad = []
+    for p in _py_files():
+        rel = str(p.relative_to(ROOT))
+        if any(rel.startswith(m) for m in STARTUP_MODULES):
+            continue
+        src = p.read_text().splitlines()
+        for fn in ast.walk(ast.parse("\n".join(src))):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            doc = (ast.get_docstring(fn) or "").lower()
+            for lo, hi, mod in _import_blocks(src, fn):
+                said = any("#" in src[i] for i in range(lo - 1, hi)) or src[lo - 2].strip().startswith("#") \
+                    or "import" in doc
+                if not said and mod.split(".")[0] not in HEAVY_LIBRARIES:
+                    bad.append(f"{rel}:{lo} {mod}")
+    assert not bad, "imports inside functions without a reason (move them to the top, or say why): " + \
+        "; ".join(sorted(set(bad)))

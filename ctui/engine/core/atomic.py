@@ -25,6 +25,7 @@ import contextlib
 import os
 import stat
 import tempfile
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
@@ -70,7 +71,7 @@ def target_mode(target: str | os.PathLike) -> int:
 
 def _lock(fd: int) -> bool:
     try:
-        import fcntl
+        import fcntl  # POSIX only: no lock (and no stale-temp check) where it is missing
 
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         return True
@@ -85,8 +86,6 @@ def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 0.2) -> int
     dies with its process) and it is older than ``min_age_s`` (which covers the instant
     between another writer creating and locking it). Returns how many were removed.
     """
-    import time
-
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     prefix = f".{target.name}."

@@ -65,7 +65,7 @@ def _cgroup_limit() -> int:
 def _rlimit_as() -> int:
     """RLIMIT_AS minus the address space already mapped (VmSize)."""
     try:
-        import resource
+        import resource  # POSIX only: no address-space limit where it is missing
 
         soft, _ = resource.getrlimit(resource.RLIMIT_AS)
         if soft == resource.RLIM_INFINITY or soft <= 0:

@@ -10,6 +10,7 @@ Kept free of heavy imports (numpy only).
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -127,8 +128,6 @@ _CT_WORDS = ("ct", "computed tomograph", "hounsfield", "hu", "cta", "pet-ct", "p
 def ct_hint(text: str) -> bool:
     """Whether a free-text header field (NIfTI descrip/intent_name, NRRD content,
     MetaImage Modality) names CT or Hounsfield units."""
-    import re
-
     words = re.findall(r"[a-z/-]+", str(text).lower())
     joined = " ".join(words)
     return any(w in _CT_WORDS for w in words) or "computed tomograph" in joined or "hounsfield" in joined

@@ -387,7 +387,7 @@ def _read_compressed(p: Path, fh, header, sizes, dtype: np.dtype, encoding: str,
     pynrrd decompresses the whole stream; a corrupted or hostile stream could expand
     far beyond the declared size, so this reads with ``max_length``.
     """
-    import bz2
+    import bz2  # optional in a Python build (as zlib): needed only for compressed NRRD data
     import zlib
 
     if byte_skip == -1:

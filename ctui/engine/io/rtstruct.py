@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui import __version__
 from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
@@ -248,7 +249,6 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
     from pydicom.dataset import FileMetaDataset
     from pydicom.uid import ImplicitVRLittleEndian, generate_uid
 
-    from ctui import __version__
 
     lab = np.asarray(labels)
     masks = masks or {}

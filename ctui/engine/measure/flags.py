@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from ctui.engine.measure.fields import ObjectField
 
@@ -115,8 +116,6 @@ def _mark_caps(rows: list[dict[str, Any]], status: list[str], field: ObjectField
 
 def _side_medians(x: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
     """Medians of the ``w`` values before and after each element (NaN where fewer than 3)."""
-    from numpy.lib.stride_tricks import sliding_window_view
-
     pad = np.concatenate([np.full(w, np.nan), x, np.full(w + 1, np.nan)])
     win = sliding_window_view(pad, w)
     n = len(x)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
@@ -234,7 +235,6 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
     if n == 1:
         _tile_range(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, ok, 0, npair)
         return ok
-    from concurrent.futures import ThreadPoolExecutor
 
     work = np.cumsum(np.diff(poff) * np.diff(qoff))
     cuts = np.searchsorted(work, work[-1] * np.arange(1, n) / n)

@@ -8,6 +8,7 @@ edge indices, counter-clockwise seen from outside (outside = values <= level).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -86,8 +87,6 @@ def _triangulate_loop(loop: list[int]) -> list[tuple[int, int, int]]:
 
     def dist(i: int, j: int) -> float:
         return float(np.linalg.norm(_EDGE_MID[loop[i]] - _EDGE_MID[loop[j]]))
-
-    from functools import lru_cache
 
     @lru_cache(maxsize=None)
     def best(i: int, j: int):

@@ -31,6 +31,7 @@ smoothed signed distance per object for smooth surfaces.
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Sequence
 
 import numpy as np
@@ -262,8 +263,6 @@ def _run_chunks(crop: np.ndarray, empty: np.ndarray, threads: int):
     if n == 1:
         parts = [_kernel(crop, empty, 0, nzc, *args)]
     else:
-        from concurrent.futures import ThreadPoolExecutor
-
         with ThreadPoolExecutor(n) as ex:
             parts = list(ex.map(lambda k: _kernel(crop, empty, int(bounds[k]), int(bounds[k + 1]), *args),
                                 range(n)))

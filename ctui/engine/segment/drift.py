@@ -46,6 +46,7 @@ never modified, so undo is dropping entries from the list and re-applying.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -532,8 +533,6 @@ def corrected_volume(volume: Any, corrections: list[dict[str, float]], *, interp
     The original is untouched: undo is keeping/using the original volume (or applying
     a shorter list of corrections to it).
     """
-    import dataclasses
-
     out = dataclasses.replace(volume, data=apply_corrections(volume.data, corrections, interpolation=interpolation))
     out.meta = {**volume.meta, "drift_corrections": [dict(c) for c in corrections]}
     return out

@@ -32,6 +32,7 @@ from __future__ import annotations
 import glob
 import os
 import stat
+from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -443,7 +444,6 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
         entries, _ = image_entries([f for f in files if f.suffix.lower() in IMAGE_SUFFIXES], base)
         if not entries:
             return []
-        from collections import Counter
 
         (h, w), n = Counter((e[2], e[3]) for e in entries).most_common(1)[0]
         sp = parse_spacing(spacing, path) or (1.0, 1.0, 1.0)

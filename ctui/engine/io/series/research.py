@@ -13,6 +13,7 @@ apply after).
 
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 from typing import Any
@@ -60,8 +61,6 @@ def _finish(data: np.ndarray, spacing, direction, origin, *, path, fmt, skipped,
 
 # --------------------------------------------------------------------- NIfTI
 def _nib():
-    import logging
-
     import nibabel as nib
 
     # nibabel logs header repairs to stderr; ctui reports problems itself

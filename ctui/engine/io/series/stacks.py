@@ -8,6 +8,7 @@ None of these formats has patient geometry (MetaImage aside): spacing comes from
 from __future__ import annotations
 
 import io
+from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -162,7 +163,6 @@ def load_images(
     skipped.extend(skip2)
     if not entries:
         raise LoadError("no readable image in " + ("the folder" if len(files) > 1 else "the file"), path=path)
-    from collections import Counter
 
     (h, w), _ = Counter((e[2], e[3]) for e in entries).most_common(1)[0]
     keep = []
