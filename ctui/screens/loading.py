@@ -61,7 +61,7 @@ class LoadingScreen(GuardMixin, Screen):
         Binding("d", "reduced(2)", "Downsample x2", show=False),
         Binding("D", "reduced(4)", "Downsample x4", show=False),
         Binding("c", "crop", "Crop", show=False),
-        Binding("escape", "back", "Back"),
+        Binding("escape", "back", "Cancel / back"),
         Binding("q", "app.quit", "Quit"),
     ]
 
