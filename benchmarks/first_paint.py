@@ -21,7 +21,27 @@ import time
 import uuid
 
 
-def one_run(path: str = "") -> tuple[float | None, float | None, float | None, float | None]:
+def _cpu_of_ctui(sock: list[str], env: dict) -> float | None:
+    """CPU seconds (user + system, all threads) the ctui process has used so far: the pane's
+    shell's child, read from /proc (Linux); None elsewhere."""
+    try:
+        shell = subprocess.run(sock + ["list-panes", "-t", "fp", "-F", "#{pane_pid}"], capture_output=True,
+                               text=True, env=env).stdout.split()[0]
+        with open(f"/proc/{shell}/task/{shell}/children") as fh:
+            kids = fh.read().split()
+        for pid in kids:
+            with open(f"/proc/{pid}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+            if fields:
+                return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+    except (OSError, IndexError, ValueError):
+        return None
+    return None
+
+
+def one_run(path: str = "") -> tuple[float | None, ...]:
+    """(first text, loading screen, preview, workspace) seconds of wall time, then the ctui
+    process's CPU seconds at the preview and at the workspace."""
     sock = ["tmux", "-L", f"ctui-fp-{uuid.uuid4().hex[:6]}"]
     env = {k: v for k, v in os.environ.items() if k not in ("TMUX", "TMUX_PANE")}
     work = tempfile.mkdtemp()
@@ -29,7 +49,7 @@ def one_run(path: str = "") -> tuple[float | None, float | None, float | None, f
            f"--graphics halfblock {path}; sleep 30")
     t0 = time.monotonic()
     subprocess.run(sock + ["new-session", "-d", "-s", "fp", "-x", "100", "-y", "30", cmd], check=True, env=env)
-    first = loading = preview = ready = None
+    first = loading = preview = ready = cpu_preview = cpu_ready = None
     try:
         while time.monotonic() - t0 < 60:
             out = subprocess.run(sock + ["capture-pane", "-p", "-t", "fp"], capture_output=True, text=True,
@@ -41,14 +61,16 @@ def one_run(path: str = "") -> tuple[float | None, float | None, float | None, f
                 loading = t
             if preview is None and "preview:" in out:
                 preview = t
+                cpu_preview = _cpu_of_ctui(sock, env)
             if "Slice" in out:
                 ready = t
+                cpu_ready = _cpu_of_ctui(sock, env)
                 break
             time.sleep(0.05)
     finally:
         subprocess.run(sock + ["kill-server"], capture_output=True, env=env)
         shutil.rmtree(work, ignore_errors=True)
-    return first, loading, preview, ready
+    return first, loading, preview, ready, cpu_preview, cpu_ready
 
 
 def main() -> int:
@@ -60,10 +82,10 @@ def main() -> int:
         print("tmux is not installed", file=sys.stderr)
         return 2
     for i in range(args.runs):
-        first, loading, preview, ready = one_run(os.path.abspath(args.path) if args.path else "")
+        first, loading, preview, ready, cpu_pv, cpu_ws = one_run(os.path.abspath(args.path) if args.path else "")
         fmt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
         print(f"run {i + 1}: first text {fmt(first)}, loading screen {fmt(loading)}, first slice (preview) "
-              f"{fmt(preview)}, workspace {fmt(ready)}")
+              f"{fmt(preview)} (cpu {fmt(cpu_pv)}), workspace {fmt(ready)} (cpu {fmt(cpu_ws)})")
     return 0
 
 
