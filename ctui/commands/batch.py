@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from ctui.commands._args import command
+from ctui.commands._progress import progress_bar
+from ctui.engine.core.atomic import check_output
+from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -34,15 +38,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
-
-    from ctui.commands._progress import progress_bar
     from ctui.engine.actions.batch import run_batch
-    from ctui.engine.core.errors import CtuiError
 
     if args.workers is not None and args.workers < 1:
         raise CtuiError(f"--workers {args.workers}: must be 1 or more")
-    from ctui.engine.core.atomic import check_output
 
     check_output(args.out, inputs=[args.manifest], label="--out")
     workers = args.workers or min(os.cpu_count() or 1, 4)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ctui.commands._args import command
+from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,9 +25,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from ctui.engine.core.errors import CtuiError
     from ctui.engine.actions.series import load_truth, write_demo
 
     out = Path(args.outdir)

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from ctui.commands._args import command, number
+from ctui.commands.info import load_kwargs
+from ctui.commands.segment import add_segmentation_args, build_pipeline, load_volume, segment_volume
+from ctui.engine.core.atomic import check_outputs
+from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ctui.commands.segment import add_segmentation_args
-
     p = command(
         subparsers, "drift", run,
         help="per-slice centroids of segmented objects and slices that drifted",
@@ -39,12 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _source(args: argparse.Namespace):
     """(Opened with labels, seg or None, pipeline or None, settings) for the drift check."""
-    import os
-
     from ctui.engine.actions.opened import Opened, open_input
-    from ctui.engine.core.errors import CtuiError
 
-    from ctui.commands.segment import load_volume, segment_volume
 
     if args.path.endswith((".ctui", ".ctui.autosave")):
         if not os.path.exists(args.path):
@@ -54,7 +53,6 @@ def _source(args: argparse.Namespace):
     if args.labels:  # placed on the series' grid: its geometry (not only its shape) must match
         return open_input(args.path, labels=args.labels, **({"series": args.series} if args.series else {})), \
             None, None, []
-    from ctui.commands.info import load_kwargs
 
     volume = load_volume(args.path, **load_kwargs(args))
     if args.seed:
@@ -66,12 +64,8 @@ def _source(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from ctui.engine.actions.drift import drift_check
     from ctui.engine.actions.project import new_project, propagation_record, save_project
-    from ctui.engine.core.errors import CtuiError
-    from ctui.engine.core.atomic import check_outputs
     from ctui.engine.core.jsonio import dumps
 
-    from ctui.commands.info import load_kwargs
-    from ctui.commands.segment import build_pipeline
 
     check_outputs({"--project": args.project, "--plot": args.plot}, inputs=[args.path, args.labels])
     try:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ctui.commands._args import command, number
+from ctui.commands._progress import progress_bar
+from ctui.engine.core.atomic import check_output
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,9 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ctui.commands._progress import progress_bar
     from ctui.engine.actions.export import export
-    from ctui.engine.core.atomic import check_output
 
     check_output(args.out, inputs=[args.input, args.series], label="--out")
     with progress_bar(args, f"export {args.format}") as progress:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ctui.commands._args import command
+from ctui.engine.actions.options import load_options
 
 
 def add_load_options(p: argparse.ArgumentParser, *, series: bool = True) -> None:
@@ -28,8 +29,6 @@ def add_load_options(p: argparse.ArgumentParser, *, series: bool = True) -> None
 def load_kwargs(args: argparse.Namespace) -> dict:
     """Keyword arguments for ctui.engine.io.series.load from the options above (one syntax:
     comma-separated z,y,x lists; :func:`ctui.engine.actions.options.load_options`)."""
-    from ctui.engine.actions.options import load_options
-
     return load_options(series=getattr(args, "series", None), spacing=getattr(args, "spacing", None),
                         shape=getattr(args, "shape", None), dtype=getattr(args, "dtype", None),
                         offset=getattr(args, "offset", None), crop=getattr(args, "crop", None),

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 from ctui.commands._args import HUGE, command, number
+from ctui.engine.core.atomic import check_outputs
+from ctui.engine.core.errors import CtuiError
 
 
 
@@ -63,8 +66,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _floats(text: str, n: int | None, what: str) -> list[float]:
-    from ctui.engine.core.errors import CtuiError
-
     try:
         vals = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
@@ -77,11 +78,7 @@ def _floats(text: str, n: int | None, what: str) -> list[float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
-
     from ctui.engine.actions.measure import measure_object, save_sections
-    from ctui.engine.core.atomic import check_outputs
-    from ctui.engine.core.errors import CtuiError
     from ctui.engine.core.jsonio import dumps
 
     if not os.path.exists(args.input):

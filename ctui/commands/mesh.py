@@ -15,12 +15,18 @@ Output format from --out's extension: .stl (binary; --ascii for text), .ply, .ob
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
 
 from ctui.commands._args import command, number
+from ctui.commands._progress import progress_bar
+from ctui.commands.info import add_load_options, load_kwargs
+from ctui.engine.actions.options import parse_floats
+from ctui.engine.core.atomic import check_output
+from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ctui.commands.info import add_load_options
     from ctui.engine.actions import defaults  # plain constants: cheap for --help
 
     p = command(
@@ -50,18 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    import os
-    from pathlib import Path
-
     from ctui.engine.actions.mesh import MESH_SUFFIXES, mesh_objects, save_mesh
-    from ctui.engine.actions.options import load_options, parse_floats
-    from ctui.engine.core.atomic import check_output
-    from ctui.engine.core.errors import CtuiError
     from ctui.engine.core.jsonio import dumps
 
-    from ctui.commands._progress import progress_bar
-    from ctui.commands.info import load_kwargs
 
     src = args.input
     out = Path(args.out)

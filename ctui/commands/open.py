@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 
 from ctui.commands._args import command
+from ctui.engine.actions.options import load_options
+from ctui.engine.core.colors import MAX_OBJECTS
+from ctui.engine.core.errors import CtuiError
 
 GRAPHICS = ("auto", "sixel", "kitty", "halfblock", "ascii")
 
@@ -29,12 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     if sys.stderr is not None and sys.stderr.isatty():  # on screen at once, before the heavy imports
         sys.stderr.write(f"ctui: opening {args.path or 'the bundled sample series'} ...\n")
         sys.stderr.flush()
-    from ctui.engine.core.errors import CtuiError
     from ctui.screens.graphics import enable_truecolor, prepare_graphics
 
     enable_truecolor()  # tmux with RGB, or a terminal that always does 24-bit: no banding, no warning
@@ -52,7 +53,6 @@ def run(args: argparse.Namespace) -> int:
             project, path = path, None
     from ctui.screens.app import CtuiApp
 
-    from ctui.engine.actions.options import load_options
 
     options = load_options(series=args.series, downsample=args.downsample, crop=args.crop)
     if "series" in options:
@@ -68,8 +68,6 @@ def run(args: argparse.Namespace) -> int:
 def _labels_session(path, labels: str, options: dict):
     """A TUI session of the series ``path`` with the label file ``labels`` on it (unsaved project)."""
     from ctui.engine.actions.opened import open_input
-    from ctui.engine.core.colors import MAX_OBJECTS
-    from ctui.engine.core.errors import CtuiError
     from ctui.screens.app import session_from_project
 
     if path is None:

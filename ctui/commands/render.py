@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from ctui.commands._args import command, number
+from ctui.commands.info import add_load_options, load_kwargs
+from ctui.engine.core.atomic import check_output
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from ctui.commands.info import add_load_options
     from ctui.engine.actions import defaults
-    from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
 
     p = command(
         subparsers, "render", run,
@@ -66,8 +69,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:
-    from ctui.engine.core.errors import CtuiError
-
     sep = "x" if what.startswith("--size") else ","
     try:
         vals = tuple(float(v) for v in text.split(sep))
@@ -79,13 +80,8 @@ def _pair(text: str, what: str, n: int = 2) -> tuple[float, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from ctui.engine.actions.render import render_view
-    from ctui.engine.core.atomic import check_output
-    from ctui.engine.core.errors import CtuiError
 
-    from ctui.commands.info import load_kwargs
 
     src = Path(args.input)
     out = Path(args.out)

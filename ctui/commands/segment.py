@@ -9,8 +9,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 from ctui.commands._args import HUGE, command, finite_list, number
+from ctui.commands._progress import progress_bar
+from ctui.commands.info import add_load_options, load_kwargs
+from ctui.engine.actions.options import parse_pair
+from ctui.engine.core.atomic import check_outputs
+from ctui.engine.core.errors import CtuiError
 
 FILTER_HELP = (
     "filter step NAME[:key=value,...], repeatable, run in order (stage 1 steps, then stage 2). "
@@ -113,7 +119,6 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--interpolate", action="store_true",
                    help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
-    from ctui.commands.info import add_load_options
 
     add_load_options(p, series=False)  # --shape, --dtype, --offset, --spacing, --crop, --downsample, --no-resample
 
@@ -164,8 +169,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 # ----------------------------------------------------------------------------- helpers
 def _err(msg: str):
-    from ctui.engine.core.errors import CtuiError
-
     return CtuiError(msg)
 
 
@@ -181,8 +184,6 @@ def parse_seed(text: str) -> tuple[int, int, int]:
 
 
 def parse_range(text: str) -> tuple[float, float]:
-    from ctui.engine.actions.options import parse_pair
-
     lo, hi = parse_pair(text, "--range", example="115:445")
     if not (math.isfinite(lo) and math.isfinite(hi) and max(abs(lo), abs(hi)) <= HUGE):
         raise _err(f"--range {text!r}: LO and HI must be finite numbers within +-{HUGE:g}")
@@ -212,8 +213,6 @@ def build_pipeline(args: argparse.Namespace):
 
 def load_volume(path: str, *, series: str | None = None, **load_options):
     """The series at ``path`` with the loader options (``commands.info.load_kwargs``)."""
-    import os
-
     if not os.path.exists(path):
         raise _err(f"{path}: no such file or folder")
     from ctui.engine.actions.series import load
@@ -225,7 +224,6 @@ def load_volume(path: str, *, series: str | None = None, **load_options):
 def parse_slices(text: str | None) -> tuple[int, int] | None:
     if not text:
         return None
-    from ctui.engine.actions.options import parse_pair
 
     lo, hi = parse_pair(text, "--slices", integer=True, form="A:B", what="slice numbers from 0",
                         example="10:40")
@@ -311,7 +309,6 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
     """--project, --mask and --mric: the project by ``actions.project``, the label map and
     the contours by ``actions.export`` (what ``ctui export`` writes)."""
     written = []
-    from ctui.commands.info import load_kwargs
 
     project = make_project(args.path, volume, seg, pipeline, settings, series=args.series,
                            source_options={k: v for k, v in load_kwargs(args).items() if k != "resample" or not v})
@@ -340,17 +337,13 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
-    from ctui.engine.core.atomic import check_outputs
+    import json  # 2 ms: loaded when a command prints, not for `ctui --help`
 
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
-    from ctui.commands._progress import progress_bar
 
     if args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
         return _edit_project(args)
 
-    from ctui.commands.info import load_kwargs
 
     volume = load_volume(args.path, **load_kwargs(args))
     with progress_bar(args, "segmenting") as progress:
@@ -377,7 +370,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _edit_project(args: argparse.Namespace) -> int:
     """``ctui segment PROJECT.ctui --interpolate|--keep-largest|--min-island N [--objects IDS] --project OUT``."""
-    import json
+    import json  # 2 ms: loaded when a command prints, not for `ctui --help`
 
     from ctui.engine.actions.opened import open_input
     from ctui.engine.actions.segment import edit_objects
