@@ -115,3 +115,15 @@ def test_overlapping_segments_and_read_back(series, tmp_path):
 def test_cielab_as_highdicom():
     for rgb in ((230, 60, 60), (0, 0, 0), (255, 255, 255), (60, 180, 75), (12, 200, 255)):
         assert rgb_to_cielab(rgb) == list(hd.color.CIELabColor.from_rgb(*rgb).value)
+
+
+def test_pydicom_imported_without_requests_leaves_requests_importable():
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom ctui.engine.io.dicomseg import import_pydicom\npd = import_pydicom()\n"
+            "print('requests' in sys.modules, hasattr(pd, 'dcmread'))\n"
+            "try:\n    import requests\n    print(True)\nexcept ImportError:\n    print('absent')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120).stdout.split()
+    assert out[:2] == ["False", "True"]
+    assert out[2] in ("True", "absent")  # importable again (or not installed at all)
