@@ -109,8 +109,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         gray = apply_window(planes.take(s.volume.data, pv, idx), s.window)
         if view == "original":
             return gray
-        lab = s.labels()
-        lab2 = None if lab is None else planes.take(lab, pv, idx)
+        lab2 = planes.take(s.seg.labels, pv, idx)
         pending = self.pending
         return planes.compose(gray, lab2, pending.plane(pv, idx, s.shape), proposal_id=pending.object_id)
 

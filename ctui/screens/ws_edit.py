@@ -304,14 +304,12 @@ class EditMixin:
         self.app.push_screen(ConfirmScreen(f"Erase every voxel of object {s.current}? (u undoes)", "Erase", "Keep"), done)
 
     def action_cycle_object(self) -> None:
-        if self.s.seg is None:
-            return
         ids = sorted(self.s.seg.objects) or [1]
         self.s.current = ids[(ids.index(self.s.current) + 1) % len(ids)] if self.s.current in ids else ids[0]
         self.update_panel()
 
     def action_undo(self, redo: bool = False) -> None:
-        if self._busy() or self.s.seg is None:
+        if self._busy():
             return
         label = self.s.seg.redo() if redo else self.s.seg.undo()
         verb = "Redone" if redo else "Undone"

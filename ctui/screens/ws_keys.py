@@ -427,12 +427,8 @@ def _objects_text(ws, t: Text) -> None:
     s = ws.s
     t.append("\nObjects", style="bold underline")
     t.append("  (n new, Tab next)\n")
-    lab = s.labels()
-    if lab is None:
-        t.append(" (selection engine missing)\n", style="dim")
-        return
-    objs = sorted(getattr(s.seg, "objects", {}) or {})
-    area = np.bincount(lab[s.z].ravel(), minlength=11)
+    objs = sorted(s.seg.objects)
+    area = np.bincount(s.seg.labels[s.z].ravel(), minlength=11)
     vols = ws.volumes.of(s)
     px_mm2 = s.volume.spacing[1] * s.volume.spacing[2]
     ids = sorted(set(objs) | set(vols) | {s.current})

@@ -310,7 +310,7 @@ class MouseMixin(ToolsMixin):
             return
         s = self.s
         vols = self.volumes.of(self.s)
-        ids = sorted(set(getattr(s.seg, "objects", {}) or {}) | set(vols) | {s.current})
+        ids = sorted(set(s.seg.objects) | set(vols) | {s.current})
         k = sum(1 for line in lines[:row] if "██" in line)
         if k < len(ids):
             s.current = ids[k]
@@ -433,12 +433,11 @@ class MouseMixin(ToolsMixin):
         if cache is not None and cache[0] == key:
             return cache[1]
         stack = None
-        lab = s.labels()
-        rng = s.seg.slice_range(s.current) if lab is not None else None
+        rng = s.seg.slice_range(s.current)
         if rng is not None and rng[1] - rng[0] >= 2:
             info = s.seg.objects.get(s.current)
             seeds = list(getattr(info, "seeds", []) or [])
-            stack = review.of_labels(lab, s.current, int(seeds[-1][2]) if seeds else None)
+            stack = review.of_labels(s.seg.labels, s.current, int(seeds[-1][2]) if seeds else None)
         self._object_stack = (key, stack)
         return stack
 

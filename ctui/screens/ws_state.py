@@ -203,12 +203,9 @@ class ObjectVolumes:
 
     def of(self, session) -> dict[int, float]:
         """Volume (ml) per object id of ``session``'s labels; recounted only when they changed."""
-        lab = session.labels()
-        if lab is None:
-            return {}
         if self._cache is not None and self._cache[0] == self.version:
             return self._cache[1]
-        counts = label_counts(lab)
+        counts = label_counts(session.seg.labels)
         vox_ml = session.volume.voxel_volume_mm3() / 1000.0
         vols = {i: float(counts[i]) * vox_ml for i in range(1, len(counts)) if counts[i]}
         self._cache = (self.version, vols)
