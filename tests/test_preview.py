@@ -81,3 +81,17 @@ def test_load_after_preview_reads_each_header_once(monkeypatch):
     assert np.array_equal(pv.volume.data[0], full.data[pv.z])
     load(p)  # used once only: the next load reads them again
     assert len(calls) == 2 * n
+
+
+def test_compressed_file_preview_stays_near_the_start(monkeypatch):
+    """A large .nii.gz is not inflated to its middle twice: the preview slice lies within the
+    first COMPRESSED_REACH bytes, and is still the full volume's slice at its index."""
+    from ctui.engine.io.series import preview as pmod
+
+    p = shared("totalseg_example") / "ct_abdomen_3mm.nii.gz"
+    monkeypatch.setattr(pmod, "COMPRESSED_REACH", 5 * 101 * 122 * 2)  # five slices of int16
+    pv = preview(p)
+    full = load(p)
+    assert pv.z == 4 < full.shape[0] // 2
+    assert np.array_equal(pv.volume.data[0], full.data[pv.z])
+    assert np.allclose(pv.volume.origin, full.index_to_mm((pv.z, 0, 0)), atol=1e-4)

@@ -171,7 +171,7 @@ class CtuiApp(App):
         worker, progress = self._load_progress_of()
         try:
             src = path if path is not None else sample_source()
-            self._post_preview(worker, src, options)
+            pv = self._post_preview(worker, src, options)
             vol = load_volume(path, progress=progress, **options)
         except Cancelled:
             return
@@ -183,7 +183,8 @@ class CtuiApp(App):
             return
         if worker.is_cancelled:
             return
-        self.post_message(SessionReady(Session(vol, source_path=str(src or ""), source_options=options)))
+        z = pv.z if pv is not None and pv.depth == vol.shape[0] else None  # on the slice the preview showed
+        self.post_message(SessionReady(Session(vol, source_path=str(src or ""), source_options=options, z=z)))
 
     @on(JobProgress)
     def _load_progress(self, msg: JobProgress) -> None:

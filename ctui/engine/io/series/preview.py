@@ -9,7 +9,9 @@ part of the cost of the whole read:
   loader's own code (a one-slice crop), when the series lies on a regular grid as it is
   (no resampling of uneven slices, no gantry-tilt correction: then None);
 * a NIfTI, NRRD or uncompressed MetaImage file: the header's shape, then a one-slice crop
-  through the format's reader (NIfTI reads its gzip stream only up to the slice).
+  through the format's reader (NIfTI reads its gzip stream only up to the slice; in a
+  compressed file the slice lies within the first :data:`COMPRESSED_REACH` bytes: the
+  middle one, or an earlier one of a large file).
 
 The window is the full read's when the header gives one or the data is CT (the CT
 default); otherwise it is the one slice's percentile window (the whole volume's may
@@ -29,6 +31,9 @@ from ctui.engine.io.series._common import list_files
 
 __all__ = ["Preview", "preview"]
 
+#: decompressed bytes a preview slice of a compressed NIfTI/NRRD may lie beyond (the full read
+#: inflates the file again: a middle slice of a 1 GB .nii.gz would add half of it)
+COMPRESSED_REACH = 32 << 20
 #: load options a preview can follow (others change the grid: no preview)
 _FOLLOWED = {"series", "spacing", "resample", "memory_limit"}
 
@@ -39,7 +44,8 @@ class Preview:
 
     volume : Volume, data (1, ny, nx); spacing, direction and modality as the full volume's,
         origin that of slice ``z`` (LPS mm)
-    z : index of the slice in the full volume
+    z : index of the slice in the full volume (the middle one, or an earlier one of a large
+        compressed file)
     depth : slices of the full volume (nz)
     """
 
@@ -110,10 +116,12 @@ def _volume_file(p: Path, *, min_voxels: int, spacing: Any, memory_limit: int | 
     d = _declared(p)
     if d is None:
         return None
-    depth, ny, nx = d[0]
+    (depth, ny, nx), itemsize, compressed = d
     if depth < 1 or depth * ny * nx < min_voxels:
         return None
     z = depth // 2
+    if compressed:  # inflated up to the slice, then again by the full read: not far in
+        z = min(z, max(0, COMPRESSED_REACH // max(ny * nx * itemsize, 1) - 1))
     vol = _load_volume_file(p, skipped=[], spacing=spacing, crop=(z, z + 1, None, None, None, None),
                             memory_limit=memory_limit)
     vol = _with_series(vol)
