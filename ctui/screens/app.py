@@ -131,12 +131,16 @@ class CtuiApp(App):
         """The load worker's progress callback: posts JobProgress, raises Cancelled once the
         worker is cancelled (Esc on the loading screen, or another load started)."""
         worker = get_current_worker()
+        last = [-1.0]
 
         def progress(*a: Any) -> None:
             if worker.is_cancelled:
                 raise Cancelled()
             if len(a) >= 2 and a[1]:
-                self.post_message(JobProgress("Loading", float(a[0]), float(a[1])))
+                frac = float(a[0]) / float(a[1])
+                if frac - last[0] >= 0.02 or frac >= 1.0:  # a repaint per 2%, not per slice
+                    last[0] = frac
+                    self.post_message(JobProgress("Loading", float(a[0]), float(a[1])))
 
         return worker, progress
 
