@@ -162,9 +162,9 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     zooms = 0  # Ctrl+wheel notches (x2 each) until a cell spans under 1.5 voxels: the click lands on the seed
     while vm is not None and max(1.0 / vm.sx, 2.0 / vm.sy) / 2 ** zooms > 1.5:
         zooms += 1
-    mouse_cost = abs(z - s.z) + zooms + 1 + (0 if s.click_fills else 1)
+    mouse_cost = abs(z - s.z) + zooms + 1 + (0 if ws.edit_tools.click_fills else 1)
     if vm is not None and mouse_cost <= len(typed) + 3:  # wheel to the slice, zoom on the seed, click (fills)
-        if not s.click_fills:
+        if not ws.edit_tools.click_fills:
             await c.press("z")
         while s.z != z:
             await c.wheel("#main", up=z > s.z)
@@ -175,7 +175,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
             await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
             await pilot.pause()
         await c.click("#main", cell_of_voxel(app, (z, y, x)))
-        if not s.click_fills:
+        if not ws.edit_tools.click_fills:
             await c.press("enter")
     else:
         await c.press("g")

@@ -179,7 +179,7 @@ def test_drift_labels_must_match_the_series_geometry(tmp_path, sample_dir, capsy
 def test_side_panel_shows_long_object_names_in_full():
     """An object's name is not cut to 10 characters: a long one gets a line of its own."""
     from ctui.screens.ws_keys import panel_text
-    from ctui.screens.ws_state import ObjectVolumes, ViewState
+    from ctui.screens.ws_state import EditTools, ObjectVolumes, ViewState
 
     s = _session("nifti")
     s.seg.objects[1].name = "kidney_left_lower_pole"
@@ -190,6 +190,7 @@ def test_side_panel_shows_long_object_names_in_full():
             self.s = session
             self.viewstate = ViewState()
             self.volumes = ObjectVolumes()
+            self.edit_tools = EditTools()
 
     text = panel_text(Ws(s)).plain
     assert "kidney_left_lower_pole" in text and " liver " in text

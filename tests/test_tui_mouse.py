@@ -91,7 +91,7 @@ async def test_click_fills_and_drag_paints_and_erases():
         z = s.z
         s.range_ = (200.0, 400.0)
         await pilot.press("z")
-        assert s.click_fills
+        assert app.workspace.edit_tools.click_fills
         await pilot.click("#main", offset=cell_of_voxel(app, (z, 24, 20)))
         area = int((s.volume.data[z] == 300).sum())
         assert s.seg.voxels(1) == area
@@ -99,7 +99,7 @@ async def test_click_fills_and_drag_paints_and_erases():
         assert s.current == 2
         # brush down (radius 1 mm = 1 px here) then drag along row 5 from x 5 to x 30
         s.brush = 1.0
-        s.tool = "brush"
+        app.workspace.edit_tools.pen = "brush"
         cells = [cell_of_voxel(app, (z, 5, x)) for x in (5, 12, 20, 30)]
         await drag(pilot, "#main", cells)
         lab = s.seg.labels[z] == 2
@@ -110,7 +110,7 @@ async def test_click_fills_and_drag_paints_and_erases():
         assert int(lab.sum()) == 3 * (b - a + 1) + 2  # a 3-px-wide band with a one-pixel cap at each end
         assert (s.seg.labels[z] == 1).sum() == area  # the other object untouched
         # eraser drag over the middle of the band
-        s.tool = "eraser"
+        app.workspace.edit_tools.pen = "eraser"
         await drag(pilot, "#main", [cell_of_voxel(app, (z, 5, x)) for x in (14, 18)])
         assert (s.seg.labels[z] == 2).sum() < lab.sum()
         assert not (s.seg.labels[z, rows[1], 16] == 2)
@@ -166,7 +166,7 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         await pilot.press("y")
         a = cell_of_voxel(app, (5, 30, 30))
         await drag(pilot, "#main", [a, (a[0] + 6, a[1] + 3), a])
-        assert s.roi_box == box and s.box_corner is None
+        assert s.roi_box == box and ws.edit_tools.box_corner is None
         await pilot.press("Y")
         assert s.roi_box is None
         # typed corners (as ctui segment/edit --box); a zero-size one is refused
@@ -238,7 +238,7 @@ async def test_brush_footprint_drawn_at_any_zoom():
         await wait_workspace(pilot, app)
         iv = app.workspace.main_view
         s.brush = 4.0
-        s.tool = "brush"
+        app.workspace.edit_tools.pen = "brush"
         for zoom in (1.0, 4.0):
             s.zoom = zoom
             app.workspace.refresh_view()
@@ -250,7 +250,7 @@ async def test_brush_footprint_drawn_at_any_zoom():
             r = np.hypot(xs - cx, ys - cy)
             expect = (4.0 + 0.5) * iv.view_map.sx
             assert abs(float(np.median(r)) - expect) <= 1.5, (zoom, float(np.median(r)), expect)
-        s.tool = None
+        app.workspace.edit_tools.pen = None
         app.workspace.refresh_view()
         await pilot.pause()
         grid = iv._grid((iv.size.width, 2 * iv.size.height))
@@ -295,17 +295,17 @@ async def test_polygon_scissors_by_clicks():
         await pilot.press("P")
         for v in ((z, 34, 14), (z, 34, 34)):
             await pilot.click("#main", offset=cell_of_voxel(app, v))
-        assert len(s.polygon) == 3 and s.zyx[0] == z
+        assert len(app.workspace.edit_tools.polygon) == 3 and s.zyx[0] == z
         await pilot.press("t")
         await choose(pilot, "scissors_in_slice")
-        cut = polygon_mask(s.polygon, s.shape[1:]) & (before[z] == 1)
+        cut = polygon_mask(app.workspace.edit_tools.polygon, s.shape[1:]) & (before[z] == 1)
         assert cut.sum() > 50
         assert s.seg.voxels(1) == int((before == 1).sum()) - int(cut.sum())
         assert np.array_equal(s.seg.labels[z + 1], before[z + 1])
         await pilot.press("u")
         assert np.array_equal(before, s.seg.labels)
         await pilot.press("Y")
-        assert s.polygon == [] and not s.polygon_mode
+        assert app.workspace.edit_tools.polygon == [] and not app.workspace.edit_tools.polygon_mode
         assert not app.internal_errors
 
 
@@ -376,7 +376,7 @@ async def test_click_and_drag_in_pixel_graphics_modes(monkeypatch, mode):
         z = s.z
         await pilot.click("#main", offset=cell_of_voxel(app, (z, 10, 35)))
         assert _near(s.zyx, (z, 10, 35))
-        s.tool, s.brush = "brush", 1.0
+        app.workspace.edit_tools.pen, s.brush = "brush", 1.0
         await drag(pilot, "#main", [cell_of_voxel(app, (z, 30, x)) for x in (5, 20)])
         lab = s.seg.labels[z] == 1
         ys, xs = np.nonzero(lab)

@@ -69,9 +69,7 @@ class Session:
     plane: str = "axial"  # "axial" | "sagittal" | "coronal" (ctui.screens.planes)
     edit_mode: str = "add"  # fill/paint mode: "add" | "replace" | "subtract"
     brush: float | None = None  # brush/eraser radius in mm (None: 3 pixels of the finest in-plane spacing)
-    tool: str | None = None  # "brush" / "eraser" while the pen is down (moving paints)
     limits: EditLimits = field(default_factory=EditLimits)  # where edits and propagation may write
-    click_fills: bool = False  # a left click on a view fills there (as Enter) instead of only moving the cursor
     # voxel indices (x, y, z) on the file's grid: the other side of a fill / grow (actions.segment)
     background_seeds: list[tuple[int, int, int]] = field(default_factory=list)
     # the segmentation panel's options (G): method, neck (None = auto), range ("auto" | "given" | (lo, hi)),
@@ -79,9 +77,6 @@ class Session:
     segment_options: dict = field(default_factory=dict)
     # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
     roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
-    box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
-    polygon: list[tuple[int, int]] = field(default_factory=list)  # scissors polygon, (x, y) voxels on the slices
-    polygon_mode: bool = False  # clicks add polygon points (P starts it; Y clears box and polygon)
     # a project opened without its series (labels only): the series' recorded identity,
     # kept when the project is saved (the stand-in zeros must not replace it)
     source_identity: dict | None = None

@@ -26,7 +26,7 @@ from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
-from ctui.screens.ws_state import Jobs, ObjectVolumes, ProposalState, ViewState
+from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, ViewState
 
 
 class SidePanel(Static):
@@ -58,6 +58,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         super().__init__()
         self.s = session
         self.viewstate = ViewState()  # layout, pan, window preset, pipeline-views requests
+        self.edit_tools = EditTools()  # pen, click fills, box corner, scissors polygon
         self.jobs = Jobs()  # the running worker and segmentation
         self.pending = ProposalState()  # the proposal waiting for a (accept) or x (reject)
         self.volumes = ObjectVolumes()  # labels version, volume per object

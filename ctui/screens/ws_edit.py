@@ -75,7 +75,7 @@ class EditMixin:
     def action_dab(self) -> None:
         if not self._editable():
             return
-        tool = self.s.tool or "brush"
+        tool = self.edit_tools.pen or "brush"
         try:
             n = self.dab(tool)
         except EDIT_ERRORS as exc:
@@ -86,12 +86,10 @@ class EditMixin:
     def action_pen(self, tool: str) -> None:
         """b / E: put the brush (eraser) down, so moving the cursor paints (erases); again lifts it."""
         s = self.s
-        if s.tool == tool:
-            s.tool = None
+        if not self.edit_tools.toggle_pen(tool):
             self.set_status(f"{tool.capitalize()} lifted")
             self.update_panel()
             return
-        s.tool = tool
         self.action_dab()
         self.set_status(f"{tool.capitalize()} down ({s.brush:g} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to paint; "
                         f"{'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
@@ -104,7 +102,7 @@ class EditMixin:
         n = 0
         try:
             for p in dict.fromkeys(pts):
-                n += self.dab(self.s.tool, p)  # type: ignore[arg-type]
+                n += self.dab(self.edit_tools.pen, p)  # type: ignore[arg-type]
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
         if n:

@@ -94,7 +94,7 @@ class NavMixin:
         before = s.zyx
         s.z, s.y, s.x = planes.moved(pv, before, dx, dy)
         s.clamp()
-        if s.tool and s.zyx != before and not self._busy():
+        if self.edit_tools.pen and s.zyx != before and not self._busy():
             self.stroke(before, s.zyx)
             self.refresh_view()
         elif self.viewstate.ortho_mode:
@@ -279,8 +279,7 @@ class NavMixin:
         elif cancelled == "job":
             self.show_progress(None)
             self.set_status("Cancelled")
-        elif self.s.tool:
-            self.s.tool = None
+        elif self.edit_tools.lift():
             self.set_status("Brush lifted")
             self.update_panel()
 
@@ -356,9 +355,10 @@ def panel_text(ws) -> Text:
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
     t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
-    pen = f" {s.tool} down" if s.tool else ""
+    tools = ws.edit_tools
+    pen = f" {tools.pen} down" if tools.pen else ""
     t.append(f"Mode {s.edit_mode}  brush {s.brush:g} mm{pen}\n")
-    if s.click_fills:
+    if tools.click_fills:
         t.append("Click fills (z)\n", style="yellow")
     if s.roi_box is not None:
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box

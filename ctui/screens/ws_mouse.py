@@ -103,20 +103,21 @@ def draw_overlay(ws, plane: str, grid, vm) -> None:
             hx, hy = vm.sx / 2, vm.sy / 2
             cv2.rectangle(grid, (int(min(x0, x1) - hx), int(min(y0, y1) - hy)),
                           (int(max(x0, x1) + hx), int(max(y0, y1) + hy)), BOX_COLOR, 1)
-    if s.box_corner is not None and s.box_corner[pv.normal] == idx:
-        xd, yd = (int(v) for v in disp(s.box_corner))
+    tools = ws.edit_tools
+    if tools.box_corner is not None and tools.box_corner[pv.normal] == idx:
+        xd, yd = (int(v) for v in disp(tools.box_corner))
         cv2.rectangle(grid, (xd - 2, yd - 2), (xd + 2, yd + 2), BOX_COLOR, 1)
-    if s.polygon and pv.normal == 0:
-        pts = [tuple(int(v) for v in disp((idx, y, x))) for x, y in s.polygon]
+    if tools.polygon and pv.normal == 0:
+        pts = [tuple(int(v) for v in disp((idx, y, x))) for x, y in tools.polygon]
         for a, b in zip(pts, pts[1:] + pts[:1] if len(pts) > 2 else pts[1:]):
             cv2.line(grid, a, b, POLY_COLOR, 1)
         for p in pts:
             cv2.rectangle(grid, (p[0] - 1, p[1] - 1), (p[0] + 1, p[1] + 1), POLY_COLOR, 1)
-    if s.tool in ("brush", "eraser"):
+    if tools.pen in ("brush", "eraser"):
         xd, yd = disp(s.zyx)
         ax = (max(int(round((s.brush / pv.spacing_yx[1] + 0.5) * vm.sx)), 1),
               max(int(round((s.brush / pv.spacing_yx[0] + 0.5) * vm.sy)), 1))
-        col = (80, 255, 80) if s.tool == "brush" else (255, 80, 255)
+        col = (80, 255, 80) if tools.pen == "brush" else (255, 80, 255)
         cv2.ellipse(grid, (int(xd), int(yd)), ax, 0, 0, 360, col, 1)
 
 
@@ -194,29 +195,29 @@ class MouseMixin(ToolsMixin):
         self._click(iv, plane, zyx)
 
     def _click(self, iv: ImageView, plane: str, zyx) -> None:
-        s = self.s
+        s, tools = self.s, self.edit_tools
         s.plane = plane
-        if s.box_corner is not None:  # drawing the box: the cursor (the seed, say) stays where it is
+        if tools.box_corner is not None:  # drawing the box: the cursor (the seed, say) stays where it is
             self._box_end = zyx
             self._drag = ("box", iv, plane, zyx, s.roi_box)
             iv.capture_mouse()
             return
         s.z, s.y, s.x = zyx
         s.clamp()
-        if s.polygon_mode and planes.plane_view(s.volume, plane).normal == 0:
-            s.polygon.append((int(s.x), int(s.y)))
-            self.set_status(f"Polygon: {len(s.polygon)} point(s); t then Scissors cuts, Y clears")
+        if tools.polygon_mode and planes.plane_view(s.volume, plane).normal == 0:
+            n = tools.add_point(s.x, s.y)
+            self.set_status(f"Polygon: {n} point(s); t then Scissors cuts, Y clears")
             self.refresh_view()
             return
-        if s.tool in ("brush", "eraser"):
+        if tools.pen in ("brush", "eraser"):
             if self._editable():
                 try:
-                    self.dab(s.tool)
+                    self.dab(tools.pen)
                 except EDIT_ERRORS as exc:
                     self.app.notify(str(exc), severity="error")
                 self.labels_changed()
             self._drag = ("paint", iv, plane, s.zyx)
-        elif s.click_fills:
+        elif tools.click_fills:
             self.refresh_view()
             self.action_fill()
             return
@@ -372,8 +373,8 @@ class MouseMixin(ToolsMixin):
         self.app.push_screen(PromptScreen(f"Go to slice (0..{nz - 1}), x,y or x,y,z", str(s.z)), done)
 
     def action_click_fills(self) -> None:
-        self.s.click_fills = not self.s.click_fills
-        self.set_status("A click on the image fills there (as Enter)" if self.s.click_fills
+        fills = self.edit_tools.toggle_click_fills()
+        self.set_status("A click on the image fills there (as Enter)" if fills
                         else "A click on the image moves the cursor")
         self.update_panel()
 
@@ -386,18 +387,18 @@ class MouseMixin(ToolsMixin):
 
     def action_box_corner(self) -> None:
         """y: first press, a corner at the cursor (or drag the box with the mouse); second, the opposite corner."""
-        s = self.s
-        if s.box_corner is None:
-            s.box_corner = s.zyx
+        s, tools = self.s, self.edit_tools
+        if tools.box_corner is None:
+            tools.box_corner = s.zyx
             self.set_status("Box: first corner set. Move and press y again, or drag the box with the mouse (Y: no box)")
             self.refresh_view()
             return
-        self._finish_box(s.plane, s.box_corner, s.zyx, previous=s.roi_box)
+        self._finish_box(s.plane, tools.box_corner, s.zyx, previous=s.roi_box)
 
     def _finish_box(self, plane: str, a, b, *, previous) -> None:
         """The box of corners ``a``, ``b`` drawn on ``plane``; a zero-size one restores ``previous``."""
         s = self.s
-        s.box_corner = None
+        self.edit_tools.take_corner()
         pv = planes.plane_view(s.volume, plane)
         if a[pv.rows] == b[pv.rows] or a[pv.cols] == b[pv.cols]:
             s.roi_box = previous
@@ -413,8 +414,8 @@ class MouseMixin(ToolsMixin):
 
     def action_box_clear(self) -> None:
         s = self.s
-        s.roi_box, s.box_corner = None, None
-        s.polygon, s.polygon_mode = [], False
+        s.roi_box = None
+        self.edit_tools.clear_shapes()
         self.set_status("ROI box and polygon off")
         self.refresh_view()
 

@@ -4,6 +4,7 @@ project saves: volume, labels, cursor, window, tools).
 - :class:`ViewState`: which layout shows the volume (one plane, the pipeline's 2x2, the
   planes' 2x2), where a zoomed view is panned, the window preset chosen, the newest
   request for the pipeline's views.
+- :class:`EditTools`: the pen, click-to-fill, the box corner and the scissors polygon.
 - :class:`Jobs`: the running work (one cancellable worker, one segmentation run).
 - :class:`ProposalState`: the pending proposal of a segmentation (hatched until ``a`` or
   ``x``), with its full-volume mask for the other planes.
@@ -80,6 +81,50 @@ class ViewState:
         name, win = presets[self.window_index]
         self.window_name = name
         return name, (float(win[0]), float(win[1]))
+
+
+class EditTools:
+    """The edit tools between keys: the pen (brush or eraser down: moving paints), whether a
+    click fills, the first corner of an ROI box being set and the scissors polygon. (The
+    ROI box itself is ``Session.roi_box``: fills, segmentation and edits read it.)"""
+
+    def __init__(self) -> None:
+        self.pen: str | None = None  # "brush" / "eraser" while down
+        self.click_fills = False  # a left click on a view fills there (as Enter) instead of only moving the cursor
+        self.box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
+        self.polygon: list[tuple[int, int]] = []  # scissors polygon, (x, y) voxels on the file's slices
+        self.polygon_mode = False  # clicks add polygon points (P starts it; Y clears box and polygon)
+
+    def toggle_pen(self, tool: str) -> bool:
+        """``tool`` ("brush"/"eraser") down, or lifted when it was down; True when down."""
+        self.pen = None if self.pen == tool else tool
+        return self.pen is not None
+
+    def lift(self) -> bool:
+        """Lift the pen; True when it was down."""
+        down, self.pen = self.pen is not None, None
+        return down
+
+    def toggle_click_fills(self) -> bool:
+        self.click_fills = not self.click_fills
+        return self.click_fills
+
+    def take_corner(self) -> tuple[int, int, int] | None:
+        """The first corner of the box being set (None when none), which is then forgotten."""
+        corner, self.box_corner = self.box_corner, None
+        return corner
+
+    def add_point(self, x: int, y: int) -> int:
+        """A polygon point (voxel x, y); the first one starts a new polygon. Returns the count."""
+        if not self.polygon_mode:
+            self.polygon, self.polygon_mode = [], True
+        self.polygon.append((int(x), int(y)))
+        return len(self.polygon)
+
+    def clear_shapes(self) -> None:
+        """No box corner, no polygon."""
+        self.box_corner = None
+        self.polygon, self.polygon_mode = [], False
 
 
 class Jobs:

@@ -49,7 +49,7 @@ class ToolsMixin:
         """Erase inside/outside the polygon (3 points or more: P) or else the ROI box, on this
         slice, the box's slices (a polygon: the slice limits, else all) or all slices."""
         s = self.s
-        poly = s.polygon if len(s.polygon) >= 3 else None
+        poly = self.edit_tools.polygon if len(self.edit_tools.polygon) >= 3 else None
         if poly is None and s.roi_box is None:
             self.app.notify("Scissors cut with the ROI box or a polygon: set one first (y / P, or drag after y)",
                             severity="warning")
@@ -65,11 +65,8 @@ class ToolsMixin:
     def action_scissors_point(self) -> None:
         """P: a polygon point at the cursor (the file's slice plane); clicks then add points too."""
         s = self.s
-        if not s.polygon_mode:
-            s.polygon = []
-            s.polygon_mode = True
-        s.polygon.append((int(s.x), int(s.y)))
-        self.set_status(f"Polygon: {len(s.polygon)} point(s); click or P adds points, t then Scissors cuts "
+        n = self.edit_tools.add_point(s.x, s.y)
+        self.set_status(f"Polygon: {n} point(s); click or P adds points, t then Scissors cuts "
                         "(3 points or more), Y clears")
         self.refresh_view()
 
