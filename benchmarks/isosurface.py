@@ -78,7 +78,10 @@ if method == "vtk":
 elif method == "skimage":
     from skimage.measure import marching_cubes as smc
 else:
-    from ctui.engine.mesh.surface import isosurface
+    try:
+        from ctui.engine.mesh.surface import isosurface
+    except ImportError:  # a tree from before the engine's stage packages (--base)
+        from ctui.engine.surface import isosurface
 vol = np.load(path)
 vol = np.ascontiguousarray(vol)
 def rss():
