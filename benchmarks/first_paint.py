@@ -4,9 +4,12 @@ is read (the loading screen's preview, large series only) and the workspace, rea
 capture-pane every 50 ms. Issue 23: something on screen within 1 s of the command; issue 27:
 the first slice within 1 s.
 
-    python3 benchmarks/first_paint.py [--runs 3] [PATH]
+    python3 benchmarks/first_paint.py [--runs 3] [--base TREE] [PATH]
 
-The big series of ``benchmarks/end_to_end.py`` is ``benchmarks/_cache/ct_300x512x512``.
+The big series of ``benchmarks/end_to_end.py`` is ``benchmarks/_cache/ct_300x512x512``. With
+``--base`` (an older checkout: ``git worktree add /tmp/ctui-base REV``) each run starts that
+tree and this one in turn, and the medians of both are printed (wall seconds, and the ctui
+process's CPU seconds at the first slice and at the workspace).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -39,11 +43,14 @@ def _cpu_of_ctui(sock: list[str], env: dict) -> float | None:
     return None
 
 
-def one_run(path: str = "") -> tuple[float | None, ...]:
+def one_run(path: str = "", tree: str | None = None) -> tuple[float | None, ...]:
     """(first text, loading screen, preview, workspace) seconds of wall time, then the ctui
-    process's CPU seconds at the preview and at the workspace."""
+    process's CPU seconds at the preview and at the workspace; ``tree``: the ctui source tree
+    to run (PYTHONPATH), else the installed one."""
     sock = ["tmux", "-L", f"ctui-fp-{uuid.uuid4().hex[:6]}"]
     env = {k: v for k, v in os.environ.items() if k not in ("TMUX", "TMUX_PANE")}
+    if tree:
+        env["PYTHONPATH"] = tree
     work = tempfile.mkdtemp()
     cmd = (f"cd {work} && CTUI_AUTOSAVE_DIR={work}/as COLORTERM=truecolor {sys.executable} -m ctui "
            f"--graphics halfblock {path}; sleep 30")
@@ -76,16 +83,28 @@ def one_run(path: str = "") -> tuple[float | None, ...]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--base", default=None, help="an older tree started in turn with this one (medians of both)")
     ap.add_argument("path", nargs="?", default="", help="a series or project (default: the bundled sample)")
     args = ap.parse_args()
     if shutil.which("tmux") is None:
         print("tmux is not installed", file=sys.stderr)
         return 2
+    path = os.path.abspath(args.path) if args.path else ""
+    trees = {"base": os.path.abspath(args.base), "now": os.path.dirname(os.path.dirname(os.path.abspath(__file__)))} \
+        if args.base else {"": None}
+    runs: dict[str, list] = {k: [] for k in trees}
+    fmt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
     for i in range(args.runs):
-        first, loading, preview, ready, cpu_pv, cpu_ws = one_run(os.path.abspath(args.path) if args.path else "")
-        fmt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
-        print(f"run {i + 1}: first text {fmt(first)}, loading screen {fmt(loading)}, first slice (preview) "
-              f"{fmt(preview)} (cpu {fmt(cpu_pv)}), workspace {fmt(ready)} (cpu {fmt(cpu_ws)})")
+        for name, tree in trees.items():
+            first, loading, preview, ready, cpu_pv, cpu_ws = r = one_run(path, tree)
+            runs[name].append(r)
+            print(f"run {i + 1}{' ' + name if name else ''}: first text {fmt(first)}, loading screen {fmt(loading)}, "
+                  f"first slice (preview) {fmt(preview)} (cpu {fmt(cpu_pv)}), workspace {fmt(ready)} (cpu {fmt(cpu_ws)})")
+    if args.base:
+        for name, rs in runs.items():
+            med = [statistics.median(v) if v else None for v in ([r[j] for r in rs if r[j] is not None] for j in range(6))]
+            print(f"{name} median of {len(rs)}: loading screen {fmt(med[1])}, first slice {fmt(med[2])} (cpu "
+                  f"{fmt(med[4])}), workspace {fmt(med[3])} (cpu {fmt(med[5])})  ({trees[name]})")
     return 0
 
 
