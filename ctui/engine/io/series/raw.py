@@ -27,6 +27,30 @@ def _read_slices_into(out: np.ndarray, reader: Callable[[int], np.ndarray], zsel
     return run_parallel(zsel, work, progress=progress)
 
 
+def _slice_at(file: Path, offset: int, shape_yx: tuple[int, int], dt: np.dtype) -> tuple[np.ndarray, int]:
+    """The (ny, nx) slice of ``dt`` values at byte ``offset`` of ``file``, and the number of
+    bytes read (fewer than the slice's: the file is truncated)."""
+    buf = np.empty(shape_yx[0] * shape_yx[1], dtype=dt)
+    with open(file, "rb") as fh:
+        fh.seek(offset)
+        got = fh.readinto(memoryview(buf).cast("B"))
+    return buf.reshape(shape_yx), got
+
+
+def _read_planned(full: tuple[int, int, int], native: np.dtype, reader: Callable[[int], np.ndarray], *, crop: Any,
+                  downsample: Any, path: Path, memory_limit: int | None,
+                  progress: Any) -> tuple[np.ndarray, Plan, list[int], list[tuple[int, str]]]:
+    """Read the (nz, ny, nx) volume ``full`` through ``reader(z) -> (ny, nx)`` as cropped and
+    downsampled (``crop``, ``downsample``), after checking the output against the memory
+    limit: (data, plan, the source slices read, failures as (index in those, reason))."""
+    plan = make_plan(full, crop=crop, downsample=downsample, path=path)
+    oshape = plan.out_shape(full)
+    check_memory(int(np.prod(oshape)) * native.itemsize, shape=oshape, path=path, limit=memory_limit)
+    out = np.empty(oshape, dtype=native)
+    zsel = list(range(*plan.z.indices(full[0])))
+    return out, plan, zsel, _read_slices_into(out, reader, zsel, plan, progress)
+
+
 def load_raw(
     path: Path,
     files: Sequence[Path] | None,
@@ -153,24 +177,17 @@ def _raw_one_file(path: Path, shp: tuple[int, ...], dt: np.dtype, native: np.dty
         off = size_avail - need
         warnings.append(f"file is {off} bytes larger than the data: the first {off} bytes taken as a header")
     full = (nz, ny, nx)
-    plan = make_plan(full, crop=crop, downsample=downsample, path=path)
-    oshape = plan.out_shape(full)
-    check_memory(int(np.prod(oshape)) * native.itemsize, shape=oshape, path=path, limit=memory_limit)
-    out = np.empty(oshape, dtype=native)
-    zsel = list(range(*plan.z.indices(nz)))
 
     def reader(zi: int) -> np.ndarray:
         if raw_bytes is not None:
             return np.frombuffer(raw_bytes, dtype=dt, count=ny * nx, offset=zi * slice_bytes).reshape(ny, nx)
-        buf = np.empty(ny * nx, dtype=dt)
-        with open(path, "rb") as fh:
-            fh.seek(off + zi * slice_bytes)
-            got = fh.readinto(memoryview(buf).cast("B"))
+        img, got = _slice_at(path, off + zi * slice_bytes, (ny, nx), dt)
         if got != slice_bytes:
             raise CtuiError(f"truncated at slice {zi}")
-        return buf.reshape(ny, nx)
+        return img
 
-    failures = _read_slices_into(out, reader, zsel, plan, progress)
+    out, plan, zsel, failures = _read_planned(full, native, reader, crop=crop, downsample=downsample, path=path,
+                                              memory_limit=memory_limit, progress=progress)
     if failures:
         raise LoadError(f"cannot read slice {zsel[failures[0][0]]}: {failures[0][1]}", path=path)
     n_src = 1
@@ -207,22 +224,15 @@ def _raw_slice_files(path: Path, files: Sequence[Path], shp: tuple[int, ...], dt
         raise LoadError(f"no file of {slice_bytes} bytes (one {ny}x{nx} {dt} slice)", path=path)
     nz = len(good_files)
     full = (nz, ny, nx)
-    plan = make_plan(full, crop=crop, downsample=downsample, path=path)
-    oshape = plan.out_shape(full)
-    check_memory(int(np.prod(oshape)) * native.itemsize, shape=oshape, path=path, limit=memory_limit)
-    out = np.empty(oshape, dtype=native)
-    zsel = list(range(*plan.z.indices(nz)))
 
     def reader(zi: int) -> np.ndarray:
-        buf = np.empty(ny * nx, dtype=dt)
-        with open(good_files[zi], "rb") as fh:
-            fh.seek(off)
-            got = fh.readinto(memoryview(buf).cast("B"))
+        img, got = _slice_at(good_files[zi], off, (ny, nx), dt)
         if got != slice_bytes:
             raise CtuiError(f"truncated ({got} of {slice_bytes} bytes)")
-        return buf.reshape(ny, nx)
+        return img
 
-    failures = _read_slices_into(out, reader, zsel, plan, progress)
+    out, plan, zsel, failures = _read_planned(full, native, reader, crop=crop, downsample=downsample, path=path,
+                                              memory_limit=memory_limit, progress=progress)
     bad = {k for k, _ in failures}
     for k, reason in failures:
         skipped.append({"file": rel(good_files[zsel[k]], base), "reason": reason})
