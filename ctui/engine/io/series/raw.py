@@ -99,27 +99,11 @@ def load_raw(
                                                   memory_limit=memory_limit, warnings=warnings)
     nz, ny, nx = full
     sp = parse_spacing(spacing, path)
-    zs, ys, xs = plan.steps()
-    z0, y0, x0 = plan.starts(full)
-    s = sp or (1.0, 1.0, 1.0)
-    d = np.eye(3) if direction is None else np.asarray(direction, float)
-    org = np.asarray(origin, float) + d @ (np.array([x0 * s[2], y0 * s[1], z0 * s[0]]))
     kind = f"{source_kind} {dt.str}" if files is None else f"{n_src} raw slice files ({dt.str})"
-    return _finish(
-        out,
-        spacing=sp,
-        given=sp is not None,
-        warnings=warnings,
-        source=f"{kind}, {nz}x{ny}x{nx}, from {path}",
-        path=path,
-        meta={"format": source_kind if files is None else "raw-slices", "dtype": dt.str, "files": n_src},
-        skipped=skipped,
-        modality=modality,
-        origin=tuple(org),
-        direction=d,
-        plan_steps=(zs, ys, xs),
-        what="raw data",
-    )
+    meta = {"format": source_kind if files is None else "raw-slices", "dtype": dt.str, "files": n_src}
+    return _finish(out, spacing=sp, given=sp is not None, warnings=warnings,
+                   source=f"{kind}, {nz}x{ny}x{nx}, from {path}", path=path, meta=meta, skipped=skipped,
+                   modality=modality, origin=origin, direction=direction, plan=plan, full=full, what="raw data")
 
 
 def _inflate(path: Path, offset: int, expected: int) -> bytes:

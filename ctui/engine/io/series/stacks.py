@@ -73,18 +73,24 @@ def _default_spacing_warning(what: str) -> str:
             f"(--spacing dz,dy,dx) for true measurements")
 
 
-def _finish(data, *, spacing, given, warnings, source, path, meta, skipped, modality="OT", origin=(0.0, 0.0, 0.0),
-            direction=None, plan_steps=(1, 1, 1), what="an image stack") -> Volume:
+def _finish(data, *, spacing, given, warnings, source, path, meta, skipped, plan, full, modality="OT",
+            origin=(0.0, 0.0, 0.0), direction=None, what="an image stack") -> Volume:
+    """The Volume of ``data`` read through ``plan`` (crop, downsampling) from the full
+    (nz, ny, nx) grid ``full`` whose first voxel is at ``origin`` (mm, along ``direction``):
+    the spacing (default 1 mm, with a warning unless ``given``) grows by the plan's steps
+    and the origin moves to the first voxel read."""
     if spacing is None:
         spacing = (1.0, 1.0, 1.0)
         if not given:
             warnings.insert(0, _default_spacing_warning(what))
-    spacing = tuple(s * st for s, st in zip(spacing, plan_steps))
+    d = np.eye(3) if direction is None else np.asarray(direction, float)
+    z0, y0, x0 = plan.starts(full)
+    origin = np.asarray(origin, float) + d @ np.array([x0 * spacing[2], y0 * spacing[1], z0 * spacing[0]])
     return Volume(
         data=data,
-        spacing=spacing,
-        origin=origin,
-        direction=np.eye(3) if direction is None else direction,
+        spacing=tuple(s * st for s, st in zip(spacing, plan.steps())),
+        origin=tuple(float(v) for v in origin),
+        direction=d,
         modality=modality,
         window=None,
         source=source,
@@ -220,20 +226,7 @@ def load_images(
     sp = parse_spacing(spacing, path)
     multipage = len({e[0] for e in keep}) == 1 and len(keep) > 1
     kind = "multi-page TIFF" if multipage else ("image" if len(keep) == 1 else "image stack")
-    zs, ys, xs = plan.steps()
-    z0, y0, x0 = plan.starts(full)
-    s = sp or (1.0, 1.0, 1.0)
-    vol = _finish(
-        out,
-        spacing=sp,
-        given=sp is not None,
-        warnings=warnings,
-        source=f"{kind}, {len(keep)} slice{'s' * (len(keep) != 1)} from {path}",
-        path=path,
-        meta={"format": "image-stack" if not multipage else "tiff", "files": len({e[0] for e in keep})},
-        skipped=skipped,
-        origin=(x0 * s[2], y0 * s[1], z0 * s[0]),
-        plan_steps=(zs, ys, xs),
-        what="an image stack",
-    )
-    return vol
+    meta = {"format": "image-stack" if not multipage else "tiff", "files": len({e[0] for e in keep})}
+    return _finish(out, spacing=sp, given=sp is not None, warnings=warnings, path=path, meta=meta, skipped=skipped,
+                   source=f"{kind}, {len(keep)} slice{'s' * (len(keep) != 1)} from {path}", plan=plan, full=full,
+                   what="an image stack")
