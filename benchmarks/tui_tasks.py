@@ -199,7 +199,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
     if got:
         await c.press("a")
-    while s.zoom > 1:  # back to the whole slice for the next organ
+    while app.workspace.viewstate.zoom > 1:  # back to the whole slice for the next organ
         await c.press("minus")
     await pilot.pause()
     info = s.seg.objects.get(s.current)

@@ -57,7 +57,7 @@ async def test_views_grid_window_zoom_pan():
         app.errors.clear()
         # zoom: the view shows a quarter of the width; panning moves the view
         await pilot.press("plus", "plus")
-        assert s.zoom == 4
+        assert app.workspace.viewstate.zoom == 4
         mv = ws.main_view
         await pilot.pause()
         vm = mv.view_map
@@ -67,7 +67,7 @@ async def test_views_grid_window_zoom_pan():
         await pilot.pause()
         assert ws.viewstate.pan_center[0] > c0[0]
         await pilot.press("minus", "minus")
-        assert s.zoom == 1
+        assert app.workspace.viewstate.zoom == 1
         assert not app.errors
 
 

@@ -74,7 +74,7 @@ async def test_click_seed_outside_and_wheel():
         assert s.z == z - 1
         at = (s.z, 12, 14)
         await wheel(pilot, "#main", cell_of_voxel(app, at), up=True, control=True)
-        assert s.zoom == 2.0 and _near(s.zyx, at)  # zoomed in on the pointer: the cursor is there
+        assert app.workspace.viewstate.zoom == 2.0 and _near(s.zyx, at)  # zoomed in on the pointer: the cursor is there
         await pilot.pause()
         cx, cy = app.workspace.main_view.view_map.to_display(*app.workspace.main_view.cursor)
         w, h = app.workspace.main_view.size
@@ -240,7 +240,7 @@ async def test_brush_footprint_drawn_at_any_zoom():
         s.brush = 4.0
         app.workspace.edit_tools.pen = "brush"
         for zoom in (1.0, 4.0):
-            s.zoom = zoom
+            app.workspace.viewstate.zoom = zoom
             app.workspace.refresh_view()
             await pilot.pause()
             grid = iv._grid((iv.size.width, 2 * iv.size.height))
@@ -316,7 +316,7 @@ async def test_shift_drag_pans_and_ortho_click_sets_plane():
         await wait_workspace(pilot, app)
         ws = app.workspace
         await pilot.press("plus", "plus")
-        assert s.zoom == 4.0
+        assert app.workspace.viewstate.zoom == 4.0
         await pilot.pause()
         c0 = ws.viewstate.pan_center or ws._view_center()
         cursor = s.zyx

@@ -54,7 +54,6 @@ class Session:
     y: int | None = None
     window: tuple[float, float] = (40.0, 400.0)
     view: str = "overlay"
-    zoom: float = 1.0
     project_path: str | None = None
     dirty: bool = False
     tolerance: float = 60.0

@@ -153,13 +153,13 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             if view in ("intermediate", "final"):
                 need_stage = True
                 if iv.rgb is not None and iv.token is not None and iv.token[0] == s.z:
-                    iv.set_view(zoom=s.zoom, center=center, cursor=cursor)
+                    iv.set_view(zoom=self.viewstate.zoom, center=center, cursor=cursor)
                     continue
                 img = self.plane_image(plane, "original")  # placeholder until the worker answers
             else:
                 img = self.plane_image(plane, view)
             iv.set_image(img, token=(s.z, view if view != "overlay" else plane, self.viewstate.token),
-                         spacing_yx=pv.spacing_yx, zoom=s.zoom, center=center, cursor=cursor)
+                         spacing_yx=pv.spacing_yx, zoom=self.viewstate.zoom, center=center, cursor=cursor)
         self._captions()
         if need_stage:
             self.compute_stage_views(s.z, self.viewstate.next_token())
@@ -194,7 +194,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             if view in ("intermediate", "final"):
                 pv = planes.plane_view(s.volume, plane)
                 img = planes.orient(s.display(getattr(views, view)), pv)
-                iv.set_image(img, token=(z, view, token), spacing_yx=pv.spacing_yx, zoom=s.zoom,
+                iv.set_image(img, token=(z, view, token), spacing_yx=pv.spacing_yx, zoom=self.viewstate.zoom,
                              center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
 
     def labels_changed(self) -> None:

@@ -106,12 +106,12 @@ class NavMixin:
         s = self.s
         for plane, _view, iv in self._targets():
             pv = planes.plane_view(s.volume, plane)
-            iv.set_view(zoom=s.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+            iv.set_view(zoom=self.viewstate.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
         self.update_panel()
 
     def action_pan(self, dx: int, dy: int) -> None:
         s = self.s
-        if s.zoom <= 1:
+        if self.viewstate.zoom <= 1:
             self.app.notify("Zoom in (+) first to pan", timeout=2)
             return
         # panning drags the cursor along so it stays visible
@@ -153,10 +153,7 @@ class NavMixin:
         self.app.push_screen(PromptScreen(f"Go to slice (0..{last})", str(self.s.z)), done)
 
     def action_zoom(self, d: int) -> None:
-        s = self.s
-        s.zoom = min(max(s.zoom * (2.0 if d > 0 else 0.5), 1.0), 16.0)
-        if s.zoom == 1.0:
-            self.viewstate.pan_to(None)
+        self.viewstate.zoom_by(d)
         self._repaint_cursor()
 
     # ------------------------------------------------------------------ windows and views
@@ -350,7 +347,7 @@ def panel_text(ws) -> Text:
     if vs.window_name:
         t.append(f" ({vs.window_name})", style="dim")
     view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
-    t.append(f"\nView {s.plane} {view}  zoom {s.zoom:g}x\n")
+    t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
     dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
     t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")

@@ -172,7 +172,7 @@ class MouseMixin(ToolsMixin):
         if iv is None:
             return
         if event.button == 2 or (event.button == 1 and (event.shift or event.meta)):
-            if self.s.zoom <= 1:
+            if self.viewstate.zoom <= 1:
                 self.set_status("Zoom in first (+ or Ctrl+wheel) to pan")
                 return
             self._drag = ("pan", iv, event.screen_x, event.screen_y, self.viewstate.pan_center or self._view_center())
@@ -268,7 +268,7 @@ class MouseMixin(ToolsMixin):
     def _pan_drag(self, event) -> None:
         _kind, iv, sx0, sy0, c0 = self._drag
         vm = iv.view_map
-        if vm is None or self.s.zoom <= 1:
+        if vm is None or self.viewstate.zoom <= 1:
             return
         if iv.mode in ("sixel", "kitty"):
             cw, ch = (float(v) for v in cell_pixels())

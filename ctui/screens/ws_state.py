@@ -23,6 +23,7 @@ class ViewState:
     """Layout, pan and window choice of the workspace's views."""
 
     def __init__(self) -> None:
+        self.zoom = 1.0  # 1 (the whole plane) to 16
         self.grid_mode = False  # the pipeline's four views of the file's slice
         self.ortho_mode = False  # axial, sagittal, coronal and 3D in 2x2
         self.pan_center: tuple[float, float] | None = None  # (x, y) image pixel of a zoomed main view
@@ -36,6 +37,13 @@ class ViewState:
         self.grid_mode, self.ortho_mode = grid, ortho
         self.pan_center = None
 
+    def zoom_by(self, d: int) -> float:
+        """Zoom in (``d`` > 0: x2) or out (/2), from 1 to 16; the pan resets at 1. Returns the zoom."""
+        self.zoom = min(max(self.zoom * (2.0 if d > 0 else 0.5), 1.0), 16.0)
+        if self.zoom == 1.0:
+            self.pan_center = None
+        return self.zoom
+
     def next_token(self) -> int:
         """A new request for the pipeline's views: answers to older ones are dropped."""
         self.token += 1
@@ -48,12 +56,12 @@ class ViewState:
         s = session
         pv = planes.plane_view(s.volume, plane)
         cx0, cy0 = planes.cursor_in(pv, s.zyx, s.shape)
-        if s.zoom <= 1.0 or plane != s.plane:
+        if self.zoom <= 1.0 or plane != s.plane:
             return (cx0, cy0)
         if self.pan_center is None:
             self.pan_center = (float(cx0), float(cy0))
         ny, nx = s.shape[pv.rows], s.shape[pv.cols]
-        half_w, half_h = nx / s.zoom / 2.0, ny / s.zoom / 2.0
+        half_w, half_h = nx / self.zoom / 2.0, ny / self.zoom / 2.0
         cx, cy = self.pan_center
         if abs(cx0 - cx) > half_w * 0.9 or abs(cy0 - cy) > half_h * 0.9:  # keep the cursor visible
             cx, cy = float(cx0), float(cy0)
@@ -67,7 +75,7 @@ class ViewState:
         pv = planes.plane_view(s.volume, s.plane)
         ny, nx = s.shape[pv.rows], s.shape[pv.cols]
         cx, cy = self.pan_center or self.center(s, s.plane)
-        step_x, step_y = nx / s.zoom / 4, ny / s.zoom / 4
+        step_x, step_y = nx / self.zoom / 4, ny / self.zoom / 4
         self.pan_center = (cx + dx * step_x, cy + dy * step_y)
         return int(round(dx * step_x)), int(round(dy * step_y))
 
