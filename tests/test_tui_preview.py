@@ -79,6 +79,7 @@ async def test_esc_cancels_the_load(monkeypatch):
         await pilot.pause()
         assert not app.screen.reading
         assert "cancelled" in str(app.screen.query_one("#load-title").render())
+        assert not app.screen.query_one("#load-preview").display  # no stale "reading ..." preview
         go.set()
         for w in list(app.workers):
             if w.group == "load":

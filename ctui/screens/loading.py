@@ -115,15 +115,22 @@ class LoadingScreen(GuardMixin, Screen):
     def action_back(self) -> None:
         if self.reading:
             self.app.cancel_load()
-            self.reading = False
+            self._hide_preview()
             self.query_one("#load-progress").display = False
             self.query_one("#load-title", Label).update(f"Loading [b]{self.what}[/b] cancelled")
             self.query_one("#load-reasons", Static).update("[dim]o opens another path, q quits[/dim]")
         if len(self.app.screen_stack) > 2:
             self.app.pop_screen()
 
+    def _hide_preview(self) -> None:
+        """No load running any more (cancelled, failed): the preview and its caption go."""
+        self.reading = False
+        self.query_one(Vertical).remove_class("preview")
+        for w in self.query("#load-preview, #load-caption"):
+            w.display = False
+
     def show_preview(self, msg: PreviewReady) -> None:
-        """The middle slice above the progress bar, captioned like the workspace's view."""
+        """The preview slice above the progress bar, captioned like the workspace's view."""
         from ctui.screens.imageview import ImageView  # with the first image, not the first text
 
         pv = msg.preview
@@ -145,10 +152,7 @@ class LoadingScreen(GuardMixin, Screen):
             self.query_one("#load-progress", ProgressBar).update(total=msg.total, progress=msg.done)
 
     def show_error(self, title: str, reasons: list[str]) -> None:
-        self.reading = False
-        self.query_one(Vertical).remove_class("preview")
-        for w in self.query("#load-preview, #load-caption"):
-            w.display = False
+        self._hide_preview()
         self.query_one("#load-title", Label).update(f"[b red]{title}[/b red]")
         self.query_one("#load-progress").display = False
         body = "\n".join(f"• {r}" for r in reasons) + "\n\n[dim]o opens another path, q quits[/dim]"
