@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Any
 
 from textual import events, on, work
-from textual.worker import get_current_worker
 from textual.app import App, SystemCommand
 from textual.binding import Binding
 from textual.screen import Screen
+from textual.worker import get_current_worker
 
 from ctui.engine.actions.formats import output_name
 from ctui.engine.actions.opened import check_source, labels_only_volume, series_available
