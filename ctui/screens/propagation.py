@@ -23,15 +23,29 @@ from ctui.screens.segpanel import describe, options_for
 
 
 class PropagationRun:
+    """One segmentation or propagation of the workspace ``ws``: its cancel event and, when it
+    ends, its proposal, the segmentation's report (``actions.segment``'s object result, None
+    for a propagation), the seed (x, y, z) and the settings the object keeps when accepted."""
+
     def __init__(self, ws, direction: str) -> None:
         self.ws = ws
         self.direction = direction
         self.event = threading.Event()
         self.proposal = None
+        self.report = None
+        self.seed: tuple[int, int, int] | None = None
+        self.object_settings: dict = {}
         self.started = time.perf_counter()
 
     def cancel(self) -> None:
         self.event.set()
+
+    def done(self, proposal, *, report=None, seed=None, object_settings: dict | None = None) -> None:
+        """The worker's result, posted to the workspace (``ProposalReady``)."""
+        self.proposal, self.report = proposal, report
+        self.seed = None if seed is None else tuple(int(v) for v in seed)
+        self.object_settings = dict(object_settings or {})
+        self.ws.post_message(ProposalReady(self))
 
 
 def settings_for(session, direction: str):
@@ -132,21 +146,14 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
         proposal = propagate.Proposal.of_mask(oid, seed[2], mask, stops=dict(obj.stops), necks=list(obj.necks),
                                               settings=dict(res.settings[0]))
         proposal.cuts = list(obj.cuts)
-        proposal.report = obj  # type: ignore[attr-defined]
-        proposal.seed = tuple(seed)  # type: ignore[attr-defined]
-        proposal.object_settings = dict(res.segmentation.objects[oid].settings)  # type: ignore[attr-defined]
+        settings = res.segmentation.objects[oid].settings
     except Cancelled:
         ws.post_message(SegmentationFailed("Segmentation", "cancelled"))
         return
     except Exception as exc:
         ws.post_message(SegmentationFailed("Segmentation", str(exc)))
         return
-    _done(run, proposal)
-
-
-def _done(run: PropagationRun, proposal) -> None:
-    run.proposal = proposal
-    run.ws.post_message(ProposalReady(run))
+    run.done(proposal, report=obj, seed=seed, object_settings=settings)
 
 
 def start_propagation(ws, direction: str) -> None:
@@ -197,19 +204,19 @@ def _work(run: PropagationRun, settings) -> None:
     except Exception as exc:
         ws.post_message(SegmentationFailed("Propagation", str(exc)))
         return
-    _done(run, proposal)
+    run.done(proposal)
 
 
 def finished(ws, run: PropagationRun) -> None:
     ws.jobs.segmentation_ended()
     ws.show_progress(None)
     p = run.proposal
-    ws.pending.show(p)
+    ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
     rng = p.slices
     secs = time.perf_counter() - run.started
     extra = "; ".join(p.warnings())
     where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
-    rep = getattr(p, "report", None)
+    rep = run.report
     if rep is not None:
         extra = "; ".join(rep.warnings)
         ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s. a accepts, x rejects")

@@ -510,7 +510,7 @@ class MouseMixin(ToolsMixin):
         if p is None:
             return
         cut = review.cut_at(p, self.s.z, seed_mask=self._seed_mask(p))
-        self.pending.show(cut)
+        self.pending.replace(cut)
         rng = cut.slices
         self.set_status(f"Cut at slice {self.s.z}: {cut.voxels} voxels (was {p.voxels}), "
                         f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
@@ -522,5 +522,5 @@ class MouseMixin(ToolsMixin):
         p = self._proposal_to_review("No pending proposal")
         if p is None:
             return
-        self.pending.show(review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p)))
+        self.pending.replace(review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p)))
         accept(self)

@@ -179,19 +179,30 @@ class Jobs:
 
 
 class ProposalState:
-    """The pending proposal (``engine.segment.propagate.Proposal``) and its full-volume mask."""
+    """The pending proposal (``engine.segment.propagate.Proposal``), the seed (x, y, z) and
+    settings its object keeps when it is accepted, and its full-volume mask."""
 
     def __init__(self) -> None:
         self.proposal = None
+        self.seed: tuple[int, int, int] | None = None
+        self.object_settings: dict = {}
         self._full: tuple[int, np.ndarray] | None = None  # (id of the proposal, its (z, y, x) mask)
 
-    def show(self, proposal) -> None:
-        """``proposal`` becomes the pending one (hatched on every plane until accepted or rejected)."""
+    def show(self, proposal, *, seed: tuple[int, int, int] | None = None, object_settings: dict | None = None) -> None:
+        """``proposal`` becomes the pending one (hatched on every plane until accepted or
+        rejected); ``seed`` and ``object_settings`` go to its object when it is accepted."""
+        self.proposal = proposal
+        self.seed = seed
+        self.object_settings = dict(object_settings or {})
+
+    def replace(self, proposal) -> None:
+        """A cut or shortened version of the pending proposal takes its place (same seed and settings)."""
         self.proposal = proposal
 
     def clear(self):
         """No pending proposal; returns the one there was (or None)."""
         p, self.proposal = self.proposal, None
+        self.seed, self.object_settings = None, {}
         self._full = None
         return p
 
@@ -223,10 +234,10 @@ class ProposalState:
             raise ValueError("no pending proposal")
         n = p.accept(seg)
         info = seg.objects.get(p.object_id)
-        if info is not None and getattr(p, "seed", None) is not None:
-            if tuple(p.seed) not in [tuple(v) for v in info.seeds]:
-                info.seeds.append(tuple(p.seed))
-            info.settings.update(getattr(p, "object_settings", {}))
+        if info is not None and self.seed is not None:
+            if self.seed not in [tuple(v) for v in info.seeds]:
+                info.seeds.append(self.seed)
+            info.settings.update(self.object_settings)
         self.clear()
         return n, p
 
