@@ -62,7 +62,7 @@ def test_workspace_snapshot(snap_compare, phantom_volume, size):
         await pilot.pause()
         ws = app.workspace
         ws.update_panel()  # the seed range at the cursor is computed in a thread: wait for it
-        await wait_for(pilot, lambda: getattr(ws, "seed_range_cache", (None, None))[1] is not None,
+        await wait_for(pilot, lambda: ws.seed_range.result is not None,
                        what="the seed range")
         ws.update_panel()
         ws.set_status("")

@@ -10,7 +10,7 @@ from ctui.engine.core.volume import Volume
 from ctui.engine.segment.propagate import Proposal
 from ctui.screens import planes
 from ctui.screens.session import Session
-from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, ViewState, label_counts
+from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState, label_counts
 
 
 def _session(shape=(12, 40, 60), spacing=(2.0, 0.5, 0.5)) -> Session:
@@ -129,3 +129,11 @@ def test_object_volumes_follow_the_labels_version():
     vols.changed()
     assert vols.of(s)[3] == 100 * 0.5 / 1000.0
     assert np.array_equal(label_counts(s.seg.labels), np.bincount(s.seg.labels.ravel(), minlength=256))
+
+
+def test_seed_range_keeps_only_the_answer_for_the_cursor_asked_last():
+    sr = SeedRange()
+    assert sr.wants((5, 1, 1)) and not sr.wants((5, 1, 1))  # asked once per cursor position
+    assert sr.wants((6, 1, 1))  # the cursor moved on before the first answer
+    assert not sr.store((5, 1, 1), "late") and sr.result is None
+    assert sr.store((6, 1, 1), "range") and sr.result == "range"

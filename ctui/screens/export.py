@@ -105,12 +105,7 @@ def export_dialog(ws) -> None:
                 return
             path = str(Path(path.strip()).expanduser())
 
-            def work() -> str:
-                msg = run_export(ws, kind, path)
-                ws.last_export = path
-                return msg
-
-            run_job(ws, work, what="Export", name=f"export {kind}")
+            run_job(ws, lambda: run_export(ws, kind, path), what="Export", name=f"export {kind}")
 
         app.push_screen(PromptScreen(f"Export to ({suffixes[kind]})", default_name(ws.s, kind)), got_path)
 

@@ -26,7 +26,7 @@ from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
-from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, ViewState
+from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
 
 
 class SidePanel(Static):
@@ -62,7 +62,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         self.jobs = Jobs()  # the running worker and segmentation
         self.pending = ProposalState()  # the proposal waiting for a (accept) or x (reject)
         self.volumes = ObjectVolumes()  # labels version, volume per object
-        self.last_export: str | None = None
+        self.seed_range = SeedRange()  # the side panel's range at the cursor
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:

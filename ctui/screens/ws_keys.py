@@ -389,11 +389,9 @@ def _seed_text(ws, t: Text) -> None:
     t.append("Segment ", style="bold")
     t.append(f"{describe(s)}\n", style="dim")
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
-    cache = getattr(ws, "seed_range_cache", None)
     if not hasattr(ws, "run_worker"):  # no screen around it (a test of the text): no range
         return
-    if cache is None or cache[0] != key:
-        ws.seed_range_cache = (key, None)
+    if ws.seed_range.wants(key):
 
         def work() -> None:  # a thread: filters on the neighbourhood may take a while
             try:
@@ -401,14 +399,13 @@ def _seed_text(ws, t: Text) -> None:
                     rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
             except Exception:  # off the image, a filter error: the views report it
                 return
-            if getattr(ws, "seed_range_cache", (None,))[0] == key and ws.is_attached:
-                ws.seed_range_cache = (key, rc)
+            if ws.is_attached and ws.seed_range.store(key, rc):
                 ws.app.call_from_thread(ws.update_panel)
 
         ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
         t.append("Seed range here ...\n", style="dim")
         return
-    rc = cache[1]
+    rc = ws.seed_range.result
     if rc is None:
         t.append("Seed range here ...\n", style="dim")
         return

@@ -9,6 +9,7 @@ project saves: volume, labels, cursor, window, tools).
 - :class:`ProposalState`: the pending proposal of a segmentation (hatched until ``a`` or
   ``x``), with its full-volume mask for the other planes.
 - :class:`ObjectVolumes`: the labels' version and each object's volume (ml) for the side panel.
+- :class:`SeedRange`: the side panel's range at the cursor, computed in a thread.
 """
 
 from __future__ import annotations
@@ -240,6 +241,30 @@ class ProposalState:
             info.settings.update(self.object_settings)
         self.clear()
         return n, p
+
+
+class SeedRange:
+    """The range ``S`` would use at the cursor (``actions.segment.suggest_range``), computed
+    in a thread once per cursor position and pipeline: the ``key`` last asked for and its
+    ``result`` (None while it is computed)."""
+
+    def __init__(self) -> None:
+        self.key = None
+        self.result = None
+
+    def wants(self, key) -> bool:
+        """True when ``key`` is new (its range is to be computed; the old one is forgotten)."""
+        if key == self.key:
+            return False
+        self.key, self.result = key, None
+        return True
+
+    def store(self, key, result) -> bool:
+        """The range computed for ``key``; False (dropped) when the cursor moved on meanwhile."""
+        if key != self.key:
+            return False
+        self.result = result
+        return True
 
 
 def label_counts(labels: np.ndarray) -> np.ndarray:
