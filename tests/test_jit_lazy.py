@@ -132,6 +132,6 @@ def test_cache_probe_looks_where_numba_writes(tmp_path):
             index.write_bytes(b"")
         import sys
         del sys.modules["numba"]  # cache_lacks answers False while numba is imported
-        print(jit.cache_lacks("mc_kernels", names), jit.cache_lacks("mc_kernels", names + ("_finish_vertices",)))
+        print(jit.cache_lacks("mc_kernels", names), jit.cache_lacks("mc_kernels", names + ("_pass_generate",)))
     """, NUMBA_CACHE_DIR=str(tmp_path))
     assert out.split() == ["True", "False", "True"]

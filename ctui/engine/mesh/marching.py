@@ -70,11 +70,11 @@ def _kernels():
 def _kernel_list() -> tuple:
     """The dispatchers jit.use_compiled checks (looked up only when needed)."""
     k = _kernels()
-    return (k._pass_rows, k._pass_count, k._pass_generate, k._finish_vertices)
+    return (k._pass_rows, k._pass_count, k._pass_generate)
 
 
 _KERNEL_DTYPES = (np.dtype(np.int16), np.dtype(np.float32))
-_KERNEL_NAMES = ("_pass_rows", "_pass_count", "_pass_generate", "_finish_vertices")  # as _kernel_list
+_KERNEL_NAMES = ("_pass_rows", "_pass_count", "_pass_generate")  # as _kernel_list
 
 
 def _threshold(data: np.ndarray, level: float):
@@ -205,9 +205,7 @@ def _marching_cubes_compiled(data, thr, level, m, org, ginv, normals, progress):
     faces = np.empty((nt, 3), np.int32)
     report(progress, 2, 4, "marching cubes")
     k._pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, vbase.reshape(shape2),
-                   tbase.reshape(shape2), NTRI, TRI_TABLE, verts, faces)
-    report(progress, 3, 4, "marching cubes")
-    k._finish_vertices(data, verts, norms, m, org, ginv, normals)
+                     tbase.reshape(shape2), NTRI, TRI_TABLE, verts, faces, norms, m, org, ginv, normals)
     report(progress, 4, 4, "marching cubes")
     return verts, faces, (norms if normals else None)
 

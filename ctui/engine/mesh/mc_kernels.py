@@ -185,7 +185,7 @@ def _grad(data, z, y, x, nz, ny, nx):
 
 
 @njit(cache=True, inline="always")
-def _put(verts, vid, va, vb, level, x, y, z, axis):
+def _put_index(verts, vid, va, vb, level, x, y, z, axis):
     """Vertex ``vid`` on the edge from voxel (x, y, z) along ``axis`` (0 x, 1 y, 2 z), index units."""
     a = float(va)
     d = float(vb) - a
@@ -202,61 +202,72 @@ def _put(verts, vid, va, vb, level, x, y, z, axis):
     verts[vid, 2] = z + t if axis == 2 else z
 
 
-@njit(cache=True, parallel=True)
-def _finish_vertices(data, verts, norms, m, org, ginv, with_normals):
-    """Index-space vertices -> mm, and gradient normals (interpolated along each edge)."""
+@njit(cache=True, inline="always")
+def _put(verts, norms, vid, va, vb, level, x, y, z, axis, data, m, org, ginv, with_normals):
+    """Vertex ``vid`` on its edge, finished at once (its normal, then mm): the volume's rows
+    around it are still in cache (a separate pass over the vertices re-read them: ~10% of
+    the whole isosurface); the same float32 index values and arithmetic as that pass."""
+    _put_index(verts, vid, va, vb, level, x, y, z, axis)
+    _finish_vertex(data, verts, norms, vid, m, org, ginv, with_normals)
+
+
+@njit(cache=True, inline="always")
+def _finish_vertex(data, verts, norms, i, m, org, ginv, with_normals):
+    """Vertex ``i``: index space -> mm, and its gradient normal (interpolated along its edge)."""
     nz, ny, nx = data.shape
-    for i in prange(verts.shape[0]):
-        fi = float(verts[i, 0])
-        fj = float(verts[i, 1])
-        fk = float(verts[i, 2])
-        if with_normals:
-            x0 = min(int(fi), nx - 1)
-            y0 = min(int(fj), ny - 1)
-            z0 = min(int(fk), nz - 1)
-            tx = fi - x0
-            ty = fj - y0
-            tz = fk - z0
-            x1 = x0
-            y1 = y0
-            z1 = z0
-            t = 0.0
-            if tx > 0.0 and x0 + 1 < nx:
-                x1 = x0 + 1
-                t = tx
-            elif ty > 0.0 and y0 + 1 < ny:
-                y1 = y0 + 1
-                t = ty
-            elif tz > 0.0 and z0 + 1 < nz:
-                z1 = z0 + 1
-                t = tz
-            g0x, g0y, g0z = _grad(data, z0, y0, x0, nz, ny, nx)
-            g1x, g1y, g1z = _grad(data, z1, y1, x1, nz, ny, nx)
-            gx = g0x + t * (g1x - g0x)
-            gy = g0y + t * (g1y - g0y)
-            gz = g0z + t * (g1z - g0z)
-            px = ginv[0, 0] * gx + ginv[0, 1] * gy + ginv[0, 2] * gz
-            py = ginv[1, 0] * gx + ginv[1, 1] * gy + ginv[1, 2] * gz
-            pz = ginv[2, 0] * gx + ginv[2, 1] * gy + ginv[2, 2] * gz
-            nrm = math.sqrt(px * px + py * py + pz * pz)
-            if nrm > 0.0:
-                nrm = -1.0 / nrm  # outward = down the gradient
-            norms[i, 0] = px * nrm
-            norms[i, 1] = py * nrm
-            norms[i, 2] = pz * nrm
-        for r in range(3):
-            verts[i, r] = org[r] + m[r, 0] * fi + m[r, 1] * fj + m[r, 2] * fk
+    fi = float(verts[i, 0])
+    fj = float(verts[i, 1])
+    fk = float(verts[i, 2])
+    if with_normals:
+        x0 = min(int(fi), nx - 1)
+        y0 = min(int(fj), ny - 1)
+        z0 = min(int(fk), nz - 1)
+        tx = fi - x0
+        ty = fj - y0
+        tz = fk - z0
+        x1 = x0
+        y1 = y0
+        z1 = z0
+        t = 0.0
+        if tx > 0.0 and x0 + 1 < nx:
+            x1 = x0 + 1
+            t = tx
+        elif ty > 0.0 and y0 + 1 < ny:
+            y1 = y0 + 1
+            t = ty
+        elif tz > 0.0 and z0 + 1 < nz:
+            z1 = z0 + 1
+            t = tz
+        g0x, g0y, g0z = _grad(data, z0, y0, x0, nz, ny, nx)
+        g1x, g1y, g1z = _grad(data, z1, y1, x1, nz, ny, nx)
+        gx = g0x + t * (g1x - g0x)
+        gy = g0y + t * (g1y - g0y)
+        gz = g0z + t * (g1z - g0z)
+        px = ginv[0, 0] * gx + ginv[0, 1] * gy + ginv[0, 2] * gz
+        py = ginv[1, 0] * gx + ginv[1, 1] * gy + ginv[1, 2] * gz
+        pz = ginv[2, 0] * gx + ginv[2, 1] * gy + ginv[2, 2] * gz
+        nrm = math.sqrt(px * px + py * py + pz * pz)
+        if nrm > 0.0:
+            nrm = -1.0 / nrm  # outward = down the gradient
+        norms[i, 0] = px * nrm
+        norms[i, 1] = py * nrm
+        norms[i, 2] = pz * nrm
+    for r in range(3):
+        verts[i, r] = org[r] + m[r, 0] * fi + m[r, 1] * fj + m[r, 2] * fk
+
+
 
 
 @njit(cache=True)
-def _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vid, do_x, do_y, do_z, verts):
+def _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vid, do_x, do_y, do_z, verts, norms, m, org, ginv,
+                       with_normals):
     """Vertices of voxel row (z, y) outside any cell row (last row / last plane)."""
     nz, ny, nx = data.shape
     row = data[z, y]
     if do_x and xl[z, y] <= xr[z, y]:
         for x in range(xl[z, y], xr[z, y] + 1):
             if (row[x] > thr) != (row[x + 1] > thr):
-                _put(verts, vid, row[x], row[x + 1], level, x, y, z, 0)
+                _put(verts, norms, vid, row[x], row[x + 1], level, x, y, z, 0, data, m, org, ginv, with_normals)
                 vid += 1
     if do_y:
         a, b = _trim2(xl, xr, sl, sr, z, y, z, y + 1, nx)
@@ -264,7 +275,7 @@ def _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vid, do_x, do_y, 
             r1 = data[z, y + 1]
             for x in range(a, b + 2):
                 if (row[x] > thr) != (r1[x] > thr):
-                    _put(verts, vid, row[x], r1[x], level, x, y, z, 1)
+                    _put(verts, norms, vid, row[x], r1[x], level, x, y, z, 1, data, m, org, ginv, with_normals)
                     vid += 1
     if do_z:
         a, b = _trim2(xl, xr, sl, sr, z, y, z + 1, y, nx)
@@ -272,24 +283,27 @@ def _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vid, do_x, do_y, 
             r1 = data[z + 1, y]
             for x in range(a, b + 2):
                 if (row[x] > thr) != (r1[x] > thr):
-                    _put(verts, vid, row[x], r1[x], level, x, y, z, 2)
+                    _put(verts, norms, vid, row[x], r1[x], level, x, y, z, 2, data, m, org, ginv, with_normals)
                     vid += 1
     return vid
 
 
 @njit(cache=True, parallel=True)
 def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, vbase, tbase, ntri, table,
-                   verts, faces):
+                   verts, faces, norms, m, org, ginv, with_normals):
+    """Every vertex (in mm, with its normal) and every triangle, plane by plane."""
     nz, ny, nx = data.shape
     for z in prange(nz):
         ids = np.empty(12, dtype=np.int64)
         if z == nz - 1:
             # last plane: x- and y-edges of every row, no cells
             for y in range(ny):
-                _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vbase[z, y], True, y < ny - 1, False, verts)
+                _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, y, vbase[z, y], True, y < ny - 1, False, verts,
+                                   norms, m, org, ginv, with_normals)
             continue
         # last row of the plane: x- and z-edges
-        _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, ny - 1, vbase[z, ny - 1], True, False, True, verts)
+        _edge_row_vertices(data, thr, level, xl, xr, sl, sr, z, ny - 1, vbase[z, ny - 1], True, False, True, verts,
+                           norms, m, org, ginv, with_normals)
         # cell rows between planes z and z+1: vertices of row (z, y) and the triangles
         for y in range(ny - 1):
             a = ta[z, y]
@@ -322,11 +336,11 @@ def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, 
                 lz10 = ((prev >> 1) ^ (prev >> 3)) & 1
                 # this row's own vertices: x-edge at x, y- and z-edges at column x
                 if xc00:
-                    _put(verts, bx00, r00[x], r00[x + 1], level, x, y, z, 0)
+                    _put(verts, norms, bx00, r00[x], r00[x + 1], level, x, y, z, 0, data, m, org, ginv, with_normals)
                 if ly00:
-                    _put(verts, by00, r00[x], r10[x], level, x, y, z, 1)
+                    _put(verts, norms, by00, r00[x], r10[x], level, x, y, z, 1, data, m, org, ginv, with_normals)
                 if lz00:
-                    _put(verts, bz00, r00[x], r01[x], level, x, y, z, 2)
+                    _put(verts, norms, bz00, r00[x], r01[x], level, x, y, z, 2, data, m, org, ginv, with_normals)
                 nt = ntri[case]
                 if nt > 0:
                     ids[0] = bx00
@@ -359,6 +373,6 @@ def _pass_generate(data, thr, level, xl, xr, sl, sr, ta, tb, noff, nib, cx, cy, 
                 prev = cur
             # the last column's y- and z-edges of this row
             if (prev ^ (prev >> 1)) & 1:
-                _put(verts, by00, r00[b + 1], r10[b + 1], level, b + 1, y, z, 1)
+                _put(verts, norms, by00, r00[b + 1], r10[b + 1], level, b + 1, y, z, 1, data, m, org, ginv, with_normals)
             if (prev ^ (prev >> 2)) & 1:
-                _put(verts, bz00, r00[b + 1], r01[b + 1], level, b + 1, y, z, 2)
+                _put(verts, norms, bz00, r00[b + 1], r01[b + 1], level, b + 1, y, z, 2, data, m, org, ginv, with_normals)
