@@ -70,5 +70,8 @@ async def test_tui_segment_equals_cli(tmp_path, capsys, mode):
         tui = s.seg.labels == s.current
         assert np.count_nonzero(tui) == report["objects"][0]["voxels"]
         assert np.array_equal(tui, cli)
+        info = s.seg.objects[s.current]  # the object keeps its seed and settings, as after a fill
+        assert tuple(seed) in [tuple(v) for v in info.seeds]  # p propagates from it later
+        assert (info.settings["low"], info.settings["high"]) == pytest.approx((lo, hi), abs=1e-3)  # the report rounds
         await pilot.press("u")  # one undo step takes it back
         assert not (s.seg.labels == s.current).any()

@@ -72,6 +72,10 @@ def test_proposal_planes_match_the_mask_and_accept_records_seed_and_settings():
     info = seg.objects[2]
     assert (25, 12, 5) in [tuple(v) for v in info.seeds] and info.settings["low"] == 100.0
     assert st.proposal is None and st.seed is None and st.plane(pv, 0, s.shape) is None
+    fresh = Segmentation(s.shape)  # an object segmented before it was ever filled: registered on accept
+    st.show(p, seed=(25, 12, 5), object_settings={"method": "fill"})
+    st.accept(fresh)
+    assert fresh.objects[2].seeds == [(25, 12, 5)] and fresh.objects[2].settings["method"] == "fill"
 
 
 def test_a_cut_proposal_keeps_its_seed_and_reject_clears_it():

@@ -228,14 +228,16 @@ class ProposalState:
         return planes.take(self._full[1], pv, index)
 
     def accept(self, seg) -> tuple[int, object]:
-        """Write the proposal into the segmentation ``seg`` (one undo step), with its seed and
-        settings on the object; returns (voxels added, the proposal). No proposal: ValueError."""
+        """Write the proposal into the segmentation ``seg`` (one undo step); a proposal from a
+        seed registers its object with the seed and settings (as a fill does). Returns
+        (voxels added, the proposal). No proposal: ValueError."""
         p = self.proposal
         if p is None:
             raise ValueError("no pending proposal")
         n = p.accept(seg)
-        info = seg.objects.get(p.object_id)
-        if info is not None and self.seed is not None:
+        if self.seed is not None:  # from a seed: the object keeps it and its settings, as after a fill (Enter)
+            seg.add_object(object_id=p.object_id)
+            info = seg.objects[p.object_id]
             if self.seed not in [tuple(v) for v in info.seeds]:
                 info.seeds.append(self.seed)
             info.settings.update(self.object_settings)
