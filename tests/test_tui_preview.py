@@ -115,3 +115,25 @@ async def test_project_preview_shows_its_objects(monkeypatch, tmp_path):
         await wait_workspace(pilot, app)
         assert app.session.z == z and int(app.session.seg.labels[z, 250, 250]) == 1
         assert not app.internal_errors and not app.errors
+
+
+async def test_esc_on_a_second_load_returns_to_the_workspace(monkeypatch):
+    """Opening another series from a workspace: its preview comes up over the workspace;
+    Esc cancels that load and returns to the workspace, its series untouched."""
+    path = shared("ct_head_phantom_philips")
+    app = CtuiApp()  # the bundled sample first (small: no preview)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        first = app.session
+        go, calls = _held_load(monkeypatch)
+        app.open_path(str(path))
+        await wait_for(pilot, lambda: _preview_shown(app), what="the second series' preview")
+        await pilot.press("escape")
+        await pilot.pause()
+        assert app.screen is app.workspace and app.session is first
+        go.set()
+        for w in list(app.workers):
+            if w.group == "load":
+                await w.wait()
+        await pilot.pause(0.2)
+        assert app.session is first and not calls and not app.internal_errors
