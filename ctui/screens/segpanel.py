@@ -18,6 +18,7 @@ from textual.widgets import Button, Checkbox, Input, Label, Select
 
 from ctui.engine.actions.segment import METHODS, SegmentOptions
 from ctui.engine.core.errors import CtuiError
+from ctui.screens.ws_state import describe  # noqa: F401 - the panel's one-line summary, read with the panel
 
 DIRECTIONS = ("both", "forward", "backward")
 
@@ -41,18 +42,6 @@ def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, 
                           keep_largest=bool(o.get("keep_largest", False)), min_island=int(o.get("min_island", 0)),
                           interpolate=bool(o.get("interpolate", False)))
     return opts, th
-
-
-def describe(session: Any) -> str:
-    """One line of the current segmentation settings, for the side panel and messages."""
-    o = getattr(session, "segment_options", {}) or {}
-    neck = o.get("neck")
-    rng = o.get("range", "given")
-    rtxt = "auto" if rng == "auto" else ("T's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
-    bg = len(getattr(session, "background_seeds", []) or [])
-    return (f"{o.get('method', 'fill')} {session.prop_mode}, neck {'auto' if neck is None else f'{neck:g} mm'}, "
-            f"range {rtxt}{', holes filled' if o.get('fill_holes', True) else ''}"
-            + (f", {bg} background seed{'s' if bg != 1 else ''}" if bg else ""))
 
 
 class SegmentPanel(ModalScreen):

@@ -12,6 +12,7 @@ from ctui.screens.dialogs import PromptScreen
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.session import VIEWS
+from ctui.screens.ws_state import describe
 
 BINDINGS = keys("""
 left,h                move(-1,0)             Cursor left                        hidden
@@ -249,7 +250,7 @@ class NavMixin:
         start_segment(self, "both")
 
     def action_segment_panel(self) -> None:
-        from ctui.screens.segpanel import SegmentPanel, describe  # the segmentation engine (scipy) loads with the first segmentation
+        from ctui.screens.segpanel import SegmentPanel  # the segmentation engine (scipy) loads with the first segmentation
 
         def done(ok: bool | None) -> None:
             if ok:
@@ -381,16 +382,19 @@ _BARS = " ▁▂▃▄▅▆▇█"
 def _seed_text(ws, t: Text) -> None:
     """The segmentation settings (G) and the range S would use at the cursor, with the neighbourhood's
     histogram (a sparkline, the range's part bright)."""
-    # the segmentation engine (scipy) loads in the side panel's first repaint, not before the first paint
-    from ctui.engine.actions.segment import suggest_range
-    from ctui.screens.segpanel import describe
-
     s = ws.s
     t.append("Segment ", style="bold")
     t.append(f"{describe(s)}\n", style="dim")
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
     if not hasattr(ws, "run_worker"):  # no screen around it (a test of the text): no range
         return
+    if not ws.seed_range.painted:
+        # the segmentation engine (scipy, 0.2-0.3 s on the main thread) loads once the workspace is painted
+        ws.seed_range.painted = True
+        ws.call_after_refresh(ws.update_panel)
+        t.append("Seed range here ...\n", style="dim")
+        return
+    from ctui.engine.actions.segment import suggest_range  # loads the segmentation engine: after the first paint
     if ws.seed_range.wants(key):
 
         def work() -> None:  # a thread: filters on the neighbourhood may take a while

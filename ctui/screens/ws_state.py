@@ -14,6 +14,8 @@ project saves: volume, labels, cursor, window, tools).
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 
@@ -245,6 +247,18 @@ class ProposalState:
         return n, p
 
 
+def describe(session: Any) -> str:
+    """One line of the current segmentation settings, for the side panel and messages."""
+    o = getattr(session, "segment_options", {}) or {}
+    neck = o.get("neck")
+    rng = o.get("range", "given")
+    rtxt = "auto" if rng == "auto" else ("T's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
+    bg = len(getattr(session, "background_seeds", []) or [])
+    return (f"{o.get('method', 'fill')} {session.prop_mode}, neck {'auto' if neck is None else f'{neck:g} mm'}, "
+            f"range {rtxt}{', holes filled' if o.get('fill_holes', True) else ''}"
+            + (f", {bg} background seed{'s' if bg != 1 else ''}" if bg else ""))
+
+
 class SeedRange:
     """The range ``S`` would use at the cursor (``actions.segment.suggest_range``), computed
     in a thread once per cursor position and pipeline: the ``key`` last asked for and its
@@ -253,6 +267,7 @@ class SeedRange:
     def __init__(self) -> None:
         self.key = None
         self.result = None
+        self.painted = False  # the workspace has been painted once (the engine may load now)
 
     def wants(self, key) -> bool:
         """True when ``key`` is new (its range is to be computed; the old one is forgotten)."""
