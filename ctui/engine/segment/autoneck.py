@@ -118,8 +118,14 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3)
     f = _resample_factors(spacing, candidate.shape)
     sp = tuple(float(s) * k for s, k in zip(spacing, f))
-    cand = fill_holes_2d(coarse(candidate, f))
-    cs = seeds // np.array(f)
+    if not candidate.any():
+        return NeckChoice(0.0, reason="the seed's region is too small to sweep")
+    # only the candidate's box is resampled (its start on the coarse grid, so the coarse voxels are the same)
+    fb = _bbox3(candidate)
+    start = [(b.start // k) * k for b, k in zip(fb, f)]
+    off = np.array(start) // np.array(f)
+    cand = fill_holes_2d(coarse(candidate[tuple(slice(a, b.stop) for a, b in zip(start, fb))], f))
+    cs = seeds // np.array(f) - off
     cs = cs[np.all((cs >= 0) & (cs < np.array(cand.shape)), axis=1)]
     cs = cs[cand[tuple(cs.T)]] if len(cs) else cs
     if not len(cs):
@@ -161,7 +167,7 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     region = None
     if kept is not None:
         full = np.zeros(tuple(-(-n // k) for n, k in zip(candidate.shape, f)), bool)
-        full[box] = kept
+        full[tuple(slice(b.start + o, b.stop + o) for b, o in zip(box, off))] = kept
         # on a coarser grid than the series the region's edge is uncertain by one coarse voxel: grow it by
         # that much; on the series' own grid it is exact (growing it there added a one-voxel rim of
         # partial-volume voxels: right kidney slice mode volume 1.23x -> 1.12x the reference)
@@ -172,8 +178,10 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
 
 def _bbox3(m: np.ndarray) -> tuple[slice, slice, slice]:
     zs = np.flatnonzero(m.any(axis=(1, 2)))
-    ys = np.flatnonzero(m.any(axis=(0, 2)))
-    xs = np.flatnonzero(m.any(axis=(0, 1)))
+    sub = m[zs[0]:zs[-1] + 1]
+    rows = sub.any(axis=2)  # (z, y): one pass over the occupied slices gives rows and columns
+    ys = np.flatnonzero(rows.any(axis=0))
+    xs = np.flatnonzero(sub[:, ys[0]:ys[-1] + 1].any(axis=(0, 1)))
     return slice(zs[0], zs[-1] + 1), slice(ys[0], ys[-1] + 1), slice(xs[0], xs[-1] + 1)
 
 
