@@ -461,6 +461,13 @@ class MouseMixin(ToolsMixin):
             return
         strip = strips.first(ReviewStrip)
         p = self.pending.proposal
+        if p is None and not self.viewstate.painted:
+            # an opened project's object is reviewed once the workspace is on screen (its slices' outlines
+            # and marks take 0.1-0.4 s for a large object)
+            self.viewstate.painted = True
+            self.call_after_refresh(self.update_strip)
+            strip.set_class(False, "on")
+            return
         src = p if p is not None else (self.review_source() if self.size.height >= 30 else None)
         if src is None:
             strip.set_class(False, "on")

@@ -34,6 +34,7 @@ class ViewState:
         self.last_views = None  # the pipeline's views (SliceViews) shown last
         self.window_index = -1  # the preset ``w`` chose last (index in Session.window_presets())
         self.window_name: str | None = None  # its name, or "custom" (W)
+        self.painted = False  # the workspace has been painted once (work that can wait for it waits)
 
     def set_layout(self, *, grid: bool = False, ortho: bool = False) -> None:
         """One plane (both False), the pipeline's 2x2 (``grid``) or the planes' 2x2 (``ortho``); the pan resets."""
