@@ -117,7 +117,7 @@ def denoised(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, hig
     y0, x0 = max(y - ry, 0), max(x - rx, 0)
     img = pipe.final_region(volume, z, y0, y + ry + 1, x0, x + rx + 1, window=pipe.window_for(volume))
     inr = in_range(img, low, high)
-    n, lab, stats, _c = cv2.connectedComponentsWithStats(inr.view(np.uint8), connectivity=8)
+    n, _lab, stats, _c = cv2.connectedComponentsWithStats(inr.view(np.uint8), connectivity=8)
     specks = int(stats[1:, cv2.CC_STAT_AREA][stats[1:, cv2.CC_STAT_AREA] < 4].sum()) if n > 1 else 0
     if specks <= SPECKLE * max(int(np.count_nonzero(inr)), 1):
         return None
