@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import cv2
 import numpy as np
 
+from ctui.engine.actions.series import label_counts
 from ctui.screens import planes
 
 
@@ -283,19 +283,6 @@ class SeedRange:
             return False
         self.result = result
         return True
-
-
-def label_counts(labels: np.ndarray) -> np.ndarray:
-    """Voxels per label value (int64 (256,)) of a uint8 label volume. OpenCV's histogram in
-    slabs of at most 8 M voxels (exact in its float32 bins): 8 ms on 24x512x512 against
-    120 ms for np.bincount, which copies the labels to int64 first (a brush stroke step
-    recounts them for the side panel)."""
-    flat = labels.reshape(-1, labels.shape[-1])
-    step = max(1, (8 << 20) // max(labels.shape[-1], 1))
-    total = np.zeros(256, np.int64)
-    for r in range(0, flat.shape[0], step):
-        total += cv2.calcHist([np.ascontiguousarray(flat[r:r + step])], [0], None, [256], [0, 256]).ravel().astype(np.int64)
-    return total
 
 
 class ObjectVolumes:
