@@ -181,6 +181,30 @@ class _Start:
     width: float  # mm; 0: no neck cut
     pipe: Pipeline  # what the fill thresholds: the user's pipeline, or a median of it on a noisy series
     denoise: str = ""  # what was added for noise ("median 3x3"), empty when nothing
+    seed: Seed | None = None  # the voxel the fill starts from: the given seed, or its in-range neighbour
+    moved: str = ""  # why the fill starts beside the given seed (a noise pixel outside the range)
+
+
+SNAP_MM = 2.0  # a seed on a noise pixel outside the range starts at the nearest in-range pixel this close
+
+
+def _snap(final: np.ndarray, x: int, y: int, lo: float, hi: float, spacing_yx: tuple[float, float]
+          ) -> tuple[int, int, float] | None:
+    """(x, y, median) of the in-range pixel nearest (x, y) within ``SNAP_MM`` (at least one pixel), when the
+    median of that disc is in range: the seed fell on a noise pixel of the object. None otherwise (the
+    seed is on another tissue). ``final``: (ny, nx) the values fills use."""
+    ry, rx = (max(1, int(round(SNAP_MM / max(float(v), 1e-6)))) for v in spacing_yx)
+    y0, y1, x0, x1 = max(y - ry, 0), min(y + ry + 1, final.shape[0]), max(x - rx, 0), min(x + rx + 1, final.shape[1])
+    patch = np.asarray(final[y0:y1, x0:x1], dtype=np.float64)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d2 = ((yy - y) * spacing_yx[0]) ** 2 + ((xx - x) * spacing_yx[1]) ** 2
+    disc = d2 <= max(SNAP_MM ** 2, float(max(spacing_yx)) ** 2 * 2) + 1e-9
+    med = float(np.median(patch[disc]))
+    ok = disc & (patch >= lo) & (patch <= hi)
+    if not lo <= med <= hi or not ok.any():
+        return None
+    k = int(np.argmin(np.where(ok, d2, np.inf)))
+    return int(xx.flat[k]), int(yy.flat[k]), med
 
 
 def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
@@ -210,10 +234,19 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     if smooth is not None:
         pipe, final = smooth, smooth.final_slice(volume, z)
     value = float(final[y, x])
+    moved = ""
     if not lo <= value <= hi:
-        how = ", after a 3x3 median for the noise" if smooth is not None else ", after the filters" if pipe.active_steps() else ""
-        raise CtuiError(f"seed {x},{y},{z}: its value {value:g} (the value fills use{how}) "
-                        f"is outside the range [{lo:g}, {hi:g}]")
+        near = _snap(final, x, y, lo, hi, spacing_yx)
+        if near is None:
+            how = (", after a 3x3 median for the noise" if smooth is not None
+                   else ", after the filters" if pipe.active_steps() else "")
+            raise CtuiError(f"seed {x},{y},{z}: its value {value:g} (the value fills use{how}) "
+                            f"is outside the range [{lo:g}, {hi:g}], and so is most of what lies within "
+                            f"{SNAP_MM:g} mm of it")
+        moved = (f"seed {x},{y},{z}: its value {value:g} is outside the range [{lo:g}, {hi:g}] (noise: the "
+                 f"median within {SNAP_MM:g} mm is {near[2]:g}), so the fill starts at {near[0]},{near[1]},{z}")
+        x, y = near[0], near[1]
+        seed = (x, y, z)
     labels = None if opts.overwrite else seg.labels
     if opts.neck_mm is None:
         choice = auto_width(volume, pipe, seed, lo, hi, labels=labels, object_id=oid, limit=box)
@@ -241,7 +274,7 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
         raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
                         f"{opts.min_area} px")
     return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width, pipe=pipe,
-                  denoise="median 3x3" if smooth is not None else "")
+                  denoise="median 3x3" if smooth is not None else "", seed=seed, moved=moved)
 
 
 def _box_mask2d(box: tuple[slice, slice, slice], shape: tuple[int, ...]) -> np.ndarray:
@@ -304,8 +337,8 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         sub = _scaled(progress, i, len(fg))
         if oid not in seg.objects:
             seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
-        res, st = _one(volume, start.pipe, seg, oid, seed, start, bg, opts, sub)
-        res.warnings[:0] = notes
+        res, st = _one(volume, start.pipe, seg, oid, start.seed or seed, start, bg, opts, sub)
+        res.warnings[:0] = notes + ([start.moved] if start.moved else [])
         results.append(res)
         settings.append(st)
     counts = label_counts(seg.labels)

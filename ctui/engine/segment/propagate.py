@@ -18,7 +18,8 @@ section thinner than the neck everywhere (an organ's tapering pole) is kept with
 the previous object's neighbourhood. ``Proposal.necks`` lists the slices where
 something was cut off. ``neck_mm=0`` turns it off.
 
-Second line, slice mode only (3D mode only with ``neck_mm=0``): the **area guard**
+Second line, slice mode with a fixed width only (3D mode only with ``neck_mm=0``; with the
+automatic width the sweep's region and the final 3D cut do this work): the **area guard**
 stops when the area grows by more than ``leak_factor`` times the previous slice's
 area (and by at least ``leak_min_pixels``, from a section of at least that many
 pixels): an object running into a wide structure along the slice axis, which no neck
@@ -396,8 +397,14 @@ def _limit_reason(s: PropagationSettings, zz: int, nz: int) -> str:
 
 def _area_guard(filler: _SliceFiller, s: PropagationSettings, prop: Proposal, zz: int, d: str,
                 prev: tuple[int, int, np.ndarray], cur: tuple[int, int, np.ndarray]) -> tuple[tuple[int, int, np.ndarray], str]:
-    """The optional area leak guard (``leak_factor``): (slice result, "ok" | "leak" | "confined")."""
-    if s.leak_factor is None:
+    """The optional area leak guard (``leak_factor``): (slice result, "ok" | "leak" | "confined").
+
+    Off with the automatic width (``neck_rule="sweep"``): its region bounds every slice and the 3D cut at
+    the end removes what joins through narrower necks. The guard counts pixels, so on a fine grid it
+    stopped at a pole's section tripling from one slice to the next (right kidney of ``ct_abdomen_3mm``
+    resampled to 1 x 1 x 3 mm, its range given: Dice 0.46 with the guard, 0.88 without; on the 3 mm grid
+    it never fires)."""
+    if s.leak_factor is None or s.neck_rule == "sweep":
         return cur, "ok"
     area = int(cur[2].sum())
     prev_area = int(prev[2].sum())
