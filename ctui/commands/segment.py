@@ -106,8 +106,9 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
                    help="two opposite corners (column, row, slice from 0, inclusive): fills, propagation and "
                         "growing stay inside this box")
     p.add_argument("--leak-factor", type=number("--leak-factor", 1, 1000, above=True), default=2.5,
-                   help="second leak guard, slice mode: stop when the area grows more than this factor from one "
-                        "slice to the next (default 2.5; used in 3D mode only with --neck 0)")
+                   help="second leak guard, slice mode with --neck MM: stop when the area grows more than this factor "
+                        "from one slice to the next (default 2.5; in 3D mode only with --neck 0; with --neck auto "
+                        "the width's region and its 3D cut do this)")
     p.add_argument("--neighbourhood", type=number("--neighbourhood", 0, 100, integer=True), default=2,
                    help="pixels the previous slice's object is grown by to seed the next slice (default 2; 0 = overlap only)")
     p.add_argument("--min-area", type=number("--min-area", 1, 1e9, integer=True), default=5, help="smallest accepted fill / object slice in pixels (default 5)")
