@@ -18,7 +18,7 @@ kidney (x, y, z), the HU range, and a background seed in the neighbour.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -115,8 +115,6 @@ def contrast_abdomen(volume: Volume, labels: np.ndarray, *, vein_mm: float = 10.
     contacts and noise, and the labels stay their truth. ``volume.data`` (nz, ny, nx) HU; returns a
     Volume with int16 data on the same grid.
     """
-    from dataclasses import replace
-
     from scipy import ndimage
     from skimage.graph import route_through_array  # test data only: not on any command's path
 
