@@ -54,7 +54,8 @@ SWEEP_MM = 2.0  # the sweep's voxel size (mm; the series' own when coarser)
 BOX_MM = 150.0  # half-size of the sweep's box around the seed (mm)
 MAX_RADII = 14
 LEAK_BALLS = 0.5  # the smallest piece a leak takes, in balls of the local depth
-SPLIT_BALLS = 2.0  # the least core a leak leaves behind as it goes, in balls of the sweep's radius
+SPLIT_BALLS = 1.0  # the least core a leak leaves behind as it goes, in balls of the sweep's radius,
+SPLIT_MM3 = 2000.0  # and in mm^3
 HOLE_MM2 = 200.0  # largest hole filled (mm^2 a slice): noise and vessels, not the renal sinus (Dice best on the kidneys)
 
 
@@ -73,12 +74,13 @@ class NeckChoice:
     volumes: list[int] = field(default_factory=list)
     reason: str = ""
     leak_ratio: float = 1.0  # V before / V after the chosen drop
+    splits: list[int] = field(default_factory=list)  # core voxels cut off from the seed's core at each radius
     region: "Region | None" = None  # the opened region at the chosen width (coarse), for slice-mode propagation
 
     def to_dict(self) -> dict[str, Any]:
         return {"width_mm": round(self.width_mm, 3), "depth_mm": round(self.depth_mm, 3),
                 "radii_mm": [round(r, 3) for r in self.radii_mm], "volumes": list(self.volumes),
-                "reason": self.reason, "leak_ratio": round(self.leak_ratio, 3)}
+                "reason": self.reason, "leak_ratio": round(self.leak_ratio, 3), "splits": list(self.splits)}
 
 
 SWEEP_VOXELS = 1_000_000  # the sweep's grid is made coarser until the box holds at most this many voxels
@@ -157,13 +159,14 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     drops = [vols[i - 1] / vols[i] for i in range(1, len(vols))]
     # a leak going takes a piece of at least LEAK_BALLS balls of the local depth (a rim or a cap rounded off
     # by the opening is smaller), drops the volume by at least ``bar``, and leaves a thick part behind: the
-    # seed's core (voxels deeper than r) loses at least SPLIT_BALLS balls of radius r that are still core
-    # (a neighbour beyond the neck). Shaving a pole or a rim only thins the core; an organ's own waist
-    # splits off a small piece of core (contrast kidney, nephrographic, at 12 mm: 30 voxels of 27 mm^3,
-    # under 2 balls; the abdomen's leaks: 200-33000).
+    # seed's core (voxels deeper than r) loses a part that is still core (a neighbour beyond the neck), of
+    # at least one ball of radius r and SPLIT_MM3. Shaving a pole or a rim only thins the core; an organ's
+    # own waist splits off a small piece of core (contrast kidney, nephrographic, at 12 mm: 0.8 mL). The
+    # abdomen's leaks leave 3-900 mL (liver on a 1 x 1 x 3 mm grid, at 18 mm: 4 mL, 1.2 balls).
     ball = 4.0 / 3.0 * math.pi * depth ** 3 / float(np.prod(sp))
+    vox = float(np.prod(sp))
     big = [vols[i - 1] - vols[i] >= LEAK_BALLS * ball
-           and split[i - 1] >= SPLIT_BALLS * 4.0 / 3.0 * math.pi * used[i] ** 3 / float(np.prod(sp))
+           and split[i - 1] * vox >= max(SPLIT_BALLS * 4.0 / 3.0 * math.pi * used[i] ** 3, SPLIT_MM3)
            for i in range(1, len(vols))]
     bar = max(jump, math.sqrt(max([d for d, b in zip(drops, big) if b], default=1.0)))
     j, ratio = 0, 1.0
@@ -174,12 +177,12 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
         # no neck to cut, but slice mode still goes no further than the region joined to the seed in 3D: its
         # seeding from the previous slice grown by a few pixels crossed gaps that the 3D fill does not
         # (contrast kidney, 120:400: 296 mL through the left renal vein's gap, 97.5 mL in 3D)
-        return NeckChoice(0.0, depth_mm=depth, radii_mm=used, volumes=vols, region=_region(cand, box, off, f, sp, candidate.shape),
+        return NeckChoice(0.0, depth_mm=depth, radii_mm=used, volumes=vols, splits=[0] + split, region=_region(cand, box, off, f, sp, candidate.shape),
                           reason="no leak: the volume does not drop as the neck width grows")
     r = used[j]
     kept = _opened(cand, dt, cs, r, sp)
     region = None if kept is None else _region(kept, box, off, f, sp, candidate.shape)
-    return NeckChoice(2.0 * r, depth_mm=depth, radii_mm=used, volumes=vols, leak_ratio=ratio, region=region,
+    return NeckChoice(2.0 * r, depth_mm=depth, radii_mm=used, volumes=vols, leak_ratio=ratio, region=region, splits=[0] + split,
                       reason=f"the volume drops {ratio:.1f}x between necks of {2 * used[j - 1]:.1f} and {2 * r:.1f} mm")
 
 
