@@ -105,13 +105,20 @@ ENHANCEMENT = {2: 160.0, 3: 160.0, 52: 250.0, 63: 150.0, 64: 150.0, 1: 100.0, 5:
 VEIN_HU = 150.0
 
 
-def contrast_abdomen(volume: Volume, labels: np.ndarray, *, vein_mm: float = 10.0) -> Volume:
+CORTEX_MM = 5.0  # corticomedullary phase: the kidney's outer shell this thick is cortex
+CORTEX_HU, MEDULLA_HU = 190.0, 80.0  # added: cortex ~220 HU, medulla ~110 HU
+
+
+def contrast_abdomen(volume: Volume, labels: np.ndarray, *, vein_mm: float = 10.0,
+                     phase: str = "nephrographic") -> Volume:
     """A contrast-enhanced copy of an unenhanced abdominal CT with TotalSegmentator labels (same grid).
 
     Each labelled organ gets :data:`ENHANCEMENT` added; each kidney (labels 2, 3) gets a renal vein:
     the cheapest path through unlabelled soft tissue from the kidney's voxel nearest the vena cava
     (label 63) to it, ``vein_mm`` wide, enhanced by :data:`VEIN_HU` (the path a fill leaks along into
-    the vena cava, the aorta and the spine on a real contrast CT). The organs keep their real shapes,
+    the vena cava, the aorta and the spine on a real contrast CT). ``phase="corticomedullary"``: each
+    kidney's outer ``CORTEX_MM`` is cortex (about 220 HU) and its inside medulla (about 110 HU), the
+    arterial phase's contrast between them. The organs keep their real shapes,
     contacts and noise, and the labels stay their truth. ``volume.data`` (nz, ny, nx) HU; returns a
     Volume with int16 data on the same grid.
     """
@@ -119,12 +126,18 @@ def contrast_abdomen(volume: Volume, labels: np.ndarray, *, vein_mm: float = 10.
     from skimage.graph import route_through_array  # test data only: not on any command's path
 
     data = volume.data.astype(np.float32)
+    sp = tuple(float(v) for v in volume.spacing)
     for lab, hu in ENHANCEMENT.items():
-        data[labels == lab] += hu
+        organ = labels == lab
+        if phase == "corticomedullary" and lab in (2, 3):
+            cortex = organ & (ndimage.distance_transform_edt(organ, sampling=sp) <= CORTEX_MM)
+            data[cortex] += CORTEX_HU
+            data[organ & ~cortex] += MEDULLA_HU
+        else:
+            data[organ] += hu
     ivc = labels == 63
     soft = (labels == 0) & (volume.data > -50) & (volume.data < 100)
     cost = np.where(soft | ivc, 1.0, 50.0)
-    sp = tuple(float(v) for v in volume.spacing)
     dist, nearest = ndimage.distance_transform_edt(~ivc, sampling=sp, return_indices=True)
     veins = np.zeros(labels.shape, bool)
     for lab in (2, 3):
