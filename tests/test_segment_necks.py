@@ -104,3 +104,24 @@ def test_real_liver_fill_stops_at_necks():
         got = segment(vol, [seed], [(lo, hi)], options=SegmentOptions(neck_mm=neck)).segmentation.labels == 1
         dice[neck] = 2 * (got & liver).sum() / (got.sum() + liver.sum())
     assert dice[0.0] < 0.6 and dice[5.0] > 0.8, dice
+
+
+@pytest.mark.parametrize("mode", ["slice", "3d"])
+def test_automatic_width_does_not_end_a_long_organ_at_the_sweep_box(mode):
+    """A tube 420 mm long (radius 10 mm, 200 HU in -100, noise 10), seeded in its middle: the automatic
+    width's sweep looks 150 mm each way, and its region allows everything beyond, so the whole tube comes
+    back in both modes (it ended at the box, slices 60-361, when the region also bounded the no-leak case)."""
+    from ctui.engine.actions.segment import SegmentOptions, segment
+    from ctui.engine.core.volume import Volume
+
+    nz = 420
+    yy, xx = np.mgrid[:64, :64]
+    disc = (yy - 32) ** 2 + (xx - 32) ** 2 <= 100
+    data = np.full((nz, 64, 64), -100.0)
+    data[:, disc] = 200.0
+    data += np.random.default_rng(0).normal(0.0, 10.0, data.shape)
+    vol = Volume(data=data.astype(np.int16), spacing=(1.0, 1.0, 1.0), modality="CT")
+    res = segment(vol, [(32, 32, 210)], [(100.0, 300.0)], options=SegmentOptions(mode=mode))
+    obj = res.objects[0]
+    assert obj.slices == (0, nz - 1)
+    assert obj.voxels == int(disc.sum()) * nz

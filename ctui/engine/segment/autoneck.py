@@ -216,12 +216,15 @@ class Region:
     origin: tuple[int, int, int] = (0, 0, 0)
 
     def crop(self, z: int, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
-        """bool (y1 - y0, x1 - x0): the allowed pixels of slice ``z`` in that crop (False outside the box)."""
+        """bool (y1 - y0, x1 - x0): the allowed pixels of slice ``z`` in that crop. Beyond the sweep's box
+        along the slices everything is allowed, so an organ longer than the box (a tube of 420 mm from a
+        seed in its middle) goes on instead of ending at it; beside the box in-plane nothing is (the
+        liver's region reaches the box's side through the stomach: allowing beyond it, Dice 0.90 -> 0.84)."""
         fz, fy, fx = self.factors
-        out = np.zeros((y1 - y0, x1 - x0), bool)
         cz = (z - self.origin[0]) // fz
         if not 0 <= cz < self.mask.shape[0]:
-            return out
+            return np.ones((y1 - y0, x1 - x0), bool)
+        out = np.zeros((y1 - y0, x1 - x0), bool)
         ys = (np.arange(y0, y1) - self.origin[1]) // fy
         xs = (np.arange(x0, x1) - self.origin[2]) // fx
         oky = (ys >= 0) & (ys < self.mask.shape[1])
