@@ -125,3 +125,24 @@ def test_automatic_width_does_not_end_a_long_organ_at_the_sweep_box(mode):
     obj = res.objects[0]
     assert obj.slices == (0, nz - 1)
     assert obj.voxels == int(disc.sum()) * nz
+
+
+def test_region_crop_is_the_coarse_mask_at_full_resolution():
+    """Region.crop (slices and repeats) against the whole region expanded voxel by voxel, for random
+    factors, origins and crops that overlap its box or not."""
+    from ctui.engine.segment.autoneck import Region
+
+    rs = np.random.default_rng(1)
+    for _ in range(500):
+        f = tuple(int(v) for v in rs.integers(1, 4, 3))
+        m = rs.random((int(rs.integers(1, 6)), int(rs.integers(1, 12)), int(rs.integers(1, 12)))) > 0.5
+        o = tuple(int(v) for v in rs.integers(0, 10, 3))
+        region = Region(factors=f, mask=m, origin=o)
+        full = np.zeros((60, 80, 80), bool)  # the box expanded, in a canvas larger than any crop
+        big = m.repeat(f[0], 0).repeat(f[1], 1).repeat(f[2], 2)
+        full[o[0]:o[0] + big.shape[0], o[1]:o[1] + big.shape[1], o[2]:o[2] + big.shape[2]] = big
+        z, y0, x0 = (int(v) for v in rs.integers(0, 30, 3))
+        y1, x1 = y0 + int(rs.integers(1, 40)), x0 + int(rs.integers(1, 40))
+        inside = o[0] <= z < o[0] + big.shape[0]
+        want = full[z, y0:y1, x0:x1] if inside else np.ones((y1 - y0, x1 - x0), bool)
+        assert np.array_equal(region.crop(z, y0, y1, x0, x1), want)

@@ -65,13 +65,13 @@ class NeckChoice:
 
     ``width_mm``: the neck width (2 r) to cut at, 0 when no leak was found (nothing to cut);
     ``radii_mm``/``volumes``: the sweep (volume in sweep voxels joined to the seed at each
-    radius); ``depth_mm``: the local half-thickness at the seed; ``reason``: one line.
+    radius; None where it was not needed: around radii where no thick part split off); ``depth_mm``: the local half-thickness at the seed; ``reason``: one line.
     """
 
     width_mm: float
     depth_mm: float = 0.0
     radii_mm: list[float] = field(default_factory=list)
-    volumes: list[int] = field(default_factory=list)
+    volumes: list[int | None] = field(default_factory=list)
     reason: str = ""
     leak_ratio: float = 1.0  # V before / V after the chosen drop
     splits: list[int] = field(default_factory=list)  # core voxels cut off from the seed's core at each radius
@@ -140,50 +140,63 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     dt = ndimage.distance_transform_edt(cand, sampling=sp)
     depth = _local_depth(dt, cs, sp)
     radii = _radii(dt, cand, depth * max_fraction, min(sp))
-    # the unopened region is the sweep's first point: on a noisy series the in-range voxels join the organ to
-    # everything around it through one-voxel bridges, which the narrowest opening already cuts
-    vols: list[int] = [int(np.count_nonzero(cand))]
-    used: list[float] = [0.0]
-    split: list[int] = []  # core voxels (distance > r) cut off from the seed's core between two radii
-    prev_core = None
-    for r in radii:
-        got, core = _opened(cand, dt, cs, r, sp, with_core=True)
-        if got is None:
-            break
-        split.append(0 if prev_core is None else int(np.count_nonzero(prev_core & (dt > r))) - int(np.count_nonzero(core)))
-        prev_core = core
-        used.append(r)
-        vols.append(int(np.count_nonzero(got)))
-    if len(vols) < 2:
+    used, split = _sweep_cores(cand, dt, cs, radii, sp)
+    if len(used) < 2:
         return NeckChoice(0.0, depth_mm=depth, reason="the region is thinner than the narrowest width swept")
-    drops = [vols[i - 1] / vols[i] for i in range(1, len(vols))]
     # a leak going takes a piece of at least LEAK_BALLS balls of the local depth (a rim or a cap rounded off
     # by the opening is smaller), drops the volume by at least ``bar``, and leaves a thick part behind: the
     # seed's core (voxels deeper than r) loses a part that is still core (a neighbour beyond the neck), of
     # at least one ball of radius r and SPLIT_MM3. Shaving a pole or a rim only thins the core; an organ's
     # own waist splits off a small piece of core (contrast kidney, nephrographic, at 12 mm: 0.8 mL). The
     # abdomen's leaks leave 3-900 mL (liver on a 1 x 1 x 3 mm grid, at 18 mm: 4 mL, 1.2 balls).
-    ball = 4.0 / 3.0 * math.pi * depth ** 3 / float(np.prod(sp))
     vox = float(np.prod(sp))
-    big = [vols[i - 1] - vols[i] >= LEAK_BALLS * ball
-           and split[i - 1] * vox >= max(SPLIT_BALLS * 4.0 / 3.0 * math.pi * used[i] ** 3, SPLIT_MM3)
-           for i in range(1, len(vols))]
-    bar = max(jump, math.sqrt(max([d for d, b in zip(drops, big) if b], default=1.0)))
+    ball = 4.0 / 3.0 * math.pi * depth ** 3 / vox
+    splits_at = [i for i in range(1, len(used))
+                 if split[i] * vox >= max(SPLIT_BALLS * 4.0 / 3.0 * math.pi * used[i] ** 3, SPLIT_MM3)]
+    # the opened volumes are needed only around those radii (a reconstruction each: most of the sweep's cost)
+    vols: list[int | None] = [None] * len(used)
+    vols[0] = int(np.count_nonzero(cand))  # the unopened region: on a noisy series the first opening cuts bridges
+    opened: dict[int, np.ndarray] = {}
+    for i in sorted({k for i in splits_at for k in (i - 1, i)} - {0}):
+        got = _opened(cand, dt, cs, used[i], sp)
+        opened[i] = got
+        vols[i] = int(np.count_nonzero(got))
+    drops = {i: vols[i - 1] / max(vols[i], 1) for i in splits_at}
+    big = [i for i in splits_at if vols[i - 1] - vols[i] >= LEAK_BALLS * ball]
+    bar = max(jump, math.sqrt(max([drops[i] for i in big], default=1.0)))
     j, ratio = 0, 1.0
-    for i in range(1, len(vols)):
-        if big[i - 1] and drops[i - 1] >= bar:
-            j, ratio = i, drops[i - 1]
+    for i in big:
+        if drops[i] >= bar:
+            j, ratio = i, drops[i]
     if j == 0:
         # no neck to cut, but slice mode still goes no further than the region joined to the seed in 3D: its
         # seeding from the previous slice grown by a few pixels crossed gaps that the 3D fill does not
         # (contrast kidney, 120:400: 296 mL through the left renal vein's gap, 97.5 mL in 3D)
-        return NeckChoice(0.0, depth_mm=depth, radii_mm=used, volumes=vols, splits=[0] + split, region=_region(cand, box, off, f, sp, candidate.shape),
+        return NeckChoice(0.0, depth_mm=depth, radii_mm=used, volumes=vols, splits=split,
+                          region=_region(cand, box, off, f, sp, candidate.shape),
                           reason="no leak: the volume does not drop as the neck width grows")
     r = used[j]
-    kept = _opened(cand, dt, cs, r, sp)
-    region = None if kept is None else _region(kept, box, off, f, sp, candidate.shape)
-    return NeckChoice(2.0 * r, depth_mm=depth, radii_mm=used, volumes=vols, leak_ratio=ratio, region=region, splits=[0] + split,
+    return NeckChoice(2.0 * r, depth_mm=depth, radii_mm=used, volumes=vols, leak_ratio=ratio, splits=split,
+                      region=_region(opened[j], box, off, f, sp, candidate.shape),
                       reason=f"the volume drops {ratio:.1f}x between necks of {2 * used[j - 1]:.1f} and {2 * r:.1f} mm")
+
+
+def _sweep_cores(cand: np.ndarray, dt: np.ndarray, seeds: np.ndarray, radii: list[float],
+                 sp: tuple[float, float, float]) -> tuple[list[float], list[int]]:
+    """The radii the seeds' core reaches (with 0: the unopened region first) and, at each, the core voxels
+    (distance > r) cut off from the seeds' core since the previous radius (0 at the first two)."""
+    used, split = [0.0], [0]
+    prev = None
+    for r in radii:
+        core = dt > r
+        hit = _core_seeds(core, dt, seeds, r, sp)
+        if not len(hit):
+            break
+        kept = fill3d_seeds(core, hit, connectivity=8)
+        split.append(0 if prev is None else int(np.count_nonzero(prev & core)) - int(np.count_nonzero(kept)))
+        prev = kept
+        used.append(r)
+    return used, split
 
 
 def _region(kept: np.ndarray, box: tuple[slice, ...], off: np.ndarray, f: tuple[int, int, int],
@@ -225,12 +238,17 @@ class Region:
         if not 0 <= cz < self.mask.shape[0]:
             return np.ones((y1 - y0, x1 - x0), bool)
         out = np.zeros((y1 - y0, x1 - x0), bool)
-        ys = (np.arange(y0, y1) - self.origin[1]) // fy
-        xs = (np.arange(x0, x1) - self.origin[2]) // fx
-        oky = (ys >= 0) & (ys < self.mask.shape[1])
-        okx = (xs >= 0) & (xs < self.mask.shape[2])
-        sl = self.mask[cz]
-        out[np.ix_(oky, okx)] = sl[np.ix_(ys[oky], xs[okx])]
+        oy, ox = self.origin[1], self.origin[2]
+        ya, yb = max(y0, oy), min(y1, oy + self.mask.shape[1] * fy)  # the crop's rows and columns in the box
+        xa, xb = max(x0, ox), min(x1, ox + self.mask.shape[2] * fx)
+        if ya >= yb or xa >= xb:
+            return out
+        cy, cx = (ya - oy) // fy, (xa - ox) // fx
+        sub = self.mask[cz, cy:(yb - 1 - oy) // fy + 1, cx:(xb - 1 - ox) // fx + 1]
+        if fy > 1 or fx > 1:  # slices and repeats, not fancy indexing: 16 -> 2 ms a kidney (300 slices)
+            sub = np.repeat(np.repeat(sub, fy, axis=0), fx, axis=1)
+        ry, rx = ya - oy - cy * fy, xa - ox - cx * fx
+        out[ya - y0:yb - y0, xa - x0:xb - x0] = sub[ry:ry + yb - ya, rx:rx + xb - xa]
         return out
 
 
@@ -259,20 +277,18 @@ def _radii(dt: np.ndarray, cand: np.ndarray, rmax: float, step: float) -> list[f
 
 
 def _opened(cand: np.ndarray, dt: np.ndarray, seeds: np.ndarray, r: float,
-            sp: tuple[float, float, float], *, with_core: bool = False) -> Any:
-    """Voxels of ``cand`` within r of the part of {dt > r} that the seeds reach (within r of a seed); None
-    when the seeds reach no core. ``with_core``: (that, the seeds' core) or (None, None)."""
+            sp: tuple[float, float, float]) -> np.ndarray:
+    """Voxels of ``cand`` within r of the part of {dt > r} that the seeds reach (r at most a radius that
+    :func:`_sweep_cores` found the seeds' core at)."""
     core = dt > r
     hit = _core_seeds(core, dt, seeds, r, sp)
-    if not len(hit):
-        return (None, None) if with_core else None
     kept = fill3d_seeds(core, hit, connectivity=8)
     box = _grown_box(kept, r, sp)  # the reconstruction stays within r of the kept core: work on its box
     back = morph_ball(np.ascontiguousarray(kept[box]), r, sp, erode=False)
     back &= cand[box]
     got = np.zeros(cand.shape, bool)
     got[box] = fill3d_seeds(back, hit - np.array([b.start for b in box]), connectivity=8)
-    return (got, kept) if with_core else got
+    return got
 
 
 def _grown_box(m: np.ndarray, r: float, sp: tuple[float, float, float]) -> tuple[slice, slice, slice]:
