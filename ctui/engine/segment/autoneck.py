@@ -54,7 +54,7 @@ SWEEP_MM = 2.0  # the sweep's voxel size (mm; the series' own when coarser)
 BOX_MM = 150.0  # half-size of the sweep's box around the seed (mm)
 MAX_RADII = 14
 LEAK_BALLS = 0.5  # the smallest piece a leak takes, in balls of the local depth
-SPLIT_BALLS = 1.0  # the least core a leak leaves behind as it goes, in balls of the sweep's radius,
+SPLIT_BALLS = 0.5  # the least core a leak leaves behind as it goes, in balls of the sweep's radius,
 SPLIT_MM3 = 2000.0  # and in mm^3
 HOLE_MM2 = 200.0  # largest hole filled (mm^2 a slice): noise and vessels, not the renal sinus (Dice best on the kidneys)
 
@@ -146,9 +146,10 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     # a leak going takes a piece of at least LEAK_BALLS balls of the local depth (a rim or a cap rounded off
     # by the opening is smaller), drops the volume by at least ``bar``, and leaves a thick part behind: the
     # seed's core (voxels deeper than r) loses a part that is still core (a neighbour beyond the neck), of
-    # at least one ball of radius r and SPLIT_MM3. Shaving a pole or a rim only thins the core; an organ's
-    # own waist splits off a small piece of core (contrast kidney, nephrographic, at 12 mm: 0.8 mL). The
-    # abdomen's leaks leave 3-900 mL (liver on a 1 x 1 x 3 mm grid, at 18 mm: 4 mL, 1.2 balls).
+    # at least half a ball of radius r and SPLIT_MM3. Shaving a pole or a rim only thins the core; an
+    # organ's own waist splits off a small piece of core (contrast kidney, nephrographic, at 12 mm: 0.8 mL).
+    # The abdomen's leaks leave 3-900 mL (the liver's last one on a 1 x 1 x 3 mm grid, at 18 mm: 3.2 mL,
+    # 0.97 balls; with noise 4 mL, 1.2 balls).
     vox = float(np.prod(sp))
     ball = 4.0 / 3.0 * math.pi * depth ** 3 / vox
     splits_at = [i for i in range(1, len(used))
