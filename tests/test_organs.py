@@ -167,16 +167,20 @@ def test_seed_on_a_noise_pixel_starts_beside_it(abdomen):
 
 
 @pytest.mark.shared_data
-def test_fine_grid_slice_mode_is_not_stopped_at_a_pole(abdomen):
-    """The same CT resampled to 1 x 1 x 3 mm (a thin-pixel series' grid): the right kidney with its range in
-    slice mode matches 3D mode. The pixel-counting area guard stopped it at the lower pole (Dice 0.64)."""
+@pytest.mark.parametrize("organ, range_on", [("kidney_right", "3mm"), ("liver", "fine")])
+def test_fine_grid_gives_the_organ_in_both_modes(abdomen, organ, range_on):
+    """The same CT resampled to 1 x 1 x 3 mm (a thin-pixel series' grid), the organ with its 5-95th
+    percentile range on the 3 mm or on this grid: slice mode matches 3D mode. The pixel-counting area guard
+    stopped the right kidney at its pole (Dice 0.64); a split rule of a whole ball of the radius missed the
+    liver's last leak (0.87). (The right kidney with its range on this grid, -23..29 HU instead of -21..36,
+    leaks into the liver in both modes, 3.2x: benchmarks/organs.py --grid 3.)"""
     vol, labels = abdomen
     from dataclasses import replace
 
     fine = replace(vol, data=np.round(ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)).astype(np.int16),
                    spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
-    ref = np.repeat(np.repeat(labels == 2, 3, 1), 3, 2)
-    th = [tuple(np.percentile(vol.data[labels == 2], [5, 95]))]
+    ref = np.repeat(np.repeat(labels == ORGANS[organ], 3, 1), 3, 2)
+    th = [tuple(np.percentile(fine.data[ref] if range_on == "fine" else vol.data[labels == ORGANS[organ]], [5, 95]))]
     got = {}
     for mode in ("slice", "3d"):
         res = segment(fine, [deepest(ref, fine.spacing)], th, options=SegmentOptions(mode=mode))
