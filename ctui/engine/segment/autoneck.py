@@ -65,7 +65,9 @@ class NeckChoice:
 
     ``width_mm``: the neck width (2 r) to cut at, 0 when no leak was found (nothing to cut);
     ``radii_mm``/``volumes``: the sweep (volume in sweep voxels joined to the seed at each
-    radius; None where it was not needed: around radii where no thick part split off); ``depth_mm``: the local half-thickness at the seed; ``reason``: one line.
+    radius; None where it was not needed: away from the radii where a thick part split off);
+    ``splits``: the core voxels cut off at each radius; ``depth_mm``: the local half-thickness at
+    the seed; ``reason``: one line.
     """
 
     width_mm: float

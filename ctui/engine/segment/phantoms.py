@@ -103,8 +103,6 @@ def leak_case(kind: str, *, seed: int = 0) -> LeakCase:
 # (190 HU, in the 120:400 users give), aorta 250, vena cava and portal vein 150, spleen 100, liver 60.
 ENHANCEMENT = {2: 160.0, 3: 160.0, 52: 250.0, 63: 150.0, 64: 150.0, 1: 100.0, 5: 60.0}
 VEIN_HU = 150.0
-
-
 CORTEX_MM = 5.0  # corticomedullary phase: the kidney's outer shell this thick is cortex
 CORTEX_HU, MEDULLA_HU = 190.0, 80.0  # added: cortex ~220 HU, medulla ~110 HU
 
@@ -118,9 +116,9 @@ def contrast_abdomen(volume: Volume, labels: np.ndarray, *, vein_mm: float = 10.
     (label 63) to it, ``vein_mm`` wide, enhanced by :data:`VEIN_HU` (the path a fill leaks along into
     the vena cava, the aorta and the spine on a real contrast CT). ``phase="corticomedullary"``: each
     kidney's outer ``CORTEX_MM`` is cortex (about 220 HU) and its inside medulla (about 110 HU), the
-    arterial phase's contrast between them. The organs keep their real shapes,
-    contacts and noise, and the labels stay their truth. ``volume.data`` (nz, ny, nx) HU; returns a
-    Volume with int16 data on the same grid.
+    arterial phase's contrast between them. The organs keep their real shapes, contacts and noise, and
+    the labels stay their truth. ``volume.data`` (nz, ny, nx) HU; returns a Volume with int16 data on
+    the same grid.
     """
     from scipy import ndimage
     from skimage.graph import route_through_array  # test data only: not on any command's path

@@ -402,8 +402,8 @@ def _area_guard(filler: _SliceFiller, s: PropagationSettings, prop: Proposal, zz
     Off with the automatic width (``neck_rule="sweep"``): its region bounds every slice and the 3D cut at
     the end removes what joins through narrower necks. The guard counts pixels, so on a fine grid it
     stopped at a pole's section tripling from one slice to the next (right kidney of ``ct_abdomen_3mm``
-    resampled to 1 x 1 x 3 mm, its range given: Dice 0.46 with the guard, 0.88 without; on the 3 mm grid
-    it never fires)."""
+    resampled to 1 x 1 x 3 mm, its range given: Dice 0.64 with the guard, 0.92 without; 0.46 and 0.88
+    with 15 HU of noise added; on the 3 mm grid it never fires)."""
     if s.leak_factor is None or s.neck_rule == "sweep":
         return cur, "ok"
     area = int(cur[2].sum())
