@@ -5,6 +5,7 @@ until the preview has been seen, so the order is certain on any machine."""
 from __future__ import annotations
 
 import threading
+from contextlib import asynccontextmanager
 
 import numpy as np
 import pytest
@@ -46,12 +47,19 @@ def _preview_shown(app) -> bool:
     return isinstance(scr, LoadingScreen) and scr.preview is not None and bool(scr.query("#load-preview"))
 
 
-async def test_preview_then_full_series(monkeypatch):
-    path = shared("ct_head_phantom_philips")
-    go, _ = _held_load(monkeypatch)
-    app = CtuiApp(str(path))
+@asynccontextmanager
+async def _on_preview(monkeypatch):
+    """The app opening the Philips phantom, its full read held back, once the preview is shown:
+    (app, pilot, the read's release Event, its progress calls)."""
+    go, calls = _held_load(monkeypatch)
+    app = CtuiApp(str(shared("ct_head_phantom_philips")))
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_for(pilot, lambda: _preview_shown(app), what="the preview slice")
+        yield app, pilot, go, calls
+
+
+async def test_preview_then_full_series(monkeypatch):
+    async with _on_preview(monkeypatch) as (app, pilot, go, _calls):
         scr = app.screen
         pv = scr.preview
         caption = str(scr.query_one("#load-caption").render())
@@ -70,11 +78,7 @@ async def test_preview_then_full_series(monkeypatch):
 
 
 async def test_esc_cancels_the_load(monkeypatch):
-    path = shared("ct_head_phantom_philips")
-    go, calls = _held_load(monkeypatch)
-    app = CtuiApp(str(path))
-    async with app.run_test(size=(120, 40)) as pilot:
-        await wait_for(pilot, lambda: _preview_shown(app), what="the preview slice")
+    async with _on_preview(monkeypatch) as (app, pilot, go, calls):
         await pilot.press("escape")
         await pilot.pause()
         assert not app.screen.reading
