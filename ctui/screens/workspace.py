@@ -292,6 +292,9 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         if not self.viewstate.ortho_mode:
             return
         if iv.size.width < 4 or iv.size.height < 2:  # the 2x2 layout is not laid out yet: a 1x2 px render
-            self.call_after_refresh(self.request_3d)  # would show as one flat colour over the whole cell
+            # would show as one flat colour over the whole cell. Ask again on a timer: a callback after each
+            # refresh kept the message queue busy, so the layout (done when idle) never came and the app
+            # spun (a CI run hung in test_3d_cell_shows_shaded_objects_and_follows_edits)
+            self.set_timer(0.05, self.request_3d)
             return
         self.jobs.track(render_cell(self, iv.target_pixels()), replace=True)
