@@ -212,3 +212,78 @@ def test_contrast_kidney_one_seed(abdomen, organ, with_range, mode):
     assert 0.85 <= got.sum() / ref.sum() <= 1.15
     assert (obj.slices[1] - obj.slices[0] + 1) * vol.spacing[0] <= 150.0
     assert obj.warnings == []
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("mode", ["slice", "3d"])
+def test_leak_with_the_guard_off_warns(abdomen, mode):
+    """--neck 0 turns the leak guard off; the right kidney then runs into the liver and beyond (1.7-2.1 L for
+    a 107 mL kidney). The size check measures the ball that fits at the seed itself when no sweep ran."""
+    vol, labels = abdomen
+    ref = labels == 2
+    res = segment(vol, [deepest(ref, vol.spacing)], [], options=SegmentOptions(mode=mode, neck_mm=0.0))
+    obj = res.objects[0]
+    assert obj.voxels > 5 * ref.sum()  # the failure the warning is about
+    assert any("the ball that fits at the seed" in w and "neck auto" in w for w in obj.warnings), obj.warnings
+
+
+@pytest.mark.shared_data
+def test_leak_into_a_tissue_of_overlapping_values_warns(abdomen):
+    """On a noisy 1 x 1 x 3 mm grid (15 HU added) the unenhanced right kidney (~10 HU) and the liver (~46 HU)
+    meet across a contact wider than any neck, and one seed takes both (5-13x the kidney). The object's
+    median then lies far from its seed's, and the result says so; the kidney itself does not warn."""
+    vol, labels = abdomen
+    from dataclasses import replace
+
+    data = ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)
+    data += np.random.default_rng(0).normal(0.0, 15.0, data.shape).astype(np.float32)
+    fine = replace(vol, data=np.round(data).astype(np.int16), spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
+    ref = np.repeat(np.repeat(labels == 2, 3, 1), 3, 2)
+    res = segment(fine, [deepest(ref, fine.spacing)], [], options=SegmentOptions(mode="slice"))
+    obj = res.objects[0]
+    ratio = obj.voxels / ref.sum()
+    assert ratio <= 1.15 or any("neighbouring tissue" in w for w in obj.warnings), (ratio, obj.warnings)
+    kid = segment(vol, [deepest(labels == 2, vol.spacing)], [], options=SegmentOptions(mode="slice"))
+    assert not any("neighbouring tissue" in w for w in kid.objects[0].warnings)
+
+
+@pytest.mark.shared_data
+def test_aorta_one_seed_says_what_it_could_not_do():
+    """The aorta of the contrast chest-abdomen CT (a dissection: the reference holds the thrombosed false lumen,
+    ~60-120 HU beside a 170-670 HU true lumen) from one seed at its deepest point. The issue's goal, Dice 0.80,
+    is not reached (benchmarks/organs.py: 0.55 slice, 0.59 3D; a perfect fill of the in-range lumen would
+    score 0.86). What this guards: the defaults keep the lumen they reach without leaking, and say that the
+    seed's neighbourhood mixes tissues; with the reference's own 5-95th percentile range (which spans the
+    thrombus, so the fill runs into bone and the heart) the result says it leaked."""
+    d = shared("totalseg_example")
+    vol = load(d / "ct_aorta_1p5mm.nii.gz")
+    ref = open_input(d / "ct_aorta_1p5mm_aorta.nii.gz").labels > 0
+    seed = deepest(ref, vol.spacing)
+    res = segment(vol, [seed], [], options=SegmentOptions(mode="3d"))
+    got = res.segmentation.labels == res.objects[0].id
+    assert dice(got, ref) >= 0.55 and np.count_nonzero(got & ~ref) < 0.1 * got.sum()
+    assert any("not uniform" in w for w in res.objects[0].warnings)
+    rng = tuple(float(v) for v in np.percentile(vol.data[ref], [5, 95]))
+    res = segment(vol, [seed], [rng], options=SegmentOptions(mode="slice"))
+    obj = res.objects[0]
+    assert obj.voxels > 3 * ref.sum()
+    assert any("the ball that fits" in w for w in obj.warnings) and any("neighbouring tissue" in w for w in obj.warnings)
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("method", ["fill", "grow"])
+def test_background_seed_the_object_does_not_reach_warns(abdomen, method):
+    """A background seed in range but where the object never runs (the other kidney) separates nothing: the
+    result is the one without it, and says so instead of dropping the seed without a word."""
+    vol, labels = abdomen
+    seed = deepest(labels == 3, vol.spacing)
+    other = deepest(labels == 2, vol.spacing)
+    alone = segment(vol, [seed], [], options=SegmentOptions(method=method))
+    rng = alone.objects[0].range
+    assert rng[0] <= vol.data[other[2], other[1], other[0]] <= rng[1]  # in range: only reach can fail it
+    res = segment(vol, [seed], [rng], background=[other], options=SegmentOptions(method=method))
+    assert any(w.startswith(f"background seed {other[0]},{other[1]},{other[2]}: the object does not reach it")
+               for w in res.objects[0].warnings), res.objects[0].warnings
+    a = alone.segmentation.labels == alone.objects[0].id
+    b = res.segmentation.labels == res.objects[0].id
+    assert dice(a, b) > 0.99

@@ -38,7 +38,7 @@ from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
 from ctui.engine.segment.methods import METHODS, Job
 from ctui.engine.segment.propagate import PropagationSettings
-from ctui.engine.segment.seeding import RangeChoice, auto_width, denoised, seed_range, seed_voxels
+from ctui.engine.segment.seeding import RangeChoice, auto_width, denoised, seed_depth, seed_range, seed_voxels
 from ctui.engine.segment.selection import (
     Segmentation,
     fill_range,
@@ -183,6 +183,7 @@ class _Start:
     denoise: str = ""  # what was added for noise ("median 3x3"), empty when nothing
     seed: Seed | None = None  # the voxel the fill starts from: the given seed, or its in-range neighbour
     moved: str = ""  # why the fill starts beside the given seed (a noise pixel outside the range)
+    depth_mm: float = 0.0  # the region's half-thickness at the seed (the size check's ball)
 
 
 SNAP_MM = 2.0  # a seed on a noise pixel outside the range starts at the nearest in-range pixel this close
@@ -264,6 +265,7 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
                            connectivity=opts.connectivity)
     else:
         choice, width = None, float(opts.neck_mm)
+        depth = seed_depth(volume, pipe, seed, lo, hi, labels=labels, object_id=oid)
         mask = neck_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity, neck_mm=width,
                          spacing_yx=spacing_yx)
         if box is not None:
@@ -274,7 +276,8 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
         raise CtuiError(f"seed {x},{y},{z}: the fill of {int(mask.sum())} px is smaller than the minimum area "
                         f"{opts.min_area} px")
     return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width, pipe=pipe,
-                  denoise="median 3x3" if smooth is not None else "", seed=seed, moved=moved)
+                  denoise="median 3x3" if smooth is not None else "", seed=seed, moved=moved,
+                  depth_mm=choice.depth_mm if choice is not None else depth)
 
 
 def _box_mask2d(box: tuple[slice, slice, slice], shape: tuple[int, ...]) -> np.ndarray:
@@ -339,6 +342,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
             seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
         res, st = _one(volume, start.pipe, seg, oid, start.seed or seed, start, bg, opts, sub)
         res.warnings[:0] = notes + ([start.moved] if start.moved else [])
+        res.warnings = _one_per_seed(res.warnings)
         results.append(res)
         settings.append(st)
     counts = label_counts(seg.labels)
@@ -351,6 +355,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         r.cuts = [{"slice": c["slice"], "voxels": c["voxels"],
                    "mm": [round(float(v), 1) for v in geo.index_to_mm((c["slice"], c["y"], c["x"]))]} for c in r.cuts]
         r.warnings.extend(_sanity(r, start, spacing, opts))
+        r.warnings.extend(_tissue_check(volume, seg, r, start))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]
@@ -426,6 +431,13 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
     return res, s.to_dict()
 
 
+def _one_per_seed(warnings: list[str]) -> list[str]:
+    """Drop "does not reach it" for a background seed already reported outside the range (one note per seed)."""
+    out_of_range = {w.split(" (value")[0] for w in warnings if w.startswith("background seed ") and "(value" in w}
+    return [w for w in warnings if not (w.startswith("background seed ") and "does not reach it" in w
+                                        and w.split(":")[0] in out_of_range)]
+
+
 def suggest_range(volume: Any, seed: Sequence[int], *, pipeline: Pipeline | None = None) -> RangeChoice:
     """The range a seed (x, y, z) would get with no range given (its neighbourhood's median +- 2 robust sd,
     in the pipeline's domain) and the neighbourhood's histogram: what the TUI shows before a fill."""
@@ -476,14 +488,45 @@ def _sanity(r: ObjectResult, start: _Start, spacing: tuple[float, ...], opts: Se
         out.append(f"the seed's neighbourhood is not uniform (spread {rc.sd:.0f}, {rc.sd / rc.noise:.1f}x the image "
                    f"noise), so the automatic range [{rc.low:.0f}, {rc.high:.0f}] may take in several tissues: give "
                    "a range, or move the seed into the object's even part")
-    depth = start.neck.depth_mm if start.neck is not None else 0.0
+    depth = start.depth_mm
     if depth > 0:
         ball_ml = 4.0 / 3.0 * np.pi * depth ** 3 / 1000.0
         if r.volume_ml > 25 * ball_ml:
             out.append(f"the object ({r.volume_ml:.0f} mL) is {r.volume_ml / ball_ml:.0f}x the ball that fits at the "
                        f"seed ({ball_ml:.1f} mL): it probably leaked into a neighbour; add background seeds there, "
-                       "narrow the range, or draw a box")
+                       "narrow the range, or draw a box" + (", or let the leak guard find its width (neck auto)"
+                                                            if opts.neck_mm is not None else ""))
     return out
+
+
+# an object whose median lies more than this many (range width / 4) from its seed's neighbourhood median is mostly
+# another tissue (benchmarks/organs.py: the 16 kidney/spleen/liver rows and the aorta with defaults 0-0.56;
+# the right kidney run into the liver on a noisy 1 x 1 x 3 mm grid 0.90-1.17, the aorta into bone with its range 2.3)
+TISSUE_SHIFT = 0.8
+TISSUE_SLICES = 16  # the object's values are sampled on at most this many of its slices
+
+
+def _tissue_check(volume: Any, seg: Segmentation, r: ObjectResult, start: _Start) -> list[str]:
+    """A warning when the object's values are centred away from its seed's: it took in a neighbouring tissue
+    whose values overlap the range (a leak no neck separates, or a range spanning two tissues)."""
+    if r.slices is None or r.voxels == 0 or start.seed is None:
+        return []
+    lo, hi = start.rng
+    unit = (hi - lo) / 4.0
+    if unit <= 0:
+        return []
+    seed_med = start.auto_range.median if start.auto_range is not None else seed_range(volume, start.pipe, start.seed).median
+    z0, z1 = r.slices
+    vals = [start.pipe.final_slice(volume, int(z))[seg.labels[int(z)] == r.id]
+            for z in np.unique(np.linspace(z0, z1, TISSUE_SLICES).round().astype(int))]
+    obj_med = float(np.median(np.concatenate(vals)))
+    shift = (obj_med - seed_med) / unit
+    if abs(shift) <= TISSUE_SHIFT:
+        return []
+    return [f"the object's values (median {obj_med:.0f}) lie {abs(shift):.1f} quarter-ranges "
+            f"{'above' if shift > 0 else 'below'} its seed's (median {seed_med:.0f}): it probably took in a "
+            "neighbouring tissue; narrow the range towards the seed's values, add background seeds there, or "
+            "draw a box"]
 
 
 def _clean(seg: Segmentation, oid: int, opts: SegmentOptions, spacing: tuple[float, float, float]) -> None:

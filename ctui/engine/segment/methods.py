@@ -109,6 +109,7 @@ def grow(job: Job) -> None:
     bg = _grow.inside_seeds(np.array([[b[2], b[1], b[0]] for b in job.background], np.int64).reshape(-1, 3) - org,
                             region.shape)
     bg = bg[region[tuple(bg.T)]] if len(bg) else bg
+    unreached(job, box, region)
     x, y, z = job.seed
     if len(bg):
         report(job.progress, 0.8, 1.0, "edges between the seeds")
@@ -216,6 +217,17 @@ def inrange_volume(volume: Any, pipe: Any, low: float, high: float, *, slices: t
     return out
 
 
+def unreached(job: Job, box: tuple[slice, ...], region: np.ndarray) -> None:
+    """A warning for each background seed that the object's region (bool, on ``box``) does not hold: it
+    separates nothing, since the object does not run there."""
+    for b in job.background:
+        p = (b[2], b[1], b[0])
+        if not (all(box[k].start <= v < box[k].stop for k, v in enumerate(p))
+                and region[tuple(v - box[k].start for k, v in enumerate(p))]):
+            job.warnings.append(f"background seed {b[0]},{b[1]},{b[2]}: the object does not reach it, so it "
+                                "changes nothing; place background seeds in the neighbours the object runs into")
+
+
 def split_background(job: Job) -> None:
     """Cut the object at its narrowest place between the seed and the background seeds it reached."""
     seg, oid = job.seg, job.oid
@@ -226,6 +238,7 @@ def split_background(job: Job) -> None:
     region = seg.labels[box] == oid
     inside = [b for b in job.background if all(box[k].start <= v < box[k].stop for k, v in enumerate((b[2], b[1], b[0])))
               and region[tuple(np.array([b[2], b[1], b[0]]) - origin)]]
+    unreached(job, box, region)
     if not inside:
         return
     x, y, z = job.seed

@@ -9,6 +9,8 @@
   goes with it, for the TUI.
 * :func:`auto_width`: the in-range region joined to the seed inside a box around it, and
   :func:`ctui.engine.segment.autoneck.choose_width` on it.
+* :func:`seed_depth`: the half-thickness of the in-range region at the seed (what the sweep
+  calls the local depth), for the size check when the width is given.
 * :func:`seed_voxels`: the seed and its in-range neighbours (one voxel around it): a seed
   on a noise voxel still starts the object.
 * :func:`denoised`: on a noisy series a tissue whose values lie within the noise of a bound
@@ -34,10 +36,12 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from ctui.engine.core.limits import check_allocation
-from ctui.engine.segment.autoneck import NeckChoice, choose_width, sweep_box
+from ctui.engine.segment.autoneck import DEPTH_REACH_MM, NeckChoice, choose_width, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
+from ctui.engine.segment.necks import fill_holes_2d
 from ctui.engine.segment.pipeline import Pipeline, Step
 from ctui.engine.segment.selection import in_range
 
@@ -173,3 +177,26 @@ def auto_width(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, h
     if choice.region is not None:
         choice.region.origin = tuple(int(v) for v in org)  # type: ignore[assignment]
     return choice
+
+
+DEPTH_BOX_MM = 45.0  # seed_depth looks this far around the seed (deeper organs are reported as this deep)
+
+
+def seed_depth(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, high: float, *,
+               labels: np.ndarray | None = None, object_id: int = 0) -> float:
+    """The local depth (mm) at a seed (x, y, z): the largest distance to the range's edge within
+    ``DEPTH_REACH_MM`` of the seed, holes filled slice by slice, on a box of ``DEPTH_BOX_MM`` around it;
+    0 when the seed is outside the range. The sweep measures the same on its coarse grid; this is for a
+    width the user gave (``--neck MM``, ``--neck 0``), where no sweep runs."""
+    x, y, z = seed
+    sp = tuple(float(s) for s in volume.spacing)
+    box = tuple(slice(max(c - h, 0), min(c + h + 1, n)) for c, n, h in
+                zip((z, y, x), volume.data.shape, (max(2, int(math.ceil(DEPTH_BOX_MM / s))) for s in sp)))
+    inr = fill_holes_2d(box_inrange(volume, pipe, low, high, box, labels=labels, object_id=object_id))
+    local = tuple(c - b.start for c, b in zip((z, y, x), box))
+    if not inr[local]:
+        return 0.0
+    dt = ndimage.distance_transform_edt(np.pad(inr, 1), sampling=sp)[1:-1, 1:-1, 1:-1]
+    reach = [max(1, int(math.ceil(DEPTH_REACH_MM / s))) for s in sp]
+    sub = dt[tuple(slice(max(c - k, 0), c + k + 1) for c, k in zip(local, reach))]
+    return float(sub.max())
