@@ -88,7 +88,7 @@ class NeckChoice:
 SWEEP_VOXELS = 1_000_000  # the sweep's grid is made coarser until the box holds at most this many voxels
 
 
-def _resample_factors(spacing: tuple[float, float, float], shape: tuple[int, ...] | None = None) -> tuple[int, int, int]:
+def resample_factors(spacing: tuple[float, float, float], shape: tuple[int, ...] | None = None) -> tuple[int, int, int]:
     """Integer factors that bring the voxels to about SWEEP_MM (never finer than the series), coarser
     when the box would hold more than SWEEP_VOXELS voxels."""
     target = SWEEP_MM
@@ -121,7 +121,7 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     thresholds); see the module docstring for the rule. Returns :class:`NeckChoice`.
     """
     seeds = np.asarray(seeds_zyx, np.int64).reshape(-1, 3)
-    f = _resample_factors(spacing, candidate.shape)
+    f = resample_factors(spacing, candidate.shape)
     sp = tuple(float(s) * k for s, k in zip(spacing, f))
     if not candidate.any():
         return NeckChoice(0.0, reason="the seed's region is too small to sweep")

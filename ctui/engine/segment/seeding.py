@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.core.limits import check_allocation
-from ctui.engine.segment.autoneck import DEPTH_REACH_MM, NeckChoice, choose_width, sweep_box
+from ctui.engine.segment.autoneck import DEPTH_REACH_MM, NeckChoice, choose_width, coarse, resample_factors, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import fill_holes_2d
 from ctui.engine.segment.pipeline import Pipeline, Step
@@ -192,10 +192,14 @@ def seed_depth(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, h
     sp = tuple(float(s) for s in volume.spacing)
     box = tuple(slice(max(c - h, 0), min(c + h + 1, n)) for c, n, h in
                 zip((z, y, x), volume.data.shape, (max(2, int(math.ceil(DEPTH_BOX_MM / s))) for s in sp)))
-    inr = fill_holes_2d(box_inrange(volume, pipe, low, high, box, labels=labels, object_id=object_id))
+    inr = box_inrange(volume, pipe, low, high, box, labels=labels, object_id=object_id)
     local = tuple(c - b.start for c, b in zip((z, y, x), box))
     if not inr[local]:
         return 0.0
+    f = resample_factors(sp)  # on the sweep's coarse grid, as the sweep measures it (0.06 -> 0.01 s, 0.8 mm pixels)
+    inr = fill_holes_2d(coarse(inr, f))
+    sp = tuple(s * k for s, k in zip(sp, f))
+    local = tuple(c // k for c, k in zip(local, f))
     dt = ndimage.distance_transform_edt(np.pad(inr, 1), sampling=sp)[1:-1, 1:-1, 1:-1]
     reach = [max(1, int(math.ceil(DEPTH_REACH_MM / s))) for s in sp]
     sub = dt[tuple(slice(max(c - k, 0), c + k + 1) for c, k in zip(local, reach))]
