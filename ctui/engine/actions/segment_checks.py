@@ -1,0 +1,111 @@
+"""The segment action's checks: the warnings that keep a wrong result from passing silently.
+
+They read the action's ObjectResult, _Start and SegmentOptions (typed Any here: no import cycle).
+
+A result that collapsed, grew many times past the ball that fits at the seed, took in a
+neighbouring tissue (its values centre away from the seed's), a guard that turned itself off,
+a neighbourhood that mixes tissues, background seeds that cannot act. Each says what happened
+and what to try (``ctui segment`` prints them, ``--json`` lists them, the TUI notifies them).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.segment.seeding import seed_range
+
+Seed = tuple[int, int, int]
+
+
+def one_per_seed(warnings: list[str]) -> list[str]:
+    """Drop "does not reach it" for a background seed already reported outside the range (one note per seed)."""
+    out_of_range = {w.split(" (value")[0] for w in warnings if w.startswith("background seed ") and "(value" in w}
+    return [w for w in warnings if not (w.startswith("background seed ") and "does not reach it" in w
+                                        and w.split(":")[0] in out_of_range)]
+
+
+def check_background(volume: Any, fg: list[Seed], bg: list[Seed], fills: list[Any], *,
+                      same_region_ok: bool = False) -> list[str]:
+    """Refuse a background seed inside a seed's own slice object (unless the method shares a region along
+    its edges: ``grow``); warn about one that cannot act."""
+    notes = []
+    for seed, start in zip(fg, fills if not same_region_ok else []):
+        for b in bg:
+            if b[2] == seed[2] and start.mask[b[1], b[0]]:
+                raise CtuiError(f"background seed {b[0]},{b[1]},{b[2]} lies inside the region of seed "
+                                f"{seed[0]},{seed[1]},{seed[2]} on its slice (same range, no neck between): "
+                                "move it outside the object")
+    lo = min(f.rng[0] for f in fills)
+    hi = max(f.rng[1] for f in fills)
+    for b in bg:
+        vals = [float(f.pipe.final_slice(volume, b[2])[b[1], b[0]]) for f in fills]
+        if not any(f.rng[0] <= v <= f.rng[1] for f, v in zip(fills, vals)):
+            v = vals[0]
+            notes.append(f"background seed {b[0]},{b[1]},{b[2]} (value {v:g}) is outside the range "
+                         f"[{lo:g}, {hi:g}], so it cannot stop anything: place it in the neighbour the object leaks into")
+    return notes
+
+
+# an automatic range whose neighbourhood spreads more than this many times the image noise mixes tissues
+# (real CT, benchmarks/organs.py seeds: kidneys, spleen, liver 1.0-1.2x unenhanced; a kidney's cortex and
+# medulla in a contrast phase 1.8x, the aorta's lumen beside its thrombus 3.8x)
+MIXED_NEIGHBOURHOOD = 1.5
+
+
+def sanity(r: Any, start: Any, spacing: tuple[float, ...], opts: Any) -> list[str]:
+    """Warnings for results that are probably wrong: collapsed, or many times what the seed suggests."""
+    out = []
+    seed_px = int(start.mask.sum())
+    if 0 < r.voxels < max(27, seed_px // 4):
+        out.append(f"the object collapsed to {r.voxels} voxels (its seed slice had {seed_px} px): widen the range, "
+                   "move the seed deeper into the object, or check the background seeds")
+    if start.neck is not None and start.width <= 0 and not start.neck.reason.startswith("no leak"):
+        out.append(f"the leak guard is off for this object ({start.neck.reason}): check it for leaks, or force "
+                   "a neck width")
+    rc = start.auto_range
+    if rc is not None and rc.noise > 0 and rc.sd > MIXED_NEIGHBOURHOOD * rc.noise:
+        out.append(f"the seed's neighbourhood is not uniform (spread {rc.sd:.0f}, {rc.sd / rc.noise:.1f}x the image "
+                   f"noise), so the automatic range [{rc.low:.0f}, {rc.high:.0f}] may take in several tissues: give "
+                   "a range, or move the seed into the object's even part")
+    depth = start.depth_mm
+    if depth > 0:
+        ball_ml = 4.0 / 3.0 * np.pi * depth ** 3 / 1000.0
+        if r.volume_ml > 25 * ball_ml:
+            out.append(f"the object ({r.volume_ml:.0f} mL) is {r.volume_ml / ball_ml:.0f}x the ball that fits at the "
+                       f"seed ({ball_ml:.1f} mL): it probably leaked into a neighbour; add background seeds there, "
+                       "narrow the range, or draw a box" + (", or let the leak guard find its width (neck auto)"
+                                                            if opts.neck_mm is not None else ""))
+    return out
+
+
+# an object whose median lies more than this many (range width / 4) from its seed's neighbourhood median is mostly
+# another tissue (benchmarks/organs.py: the 16 kidney/spleen/liver rows and the aorta with defaults 0-0.56;
+# the right kidney run into the liver on a noisy 1 x 1 x 3 mm grid 0.90-1.17, the aorta into bone with its range 2.3)
+TISSUE_SHIFT = 0.8
+TISSUE_SLICES = 16  # the object's values are sampled on at most this many of its slices
+
+
+def tissue_check(volume: Any, seg: Any, r: Any, start: Any) -> list[str]:
+    """A warning when the object's values are centred away from its seed's: it took in a neighbouring tissue
+    whose values overlap the range (a leak no neck separates, or a range spanning two tissues)."""
+    if r.slices is None or r.voxels == 0 or start.seed is None:
+        return []
+    lo, hi = start.rng
+    unit = (hi - lo) / 4.0
+    if unit <= 0:
+        return []
+    seed_med = start.auto_range.median if start.auto_range is not None else seed_range(volume, start.pipe, start.seed).median
+    z0, z1 = r.slices
+    vals = [start.pipe.final_slice(volume, int(z))[seg.labels[int(z)] == r.id]
+            for z in np.unique(np.linspace(z0, z1, TISSUE_SLICES).round().astype(int))]
+    obj_med = float(np.median(np.concatenate(vals)))
+    shift = (obj_med - seed_med) / unit
+    if abs(shift) <= TISSUE_SHIFT:
+        return []
+    return [f"the object's values (median {obj_med:.0f}) lie {abs(shift):.1f} quarter-ranges "
+            f"{'above' if shift > 0 else 'below'} its seed's (median {seed_med:.0f}): it probably took in a "
+            "neighbouring tissue; narrow the range towards the seed's values, add background seeds there, or "
+            "draw a box"]
