@@ -364,17 +364,17 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         res.warnings = one_per_seed(res.warnings)
         results.append(res)
         settings.append(st)
-    counts = label_counts(seg.labels)
     vox_ml = float(np.prod(spacing)) / 1000.0
     geo = Geometry.of(volume)
     for r, start in zip(results, fills):
-        r.voxels = int(counts[r.id])
+        box = seg.object_bbox(r.id)  # one pass for the count and the slices (not a whole-volume histogram)
+        r.voxels = 0 if box is None else int(np.count_nonzero(seg.labels[box] == r.id))
         r.volume_ml = r.voxels * vox_ml
-        r.slices = seg.slice_range(r.id)
+        r.slices = None if box is None else (box[0].start, box[0].stop - 1)
         r.cuts = [{"slice": c["slice"], "voxels": c["voxels"],
                    "mm": [round(float(v), 1) for v in geo.index_to_mm((c["slice"], c["y"], c["x"]))]} for c in r.cuts]
         r.warnings.extend(sanity(r, start, spacing, opts))
-        r.warnings.extend(tissue_check(volume, seg, r, start))
+        r.warnings.extend(tissue_check(volume, seg, r, start, box))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]

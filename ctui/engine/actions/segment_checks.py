@@ -88,9 +88,10 @@ TISSUE_SHIFT = 0.8
 TISSUE_SLICES = 16  # the object's values are sampled on at most this many of its slices
 
 
-def tissue_check(volume: Any, seg: Any, r: Any, start: Any) -> list[str]:
+def tissue_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slice, slice] | None = None) -> list[str]:
     """A warning when the object's values are centred away from its seed's: it took in a neighbouring tissue
-    whose values overlap the range (a leak no neck separates, or a range spanning two tissues)."""
+    whose values overlap the range (a leak no neck separates, or a range spanning two tissues). ``box``: the
+    object's bounding box (z, y, x), when known."""
     if r.slices is None or r.voxels == 0 or start.seed is None:
         return []
     lo, hi = start.rng
@@ -99,7 +100,8 @@ def tissue_check(volume: Any, seg: Any, r: Any, start: Any) -> list[str]:
         return []
     seed_med = start.auto_range.median if start.auto_range is not None else seed_range(volume, start.pipe, start.seed).median
     z0, z1 = r.slices
-    vals = [start.pipe.final_slice(volume, int(z))[seg.labels[int(z)] == r.id]
+    ys, xs = (box[1], box[2]) if box is not None else (slice(None), slice(None))
+    vals = [start.pipe.final_slice(volume, int(z))[ys, xs][seg.labels[int(z), ys, xs] == r.id]
             for z in np.unique(np.linspace(z0, z1, TISSUE_SLICES).round().astype(int))]
     obj_med = float(np.median(np.concatenate(vals)))
     shift = (obj_med - seed_med) / unit
