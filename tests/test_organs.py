@@ -83,6 +83,7 @@ def test_background_seed_out_of_range_warns_and_empty_fails(abdomen):
     air = (2, 2, 5)  # outside the body, far out of a kidney's range
     res = segment(vol, [seed], [], background=[air])
     assert any("cannot stop anything" in w for w in res.objects[0].warnings)
+    assert not any("does not reach it" in w for w in res.objects[0].warnings)  # one note per seed
     with pytest.raises(CtuiError, match="outside the range"):
         segment(vol, [air], [(0.0, 50.0)])
 

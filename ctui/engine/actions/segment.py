@@ -32,7 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ctui.engine.actions.segment_checks import check_background, one_per_seed, sanity, tissue_check
+from ctui.engine.actions.segment_checks import check_background, sanity, tissue_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -361,7 +361,6 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
             seg.add_object(names[i] if names and i < len(names) else f"object {oid}", object_id=oid)
         res, st = _one(volume, start.pipe, seg, oid, start.seed or seed, start, bg, opts, sub)
         res.warnings[:0] = notes + ([start.moved] if start.moved else [])
-        res.warnings = one_per_seed(res.warnings)
         results.append(res)
         settings.append(st)
     vox_ml = float(np.prod(spacing)) / 1000.0

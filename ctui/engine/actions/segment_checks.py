@@ -20,13 +20,6 @@ from ctui.engine.segment.seeding import seed_range
 Seed = tuple[int, int, int]
 
 
-def one_per_seed(warnings: list[str]) -> list[str]:
-    """Drop "does not reach it" for a background seed already reported outside the range (one note per seed)."""
-    out_of_range = {w.split(" (value")[0] for w in warnings if w.startswith("background seed ") and "(value" in w}
-    return [w for w in warnings if not (w.startswith("background seed ") and "does not reach it" in w
-                                        and w.split(":")[0] in out_of_range)]
-
-
 def check_background(volume: Any, fg: list[Seed], bg: list[Seed], fills: list[Any], *,
                       same_region_ok: bool = False) -> list[str]:
     """Refuse a background seed inside a seed's own slice object (unless the method shares a region along

@@ -218,10 +218,14 @@ def inrange_volume(volume: Any, pipe: Any, low: float, high: float, *, slices: t
 
 
 def unreached(job: Job, box: tuple[slice, ...], region: np.ndarray) -> None:
-    """A warning for each background seed that the object's region (bool, on ``box``) does not hold: it
-    separates nothing, since the object does not run there."""
+    """A warning for each background seed in range that the object's region (bool, on ``box``) does not
+    hold: it separates nothing, since the object does not run there. (One out of range has its own note
+    from the ``segment`` action.)"""
+    s = job.settings
     for b in job.background:
         p = (b[2], b[1], b[0])
+        if not s.low <= float(job.pipe.final_slice(job.volume, b[2])[b[1], b[0]]) <= s.high:
+            continue
         if not (all(box[k].start <= v < box[k].stop for k, v in enumerate(p))
                 and region[tuple(v - box[k].start for k, v in enumerate(p))]):
             job.warnings.append(f"background seed {b[0]},{b[1]},{b[2]}: the object does not reach it, so it "
