@@ -41,6 +41,18 @@ def dice(a: np.ndarray, b: np.ndarray) -> float:
     return 2.0 * np.count_nonzero(a & b) / (np.count_nonzero(a) + np.count_nonzero(b))
 
 
+def fine_grid(vol, labels, lab: int, noise: float = 0.0):
+    """The CT resampled to 1 x 1 x 3 mm (linear; a thin-pixel series' grid), Gaussian noise of ``noise`` HU
+    added (seeded), and label ``lab`` repeated onto that grid: (volume, reference)."""
+    from dataclasses import replace
+
+    data = ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)
+    if noise:
+        data += np.random.default_rng(0).normal(0.0, noise, data.shape).astype(np.float32)
+    fine = replace(vol, data=np.round(data).astype(np.int16), spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
+    return fine, np.repeat(np.repeat(labels == lab, 3, 1), 3, 2)
+
+
 @pytest.mark.shared_data
 @pytest.mark.parametrize("mode", ["slice", "3d"])
 @pytest.mark.parametrize("with_range", [False, True])
@@ -176,11 +188,7 @@ def test_fine_grid_gives_the_organ_in_both_modes(abdomen, organ, range_on):
     liver's last leak (0.87). (The right kidney with its range on this grid, -23..29 HU instead of -21..36,
     leaks into the liver in both modes, 3.2x: benchmarks/organs.py --grid 3.)"""
     vol, labels = abdomen
-    from dataclasses import replace
-
-    fine = replace(vol, data=np.round(ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)).astype(np.int16),
-                   spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
-    ref = np.repeat(np.repeat(labels == ORGANS[organ], 3, 1), 3, 2)
+    fine, ref = fine_grid(vol, labels, ORGANS[organ])
     th = [tuple(np.percentile(fine.data[ref] if range_on == "fine" else vol.data[labels == ORGANS[organ]], [5, 95]))]
     got = {}
     for mode in ("slice", "3d"):
@@ -234,12 +242,7 @@ def test_leak_into_a_tissue_of_overlapping_values_warns(abdomen):
     meet across a contact wider than any neck, and one seed takes both (5-13x the kidney). The object's
     median then lies far from its seed's, and the result says so; the kidney itself does not warn."""
     vol, labels = abdomen
-    from dataclasses import replace
-
-    data = ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)
-    data += np.random.default_rng(0).normal(0.0, 15.0, data.shape).astype(np.float32)
-    fine = replace(vol, data=np.round(data).astype(np.int16), spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
-    ref = np.repeat(np.repeat(labels == 2, 3, 1), 3, 2)
+    fine, ref = fine_grid(vol, labels, 2, noise=15.0)
     res = segment(fine, [deepest(ref, fine.spacing)], [], options=SegmentOptions(mode="slice"))
     obj = res.objects[0]
     ratio = obj.voxels / ref.sum()
@@ -298,11 +301,7 @@ def test_seed_one_slice_off_the_deepest_point(abdomen, dz):
     kidney in-plane through a contact wider than the neck: the seed slice's object must stay inside what the
     3D sweep joined to the seed (it took the liver in: Dice 0.36-0.39, 3.7-4.2x the volume)."""
     vol, labels = abdomen
-    from dataclasses import replace
-
-    fine = replace(vol, data=np.round(ndimage.zoom(vol.data.astype(np.float32), (1, 3, 3), order=1)).astype(np.int16),
-                   spacing=(vol.spacing[0], vol.spacing[1] / 3, vol.spacing[2] / 3))
-    ref = np.repeat(np.repeat(labels == 2, 3, 1), 3, 2)
+    fine, ref = fine_grid(vol, labels, 2)
     x, y, z = deepest(ref, fine.spacing)
     for mode in ("slice", "3d"):
         res = segment(fine, [(x, y, z + dz)], [(-21.0, 36.0)], options=SegmentOptions(mode=mode))

@@ -140,7 +140,7 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     cand = np.ascontiguousarray(cand[box])  # the sweep works on the region's own box
     cs = cs - np.array([b.start for b in box])
     dt = ndimage.distance_transform_edt(cand, sampling=sp)
-    depth = _local_depth(dt, cs, sp)
+    depth = local_depth(dt, cs, sp)
     radii = _radii(dt, cand, depth * max_fraction, min(sp))
     used, split = _sweep_cores(cand, dt, cs, radii, sp)
     if len(used) < 2:
@@ -255,7 +255,7 @@ class Region:
         return out
 
 
-def _local_depth(dt: np.ndarray, seeds: np.ndarray, sp: tuple[float, float, float]) -> float:
+def local_depth(dt: np.ndarray, seeds: np.ndarray, sp: tuple[float, float, float]) -> float:
     reach = [max(1, int(math.ceil(DEPTH_REACH_MM / s))) for s in sp]
     best = 0.0
     for z, y, x in seeds[:64]:

@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.core.limits import check_allocation
-from ctui.engine.segment.autoneck import DEPTH_REACH_MM, NeckChoice, choose_width, coarse, resample_factors, sweep_box
+from ctui.engine.segment.autoneck import NeckChoice, choose_width, coarse, local_depth, resample_factors, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import fill_holes_2d
 from ctui.engine.segment.pipeline import Pipeline, Step
@@ -185,9 +185,9 @@ DEPTH_BOX_MM = 45.0  # seed_depth looks this far around the seed (deeper organs 
 def seed_depth(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, high: float, *,
                labels: np.ndarray | None = None, object_id: int = 0) -> float:
     """The local depth (mm) at a seed (x, y, z): the largest distance to the range's edge within
-    ``DEPTH_REACH_MM`` of the seed, holes filled slice by slice, on a box of ``DEPTH_BOX_MM`` around it;
-    0 when the seed is outside the range. The sweep measures the same on its coarse grid; this is for a
-    width the user gave (``--neck MM``, ``--neck 0``), where no sweep runs."""
+    ``autoneck.DEPTH_REACH_MM`` of the seed (``autoneck.local_depth``), holes filled slice by slice, on a
+    box of ``DEPTH_BOX_MM`` around it; 0 when the seed is outside the range. The sweep measures the same on
+    its coarse grid; this is for a width the user gave (``--neck MM``, ``--neck 0``), where no sweep runs."""
     x, y, z = seed
     sp = tuple(float(s) for s in volume.spacing)
     box = tuple(slice(max(c - h, 0), min(c + h + 1, n)) for c, n, h in
@@ -201,6 +201,4 @@ def seed_depth(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, h
     sp = tuple(s * k for s, k in zip(sp, f))
     local = tuple(c // k for c, k in zip(local, f))
     dt = ndimage.distance_transform_edt(np.pad(inr, 1), sampling=sp)[1:-1, 1:-1, 1:-1]
-    reach = [max(1, int(math.ceil(DEPTH_REACH_MM / s))) for s in sp]
-    sub = dt[tuple(slice(max(c - k, 0), c + k + 1) for c, k in zip(local, reach))]
-    return float(sub.max())
+    return local_depth(dt, np.array([local]), sp)  # type: ignore[arg-type]
