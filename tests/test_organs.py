@@ -307,3 +307,35 @@ def test_seed_one_slice_off_the_deepest_point(abdomen, dz):
         res = segment(fine, [(x, y, z + dz)], [(-21.0, 36.0)], options=SegmentOptions(mode=mode))
         got = res.segmentation.labels == res.objects[0].id
         assert dice(got, ref) >= 0.88 and got.sum() / ref.sum() <= 1.15, (mode, dice(got, ref), got.sum() / ref.sum())
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("organ", ["kidney_right", "kidney_left"])
+def test_medulla_wrapped_in_cortex_warns(abdomen, organ):
+    """Arterial (corticomedullary) phase: the kidney's deepest point is medulla (~110 HU) inside a cortex
+    of ~220 HU. The range from that seed gives the medulla alone, about half the kidney, and before this
+    check nothing said so. Now a warning names the brighter shell and a range that holds both; for the left
+    kidney that range gives the whole kidney (the right one's also takes the liver, enhanced to the medulla's
+    values in this copy, and the size check says so)."""
+    import re
+
+    from ctui.engine.segment.phantoms import contrast_abdomen
+
+    vol, labels = abdomen
+    cvol = contrast_abdomen(vol, labels, phase="corticomedullary")
+    ref = labels == ORGANS[organ]
+    seed = deepest(ref, vol.spacing)
+    res = segment(cvol, [seed], [], options=SegmentOptions())
+    got = res.segmentation.labels == res.objects[0].id
+    assert got.sum() / ref.sum() < 0.6  # the medulla alone
+    wrapped = [w for w in res.objects[0].warnings if "wrapped in brighter tissue" in w]
+    assert len(wrapped) == 1, res.objects[0].warnings
+    lo, hi = (float(v) for v in re.search(r"about (-?\d+):(-?\d+)", wrapped[0]).groups())
+    assert lo <= 120.0 and hi >= 200.0  # the medulla's values and the cortex's
+    again = segment(cvol, [seed], [(lo, hi)], options=SegmentOptions())
+    got = again.segmentation.labels == again.objects[0].id
+    if organ == "kidney_left":
+        assert dice(got, ref) >= 0.9, f"Dice {dice(got, ref):.3f}"
+    else:
+        assert any("ball that fits at the seed" in w for w in again.objects[0].warnings)
+    assert not any("wrapped" in w for w in again.objects[0].warnings)
