@@ -28,7 +28,9 @@ slice-mode kidney timing on a 300 x 512 x 512 series (automatic width vs --neck 
 cava; ``phantoms.contrast_abdomen``), with and without 120:400: automatic width, ``--neck 5`` and ``--neck 0``.
 ``--grid 3 [--noise 15]`` reruns the abdomen on a 1 x 1 x 3 mm grid (a thin-pixel series' grid).
 ``--seeds N`` adds N seeds at random >= 6 mm inside each organ (a user's click rather than the deepest point).
-Run: python3 benchmarks/organs.py [--speed] [--no-peers] [--grid F [--noise SD]] [--seeds N]
+``--aorta`` prints what bounds the aorta from one seed: the best Dice a fill within the automatic range could
+reach, what ctui's result lacks, and the widths at which a 3D neck cut parts the aorta from the left ventricle.
+Run: python3 benchmarks/organs.py [--speed] [--no-peers] [--grid F [--noise SD]] [--seeds N] [--aorta]
 """
 
 from __future__ import annotations
@@ -201,10 +203,13 @@ def main() -> int:
     ap.add_argument("--noise", type=float, default=0.0, metavar="SD", help="with --grid: Gaussian noise added (HU)")
     ap.add_argument("--seeds", type=int, default=0, metavar="N",
                     help="also N seeds at random >= 6 mm inside each organ (a user's click, not the deepest point)")
+    ap.add_argument("--aorta", action="store_true", help="only the bounds on the aorta from one seed")
     args = ap.parse_args()
     if not DATA.is_dir():
         print(f"skipped: {DATA} is missing")
         return 0
+    if args.aorta:
+        return aorta_limits()
     if args.contrast:
         return contrast(args.grid, args.noise, args.phase)
     print(f"{'organ':13s} {'method':22s} {'Dice':>6s} {'vol x':>6s} {'HD95':>7s} {'s':>6s}")
@@ -293,6 +298,45 @@ def contrast(grid: int = 1, noise: float = 0.0, phase: str = "nephrographic") ->
                     ext = (o.slices[1] - o.slices[0] + 1) * vol.spacing[0] if o.slices else 0.0
                     print(f"{head} {o.volume_ml:7.1f} mL (reference {ref.sum() * np.prod(vol.spacing) / 1000:.1f}) over {ext:4.0f} mm,"
                           f" Dice {dice(got, ref):.3f}, width {o.neck.get('width_mm', 0):g} mm, warnings {len(o.warnings)}")
+    return 0
+
+
+def aorta_limits() -> int:
+    """What bounds the aorta from one seed at its deepest point (a dissection: the reference holds a false lumen
+    at 20-200 HU beside the lumen at 300-550, and the ascending aorta opens into the left ventricle)."""
+    from ctui.engine.segment.autoneck import cut_3d
+    from ctui.engine.segment.fill3d import fill3d_seeds
+
+    vol = load(DATA / "ct_aorta_1p5mm.nii.gz")
+    ref = open_input(DATA / "ct_aorta_1p5mm_aorta.nii.gz").labels > 0
+    x, y, z = deepest(ref, vol.spacing)
+    res = segment(vol, [(x, y, z)], [], options=SegmentOptions())
+    lo, hi = res.objects[0].range
+    inr = (vol.data >= lo) & (vol.data <= hi)
+    print(f"aorta: seed {x},{y},{z}, automatic range [{lo:.0f}, {hi:.0f}]; reference {ref.sum()} voxels, "
+          f"{(ref & inr).sum() / ref.sum():.0%} of them in range")
+    print(f"  a perfect fill of the reference's in-range voxels: Dice {dice(ref & inr, ref):.3f}")
+    start = ndimage.label((ref & inr)[z])[0]
+    through = ref & inr
+    through[z] = start == start[y, x]  # the 3D fill crosses the seed slice only within the seed slice's object
+    lab = ndimage.label(through, structure=np.ones((3, 3, 3)))[0]
+    print(f"  the same, crossing the seed slice only inside the seed slice's object: Dice {dice(lab == lab[z, y, x], ref):.3f}")
+    for mode in ("slice", "3d"):
+        got = ctui_run(vol, (x, y, z), None, mode=mode)
+        asc = np.zeros_like(ref)
+        for k in range(70, 135):  # in-range reference pieces that do not touch the result: the ascending aorta
+            pieces, n = ndimage.label((ref & inr)[k])
+            for i in range(1, n + 1):
+                if not (got[k] & (pieces == i)).any():
+                    asc[k] |= pieces == i
+        print(f"  ctui {mode:5s}: Dice {dice(got, ref):.3f}; with the ascending aorta it lacks {dice(got | asc, ref):.3f}; "
+              f"with every in-range reference voxel {dice(got | (ref & inr), ref):.3f}")
+    cc = fill3d_seeds(inr, np.array([[z, y, x]]), connectivity=8)
+    bx, by, bz = background_seeds(vol, ref, (x, y, z), lo, hi, n=1)[0]  # the left ventricle's deepest point
+    for w in (6.0, 9.0, 12.0, 15.0, 18.0, 21.0):
+        cut, _st = cut_3d(cc, np.array([[z, y, x]]), width_mm=w, spacing=tuple(vol.spacing))
+        print(f"  3D neck cut at {w:4.1f} mm: {cut.sum() / ref.sum():5.2f}x the reference, Dice {dice(cut, ref):.3f}, "
+              f"left ventricle ({bx},{by},{bz}) {'still joined' if cut[bz, by, bx] else 'parted'}")
     return 0
 
 
