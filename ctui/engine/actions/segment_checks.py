@@ -109,7 +109,7 @@ def tissue_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, sl
 
 
 # an object whose outer face borders values above the range on more than this share of it is wrapped in a
-# brighter shell (a kidney's medulla seeded in an arterial phase: 0.74-0.98 of the face is cortex; the 16
+# brighter shell (a kidney's medulla seeded in an arterial phase: 0.65-0.98 of the face is cortex; the 16
 # kidney/spleen/liver rows of benchmarks/organs.py, random seeds in them, the aorta and the nephrographic
 # kidneys 0.00-0.15; leaks into a neighbour 0.28-0.30) ...
 WRAPPED = 0.5
@@ -137,7 +137,8 @@ def wrap_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slic
     vals = []
     for z in np.unique(np.linspace(box[0].start, box[0].stop - 1, WRAP_SLICES).round().astype(int)):
         obj = labels[z, ys, xs] == r.id
-        face = ndimage.binary_dilation(obj, structure=cross)  # the object's 6-neighbours on and beside slice z
+        # slice z's pixels that are 6-neighbours of the object: beside it in-plane, or above or below it
+        face = ndimage.binary_dilation(obj, structure=cross)
         for dz in (-1, 1):
             if 0 <= z + dz < nz:
                 face |= labels[z + dz, ys, xs] == r.id
