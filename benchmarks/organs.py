@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ctui.engine.actions.opened import open_input  # noqa: E402
-from ctui.engine.actions.segment import SegmentOptions, segment  # noqa: E402
+from ctui.engine.actions.segment import SegmentOptions, segment, suggest_range  # noqa: E402
 from ctui.engine.core.errors import CtuiError  # noqa: E402
 from ctui.engine.io.series import load  # noqa: E402
 
@@ -310,8 +310,8 @@ def aorta_limits() -> int:
     vol = load(DATA / "ct_aorta_1p5mm.nii.gz")
     ref = open_input(DATA / "ct_aorta_1p5mm_aorta.nii.gz").labels > 0
     x, y, z = deepest(ref, vol.spacing)
-    res = segment(vol, [(x, y, z)], [], options=SegmentOptions())
-    lo, hi = res.objects[0].range
+    rc = suggest_range(vol, (x, y, z))  # the range a fill from that seed uses (no median: no specks there)
+    lo, hi = rc.low, rc.high
     inr = (vol.data >= lo) & (vol.data <= hi)
     print(f"aorta: seed {x},{y},{z}, automatic range [{lo:.0f}, {hi:.0f}]; reference {ref.sum()} voxels, "
           f"{(ref & inr).sum() / ref.sum():.0%} of them in range")

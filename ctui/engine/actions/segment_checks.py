@@ -134,6 +134,7 @@ def wrap_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slic
     ys = slice(max(box[1].start - 1, 0), min(box[1].stop + 1, ny))
     xs = slice(max(box[2].start - 1, 0), min(box[2].stop + 1, nx))
     cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+    window = start.pipe.window_for(volume)  # the box's values only, not whole slices (16 -> 5 ms, 512 x 512)
     vals = []
     for z in np.unique(np.linspace(box[0].start, box[0].stop - 1, WRAP_SLICES).round().astype(int)):
         obj = labels[z, ys, xs] == r.id
@@ -143,7 +144,8 @@ def wrap_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slic
             if 0 <= z + dz < nz:
                 face |= labels[z + dz, ys, xs] == r.id
         face &= ~obj
-        vals.append(np.asarray(start.pipe.final_slice(volume, int(z))[ys, xs], np.float64)[face])
+        img = start.pipe.final_region(volume, int(z), ys.start, ys.stop, xs.start, xs.stop, window=window)
+        vals.append(np.asarray(img, np.float64)[face])
     v = np.concatenate(vals)
     above = v[v > hi]
     if not v.size or above.size < WRAPPED * v.size:
