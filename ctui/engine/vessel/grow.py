@@ -1,0 +1,189 @@
+"""Vessel growth section by section along the path.
+
+Works in the work box's own frame: positions ``q = index * spacing`` mm in (z, y, x) order
+(an orthonormal frame, so distances and angles are the patient's). The path is cut into
+sections ``step`` mm apart (default 1 mm), each a plane normal to the path carried by
+rotation-minimising frames. In each plane the image is sampled (trilinear, on a grid of half
+the smallest voxel side), and the vessel's section is the in-range region holding the path
+point or the core's pixels, holes filled. Continuity: the section may not reach further from
+the path than ``RADIUS_FACTOR`` times the lumen's inscribed radius there (the 3D distance to
+the range's border, running median over ``REF_MM`` of path, so a branch's origin or a
+neighbour touching the vessel is cut off), nor grow in area beyond ``AREA_JUMP`` times the
+median of the sections before it (it is then clipped at 1.1 times their reach). Every voxel
+takes the section of its nearest path point: it is in the vessel when it lies in that
+section's slab and region; voxels behind the first plane or beyond the last are never in it
+(the cut planes at both ends: the aortic root stops at the start, a branch at its origin).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ctui.engine.core.progress import Progress, report
+from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames
+
+RADIUS_FACTOR = 1.6  # reach of a section / inscribed radius (an ellipse of axes 1:1.6 fits)
+REF_MM = 10.0  # running-median window of the inscribed radius
+AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond which it is clipped
+EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
+EDGE_SHARE = 0.3  # ... down to lo - EDGE_SHARE * |lo|
+AREA_WINDOW = 5  # previous sections the area rule looks at
+
+
+@dataclass
+class Sections:
+    """The planes: ``s`` (n,) arc length mm; ``p``, ``t``, ``u``, ``v`` (n, 3) point, normal and
+    in-plane basis in the work frame (mm, z, y, x); ``h`` grid step mm; ``half`` the grid's half
+    side mm; ``regions`` (n, g, g) bool, the vessel in each plane (row: u, column: v);
+    ``inscribed`` (n,) the largest disc inside each region, diameter mm; ``clipped`` (n,) bool."""
+
+    s: np.ndarray
+    p: np.ndarray
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    h: float
+    half: float
+    regions: np.ndarray | None = None
+    inscribed: np.ndarray | None = None
+    clipped: np.ndarray | None = None
+
+    def grid(self, i: int) -> np.ndarray:
+        """Positions (g, g, 3) mm (work frame) of plane i's grid."""
+        a = np.arange(-self.half, self.half + 1e-9, self.h)
+        return self.p[i] + a[:, None, None] * self.u[i] + a[None, :, None] * self.v[i]
+
+
+def planes(route_q: np.ndarray, *, step_mm: float, h: float, half: float) -> Sections:
+    """Sections every ``step_mm`` along a smooth path (k, 3) mm in the work frame."""
+    total = float(arc_length(route_q)[-1])
+    s = np.arange(0.0, total + 1e-9, step_mm)
+    p, t = path_points(route_q, s)
+    u, v = rotation_minimising_frames(p, t)
+    return Sections(s, p, t, u, v, h, half)
+
+
+def _sample(vol: np.ndarray, q: np.ndarray, spacing, order: int = 1, cval: float = -1e4) -> np.ndarray:
+    from scipy import ndimage as ndi
+
+    idx = (q / np.asarray(spacing, dtype=float)).reshape(-1, 3).T
+    return ndi.map_coordinates(vol, idx, order=order, mode="constant", cval=cval).reshape(q.shape[:-1])
+
+
+def _seeded(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """The 4-connected components of ``mask`` holding a ``seeds`` pixel, holes filled."""
+    from scipy import ndimage as ndi
+
+    lab, n = ndi.label(mask)
+    if n == 0:
+        return np.zeros_like(mask)
+    keep = np.unique(lab[seeds & mask])
+    keep = keep[keep > 0]
+    return ndi.binary_fill_holes(np.isin(lab, keep)) if keep.size else np.zeros_like(mask)
+
+
+def _radius_limit(sec: Sections, dist: np.ndarray, spacing) -> np.ndarray:
+    """Per section: the reach allowed (mm) from the inscribed radius along the path."""
+    from scipy import ndimage as ndi
+
+    r = _sample(dist.astype(np.float32), sec.p, spacing, order=1, cval=0.0)
+    step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
+    r = ndi.median_filter(r, size=max(3, int(round(REF_MM / step)) | 1), mode="nearest")
+    return np.maximum(RADIUS_FACTOR * r, r + 2.0 * sec.h)
+
+
+def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core: np.ndarray, dist: np.ndarray, *,
+                  progress: Progress | None = None) -> Sections:
+    """Fill ``sec.regions``: in each plane, the pixels in one of ``ranges`` ((lo, hi) pairs;
+    the first is the lumen's, a second band is taken where joined to the lumen) connected to
+    the path point or the core's pixels, under the continuity rule (module docstring).
+    ``dist``: distance (mm) to the border of the ranges' voxels (the inscribed radius)."""
+    from scipy import ndimage as ndi
+
+    n = len(sec.s)
+    a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
+    rr = np.hypot(a[:, None], a[None, :])
+    g = len(a)
+    centre = np.zeros((g, g), bool)
+    centre[g // 2, g // 2] = True
+    limit = _radius_limit(sec, dist, spacing)
+    regions = np.zeros((n, g, g), bool)
+    clipped = np.zeros(n, bool)
+    areas: list[float] = []
+    reach: list[float] = []
+    img = np.asarray(image, dtype=np.float32)
+    for i in range(n):
+        if i % 32 == 0:
+            report(progress, i, n, "sections")
+        q = sec.grid(i)
+        val = _sample(img, q, spacing)
+        seeds = centre | (_sample(core.astype(np.float32), q, spacing, order=0, cval=0.0) > 0.5)
+        lo, hi = ranges[0]
+        lumen = (val >= lo) & (val <= hi) & (rr <= limit[i])
+        reg = _seeded(lumen, seeds)
+        if EDGE_PX and reg.any():  # the lumen's rim, blurred below the range by partial volume
+            rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & ~lumen
+            reg = reg | (rim & (rr <= limit[i]))
+        if len(ranges) > 1:
+            band = ((val >= ranges[1][0]) & (val < ranges[1][1])) & (rr <= limit[i])
+            reg = _seeded(lumen | band, reg) if reg.any() else reg
+        area = float(reg.sum()) * sec.h * sec.h
+        if len(areas) >= 3 and area > AREA_JUMP * float(np.median(areas[-AREA_WINDOW:])):
+            reg = _seeded(reg & (rr <= 1.1 * float(np.median(reach[-AREA_WINDOW:]))), seeds | reg & centre)
+            clipped[i] = True
+            area = float(reg.sum()) * sec.h * sec.h
+        regions[i] = reg
+        if reg.any():
+            areas.append(area)
+            reach.append(float(rr[reg].max()))
+    sec.regions, sec.clipped = regions, clipped
+    sec.inscribed = _inscribed(regions, sec.h)
+    return sec
+
+
+def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
+    """Diameter (mm) of the largest disc inside each plane's region."""
+    from scipy import ndimage as ndi
+
+    out = np.zeros(len(regions))
+    for i, reg in enumerate(regions):
+        if reg.any():
+            out[i] = 2.0 * float(ndi.distance_transform_edt(np.pad(reg, 1)).max()) * h
+    return out
+
+
+def rasterise(sec: Sections, shape, spacing, *, progress: Progress | None = None) -> np.ndarray:
+    """The vessel's voxels (bool ``shape``): each voxel within the grid's reach of the path
+    takes its nearest plane; it is in the vessel when within half a step of that plane (never
+    behind the first plane or beyond the last: the cut planes) and in its region."""
+    from scipy import ndimage as ndi
+    from scipy.spatial import cKDTree
+
+    sp = np.asarray(spacing, dtype=float)
+    out = np.zeros(shape, bool)
+    if sec.regions is None or not sec.regions.any():
+        return out
+    seedmask = np.zeros(shape, bool)
+    k = np.clip(np.rint(sec.p / sp).astype(int), 0, np.asarray(shape) - 1)
+    seedmask[k[:, 0], k[:, 1], k[:, 2]] = True
+    near = ndi.distance_transform_edt(~seedmask, sampling=sp) <= sec.half
+    report(progress, 0, 1, "voxels")
+    vox = np.argwhere(near)
+    q = vox * sp
+    _, j = cKDTree(sec.p).query(q)
+    d = q - sec.p[j]
+    w = np.einsum("ij,ij->i", d, sec.t[j])
+    step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
+    ok = np.abs(w) <= step + 1e-6  # interior voxels: within one step of their nearest plane
+    ok &= ~((j == 0) & (w < 0)) & ~((j == len(sec.s) - 1) & (w > 0))
+    iu = np.rint((np.einsum("ij,ij->i", d, sec.u[j]) + sec.half) / sec.h).astype(int)
+    iv = np.rint((np.einsum("ij,ij->i", d, sec.v[j]) + sec.half) / sec.h).astype(int)
+    g = sec.regions.shape[1]
+    ok &= (iu >= 0) & (iu < g) & (iv >= 0) & (iv < g)
+    hit = np.zeros(len(vox), bool)
+    hit[ok] = sec.regions[j[ok], iu[ok], iv[ok]]
+    v = vox[hit]
+    out[v[:, 0], v[:, 1], v[:, 2]] = True
+    return out

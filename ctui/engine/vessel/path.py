@@ -1,0 +1,165 @@
+"""Vessel path: lumen range, speed map, minimal path through the user's points, colliding fronts.
+
+Points are voxel indices (z, y, x) of the volume; paths are patient mm (x, y, z) like every
+path of :mod:`ctui.engine.measure.paths`. The cost of one mm of travel is
+``1 / (eps + d**2)`` with ``d`` (mm) the distance to the border of the in-range region (the
+lumen), so the route keeps to the lumen's middle and crossing out-of-range voxels costs
+``1 / eps`` per mm (a stenosis or an artefact is crossed, lung or fat is not); the route is
+found by Dijkstra on the 26-connected voxel graph with mm steps (scikit-image
+``MCP_Geometric``), the same solver as :func:`ctui.engine.measure.centreline.centreline`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.progress import Progress, report
+
+COST_EPS = 0.01  # 1 / COST_EPS: the cost of one mm outside the lumen's range
+MARGIN_MM = 50.0  # the work box: the points' box grown by this much (a route may bend out of it)
+
+
+@dataclass
+class Legs:
+    """The route as chains of voxel points (z, y, x): one chain per end, from the start through
+    its waypoints to that end (the first chain is the trunk; the others branch from it)."""
+
+    chains: list
+
+    @property
+    def pairs(self) -> list:
+        """Every leg (a, b): consecutive points of a chain."""
+        return [(c[i], c[i + 1]) for c in self.chains for i in range(len(c) - 1)]
+
+
+def crop_box(shape, points, spacing, margin_mm: float = MARGIN_MM) -> tuple[slice, slice, slice]:
+    """The work box: the points' bounding box grown by ``margin_mm``, clipped to the volume."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    m = np.ceil(margin_mm / np.asarray(spacing, dtype=float)).astype(int)
+    lo = np.maximum(np.floor(p.min(axis=0)).astype(int) - m, 0)
+    hi = np.minimum(np.ceil(p.max(axis=0)).astype(int) + m + 1, np.asarray(shape))
+    return tuple(slice(int(a), int(b)) for a, b in zip(lo, hi))
+
+
+def auto_range(image: np.ndarray, points, spacing) -> tuple[float, float]:
+    """The lumen's range (lo, hi) from the values at the user's points.
+
+    ``mu``: the median of the 3 x 3 x 3 medians at the points (the lumen); ``bg``: the median
+    of the values below ``mu`` in a box of +-15 mm around them (the wall and what surrounds
+    it); ``lo`` halfway between, ``hi`` as far above ``mu`` as ``lo`` is below it, three times
+    (contrast is uneven, calcium brighter)."""
+    img = np.asarray(image)
+    meds, around = [], []
+    r = np.maximum(np.round(15.0 / np.asarray(spacing, dtype=float)).astype(int), 2)
+    for p in np.asarray(points, dtype=int).reshape(-1, 3):
+        sl = tuple(slice(max(int(c) - 1, 0), int(c) + 2) for c in p)
+        meds.append(float(np.median(img[sl])))
+        big = tuple(slice(max(int(c) - k, 0), int(c) + k + 1) for c, k in zip(p, r))
+        around.append(img[big].ravel())
+    mu = float(np.median(meds))
+    vals = np.concatenate(around).astype(np.float64)
+    below = vals[vals < mu - 0.1 * abs(mu)]
+    bg = float(np.median(below)) if below.size else mu - abs(mu)
+    lo = 0.5 * (mu + bg)
+    return lo, mu + 3.0 * (mu - lo)
+
+
+def cost_map(image: np.ndarray, lo: float, hi: float, spacing, *, band: tuple[float, float] | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(cost per mm, in-range mask) of a (cropped) image: ``1 / (eps + d**2)``, d (mm) the
+    distance to the border of the in-range voxels (0 outside them). ``band``: a second range
+    (the lower band of ``--lumen wall``) counted as lumen for the route."""
+    from scipy import ndimage as ndi
+
+    img = np.asarray(image)
+    inr = (img >= lo) & (img <= hi)
+    if band is not None:
+        inr |= (img >= band[0]) & (img < band[1])
+    d = ndi.distance_transform_edt(inr, sampling=tuple(float(s) for s in spacing))
+    return (1.0 / (COST_EPS + d * d)).astype(np.float64), inr
+
+
+def _leg_route(cost: np.ndarray, a, b, spacing) -> np.ndarray:
+    from skimage.graph import MCP_Geometric
+
+    mcp = MCP_Geometric(cost, fully_connected=True, sampling=tuple(float(s) for s in spacing))
+    mcp.find_costs([tuple(int(v) for v in a)], [tuple(int(v) for v in b)])
+    return np.asarray(mcp.traceback(tuple(int(v) for v in b)), dtype=np.float64)
+
+
+def order_legs(start, vias, ends) -> Legs:
+    """Chains from ``start`` through the waypoints to each end. One end: the waypoints in the
+    order given. Several ends (a tree): each waypoint belongs to the end it lies nearest, in
+    order of distance from the start."""
+    start = tuple(int(v) for v in start)
+    ends = [tuple(int(v) for v in e) for e in ends]
+    if not ends:
+        raise CtuiError("a vessel needs at least one end", option="ends")
+    by_end: list[list] = [[] for _ in ends]
+    for v in vias:
+        v = tuple(int(c) for c in v)
+        k = int(np.argmin([np.linalg.norm(np.subtract(v, e)) for e in ends])) if len(ends) > 1 else 0
+        by_end[k].append(v)
+    if len(ends) > 1:
+        by_end = [sorted(b, key=lambda q: float(np.linalg.norm(np.subtract(q, start)))) for b in by_end]
+    return Legs([[start, *by_end[k], e] for k, e in enumerate(ends)])
+
+
+def minimal_path(cost: np.ndarray, legs: Legs, spacing, *, progress: Progress | None = None) -> list[np.ndarray]:
+    """Voxel routes (k, 3), (z, y, x) float indices of ``cost``, one per chain, each from the
+    start through its waypoints to its end."""
+    routes = []
+    n, done = len(legs.pairs), 0
+    for chain in legs.chains:
+        parts = []
+        for a, b in zip(chain[:-1], chain[1:]):
+            report(progress, done, n, "minimal path")
+            r = _leg_route(cost, a, b, spacing)
+            parts.append(r if not parts else r[1:])
+            done += 1
+        routes.append(np.concatenate(parts))
+    return routes
+
+
+def outside_runs(route: np.ndarray, inr: np.ndarray, spacing, min_mm: float = 5.0) -> list[dict]:
+    """Stretches of a voxel route through out-of-range voxels longer than ``min_mm``: each
+    {from, to (voxel z, y, x), length_mm, middle (voxel z, y, x: where a waypoint would help)}."""
+    k = np.rint(route).astype(int)
+    out = ~inr[k[:, 0], k[:, 1], k[:, 2]]
+    step = np.linalg.norm(np.diff(route, axis=0) * np.asarray(spacing, dtype=float), axis=1)
+    runs, i = [], 0
+    while i < len(out):
+        if not out[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < len(out) and out[j + 1]:
+            j += 1
+        length = float(step[max(i - 1, 0):j].sum())
+        if length >= min_mm:
+            runs.append({"from": k[i].tolist(), "to": k[j].tolist(), "length_mm": length,
+                         "middle": k[(i + j) // 2].tolist()})
+        i = j + 1
+    return runs
+
+
+def colliding_fronts(cost: np.ndarray, legs: Legs, inr: np.ndarray) -> np.ndarray:
+    """The core: SimpleITK's colliding fronts (the region where the fronts from a leg's two
+    ends meet, negative output) on the speed ``1 / cost``, for each leg, in range, joined.
+    The fronts start at the leg's ends, so the core does not pass behind the start or an end."""
+    import SimpleITK as sitk
+
+    speed = sitk.GetImageFromArray((1.0 / cost).astype(np.float32))
+    core = np.zeros(cost.shape, bool)
+    for a, b in legs.pairs:
+        f = sitk.CollidingFrontsImageFilter()
+        f.SetSeedPoints1([[int(a[2]), int(a[1]), int(a[0])]])
+        f.SetSeedPoints2([[int(b[2]), int(b[1]), int(b[0])]])
+        f.ApplyConnectivityOn()
+        f.StopOnTargetsOn()
+        out = sitk.GetArrayFromImage(f.Execute(speed))
+        core |= out < 0
+    return core & inr
