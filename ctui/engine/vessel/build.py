@@ -95,7 +95,7 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
     ranges = [(lo, hi)] + ([band] if band else [])
     smooth, lengths = [], []
     for b, route in enumerate(routes):
-        rq = spline_resample(route * sp, 0.5, smooth_mm=ROUTE_SMOOTH_MM)
+        rq = _between_ends(spline_resample(route * sp, 0.5, smooth_mm=ROUTE_SMOOTH_MM), route * sp)
         if b:  # a branch: from where it leaves the trunk's vessel
             rq = _leaving(rq, mask, sp)
         sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()), half=half)
@@ -111,6 +111,16 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
     report(progress, 1, 1, "done")
     return Vessel(full, np.concatenate(smooth), int(core.sum()), (float(lo), float(hi)),
                   None if band is None else (float(band[0]), float(band[1])), rows, outside, lengths)
+
+
+def _between_ends(rq: np.ndarray, route_q: np.ndarray) -> np.ndarray:
+    """The smoothed path from its point nearest the route's start to the one nearest its end,
+    with the user's points as its ends (a smoothing spline overshoots and moves its ends)."""
+    i = int(np.argmin(np.linalg.norm(rq - route_q[0], axis=1)))
+    j = int(np.argmin(np.linalg.norm(rq - route_q[-1], axis=1)))
+    if j - i < 3:
+        return rq
+    return np.concatenate([route_q[:1], rq[i + 1 : j], route_q[-1:]])
 
 
 def _leaving(rq: np.ndarray, mask: np.ndarray, sp: np.ndarray) -> np.ndarray:

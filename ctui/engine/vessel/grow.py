@@ -29,6 +29,7 @@ REF_MM = 10.0  # running-median window of the inscribed radius
 AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond which it is clipped
 EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
 EDGE_SHARE = 0.3  # ... down to lo - EDGE_SHARE * |lo|
+END_CHORD_MM = 4.0  # the end planes are normal to the path's chord over this length (a spline's end bends)
 AREA_WINDOW = 5  # previous sections the area rule looks at
 
 
@@ -61,6 +62,10 @@ def planes(route_q: np.ndarray, *, step_mm: float, h: float, half: float) -> Sec
     total = float(arc_length(route_q)[-1])
     s = np.arange(0.0, total + 1e-9, step_mm)
     p, t = path_points(route_q, s)
+    for i, j in ((0, min(END_CHORD_MM / step_mm, len(s) - 1)), (len(s) - 1, max(len(s) - 1 - END_CHORD_MM / step_mm, 0))):
+        c = p[i] - p[int(j)] if i else p[int(j)] - p[0]  # the cut planes: normal to the chord over the end's mm
+        if np.linalg.norm(c) > 0:
+            t[i] = c / np.linalg.norm(c)
     u, v = rotation_minimising_frames(p, t)
     return Sections(s, p, t, u, v, h, half)
 
@@ -154,6 +159,14 @@ def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
     return out
 
 
+def _reach(sec: Sections, i: int) -> float:
+    """How far (mm) the cut plane at section i reaches: 1.5 times its region's reach, at least 3 grid steps."""
+    a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
+    reg = sec.regions[i]
+    r = float(np.hypot(a[:, None], a[None, :])[reg].max()) if reg.any() else 0.0
+    return max(1.5 * r, 3.0 * sec.h)
+
+
 def rasterise(sec: Sections, shape, spacing, *, progress: Progress | None = None) -> np.ndarray:
     """The vessel's voxels (bool ``shape``): each voxel within the grid's reach of the path
     takes its nearest plane; it is in the vessel when within half a step of that plane (never
@@ -177,7 +190,9 @@ def rasterise(sec: Sections, shape, spacing, *, progress: Progress | None = None
     w = np.einsum("ij,ij->i", d, sec.t[j])
     step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
     ok = np.abs(w) <= step + 1e-6  # interior voxels: within one step of their nearest plane
-    ok &= ~((j == 0) & (w < 0)) & ~((j == len(sec.s) - 1) & (w > 0))
+    for e, sign in ((0, -1.0), (len(sec.s) - 1, 1.0)):  # the cut planes: nothing behind an end near it
+        de = q - sec.p[e]
+        ok &= ~((sign * (de @ sec.t[e]) > 0) & (np.linalg.norm(de, axis=1) <= _reach(sec, e)))
     iu = np.rint((np.einsum("ij,ij->i", d, sec.u[j]) + sec.half) / sec.h).astype(int)
     iv = np.rint((np.einsum("ij,ij->i", d, sec.v[j]) + sec.half) / sec.h).astype(int)
     g = sec.regions.shape[1]
