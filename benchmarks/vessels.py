@@ -121,7 +121,8 @@ def peer_core(vol, pts: dict) -> np.ndarray:
     rel = [np.subtract(p, off) for p in zyx]
     lo, hi = vpath.auto_range(img, rel, vol.spacing)
     cost, inr = vpath.cost_map(img, lo, hi, vol.spacing)
-    core = vpath.colliding_fronts(cost, vpath.order_legs(rel[0], [rel[1]], [rel[2]]), inr)
+    legs = vpath.order_legs(rel[0], [rel[1]], [rel[2]])
+    core = vpath.colliding_fronts(cost, legs, inr, vol.spacing, vpath.minimal_path(cost, legs, vol.spacing)[1])
     out = np.zeros(vol.shape, bool)
     out[box] = core
     return out

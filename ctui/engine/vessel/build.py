@@ -15,7 +15,8 @@ from ctui.engine.vessel import grow, path
 LUMENS = {"contrast": "the bright lumen only (the range at the points)",
           "wall": "the lumen and a lower band joined to it inside the wall (a dissection's false lumen, thrombus)"}
 SECTION_STEP_MM = 1.0  # distance between growth planes
-ROUTE_SMOOTH_MM = 1.0  # spline smoothing of the voxel route
+ROUTE_SMOOTH_MM = 1.0
+RECENTRE = 0  # growth passes on the path moved onto its sections' centroids  # spline smoothing of the voxel route
 
 
 @dataclass
@@ -79,17 +80,16 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
     cost, inr = path.cost_map(img, lo, hi, sp, band=band)
     legs = path.order_legs(np.subtract(start, off), [np.subtract(v, off) for v in vias_],
                            [np.subtract(e, off) for e in ends_])
-    routes = path.minimal_path(cost, legs, sp, progress=scaled(progress, 0.05, 0.35))
+    routes, leg_routes = path.minimal_path(cost, legs, sp, progress=scaled(progress, 0.05, 0.35))
     outside = [r for route in routes for r in path.outside_runs(route, inr, sp)]
     for r in outside:
         for k in ("from", "to", "middle"):
             r[k] = (np.asarray(r[k]) + off).tolist()
     report(progress, 0.35, 1, "colliding fronts")
-    core = path.colliding_fronts(cost, legs, inr)
+    core = path.colliding_fronts(cost, legs, inr, sp, leg_routes)
     from scipy import ndimage as ndi
 
     dist = ndi.distance_transform_edt(inr, sampling=tuple(sp))
-    half = float(min(60.0, max(15.0, 2.0 * float(dist.max()))))
     mask = np.zeros(img.shape, bool)
     rows: list = []
     ranges = [(lo, hi)] + ([band] if band else [])
@@ -98,10 +98,13 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
         rq = _between_ends(spline_resample(route * sp, 0.5, smooth_mm=ROUTE_SMOOTH_MM), route * sp)
         if b:  # a branch: from where it leaves the trunk's vessel
             rq = _leaving(rq, mask, sp)
-        sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()), half=half)
-        sec = grow.grow_sections(sec, img, sp, ranges, core, dist,
-                                 progress=scaled(progress, 0.45 + 0.45 * b / len(routes),
-                                                 0.45 + 0.45 * (b + 1) / len(routes)))
+        for k in range(1 + RECENTRE):
+            if k:
+                rq = grow.recentred(sec)
+            sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()))
+            sec = grow.grow_sections(sec, img, sp, ranges, core, dist,
+                                     progress=scaled(progress, 0.45 + 0.45 * (b + k / (1 + RECENTRE)) / len(routes),
+                                                     0.45 + 0.45 * (b + (k + 1) / (1 + RECENTRE)) / len(routes)))
         mask |= grow.rasterise(sec, img.shape, sp)
         rows += _rows(sec, branch=b)
         smooth.append(rq / sp + off)

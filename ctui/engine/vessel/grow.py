@@ -8,8 +8,8 @@ the smallest voxel side), and the vessel's section is the in-range region holdin
 point or the core's pixels, holes filled. Continuity: the section may not reach further from
 the path than ``RADIUS_FACTOR`` times the lumen's inscribed radius there (the 3D distance to
 the range's border, running median over ``REF_MM`` of path, so a branch's origin or a
-neighbour touching the vessel is cut off), nor grow in area beyond ``AREA_JUMP`` times the
-median of the sections before it (it is then clipped at 1.1 times their reach). Every voxel
+neighbour touching the vessel is cut off), nor exceed ``AREA_JUMP`` times the running median of
+the areas around it (it is then cut back to 1.1 times the running median reach). Every voxel
 takes the section of its nearest path point: it is in the vessel when it lies in that
 section's slab and region; voxels behind the first plane or beyond the last are never in it
 (the cut planes at both ends: the aortic root stops at the start, a branch at its origin).
@@ -30,7 +30,7 @@ AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond whi
 EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
 EDGE_SHARE = 0.3  # ... down to lo - EDGE_SHARE * |lo|
 END_CHORD_MM = 4.0  # the end planes are normal to the path's chord over this length (a spline's end bends)
-AREA_WINDOW = 5  # previous sections the area rule looks at
+AREA_WINDOW_MM = 31.0  # the area rule's running median window (path mm)
 
 
 @dataclass
@@ -57,8 +57,9 @@ class Sections:
         return self.p[i] + a[:, None, None] * self.u[i] + a[None, :, None] * self.v[i]
 
 
-def planes(route_q: np.ndarray, *, step_mm: float, h: float, half: float) -> Sections:
-    """Sections every ``step_mm`` along a smooth path (k, 3) mm in the work frame."""
+def planes(route_q: np.ndarray, *, step_mm: float, h: float, half: float = 0.0) -> Sections:
+    """Sections every ``step_mm`` along a smooth path (k, 3) mm in the work frame (``half``:
+    the grid's half side; 0: set by :func:`grow_sections` from the reach allowed)."""
     total = float(arc_length(route_q)[-1])
     s = np.arange(0.0, total + 1e-9, step_mm)
     p, t = path_points(route_q, s)
@@ -75,6 +76,14 @@ def _sample(vol: np.ndarray, q: np.ndarray, spacing, order: int = 1, cval: float
 
     idx = (q / np.asarray(spacing, dtype=float)).reshape(-1, 3).T
     return ndi.map_coordinates(vol, idx, order=order, mode="constant", cval=cval).reshape(q.shape[:-1])
+
+
+def _nearest(vol: np.ndarray, q: np.ndarray, spacing) -> np.ndarray:
+    """``vol`` (bool) at the voxels nearest positions ``q`` (..., 3) mm; False outside."""
+    k = np.rint(q / np.asarray(spacing, dtype=float)).astype(int)
+    ok = np.all((k >= 0) & (k < np.asarray(vol.shape)), axis=-1)
+    k = np.where(ok[..., None], k, 0)
+    return vol[k[..., 0], k[..., 1], k[..., 2]] & ok
 
 
 def _seeded(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
@@ -108,23 +117,23 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
     from scipy import ndimage as ndi
 
     n = len(sec.s)
+    limit = _radius_limit(sec, dist, spacing)
+    if not sec.half:
+        sec.half = float(limit.max()) + 2.0 * sec.h
     a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
     rr = np.hypot(a[:, None], a[None, :])
     g = len(a)
     centre = np.zeros((g, g), bool)
     centre[g // 2, g // 2] = True
-    limit = _radius_limit(sec, dist, spacing)
     regions = np.zeros((n, g, g), bool)
-    clipped = np.zeros(n, bool)
-    areas: list[float] = []
-    reach: list[float] = []
+    seeds_all = np.zeros((n, g, g), bool)
     img = np.asarray(image, dtype=np.float32)
     for i in range(n):
         if i % 32 == 0:
             report(progress, i, n, "sections")
         q = sec.grid(i)
         val = _sample(img, q, spacing)
-        seeds = centre | (_sample(core.astype(np.float32), q, spacing, order=0, cval=0.0) > 0.5)
+        seeds = centre | _nearest(core, q, spacing)
         lo, hi = ranges[0]
         lumen = (val >= lo) & (val <= hi) & (rr <= limit[i])
         reg = _seeded(lumen, seeds)
@@ -134,29 +143,64 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
         if len(ranges) > 1:
             band = ((val >= ranges[1][0]) & (val < ranges[1][1])) & (rr <= limit[i])
             reg = _seeded(lumen | band, reg) if reg.any() else reg
-        area = float(reg.sum()) * sec.h * sec.h
-        if len(areas) >= 3 and area > AREA_JUMP * float(np.median(areas[-AREA_WINDOW:])):
-            reg = _seeded(reg & (rr <= 1.1 * float(np.median(reach[-AREA_WINDOW:]))), seeds | reg & centre)
-            clipped[i] = True
-            area = float(reg.sum()) * sec.h * sec.h
         regions[i] = reg
-        if reg.any():
-            areas.append(area)
-            reach.append(float(rr[reg].max()))
-    sec.regions, sec.clipped = regions, clipped
+        seeds_all[i] = seeds
+    sec.regions, sec.clipped = regions, _continuity(regions, seeds_all, rr, sec)
     sec.inscribed = _inscribed(regions, sec.h)
     return sec
 
 
-def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
-    """Diameter (mm) of the largest disc inside each plane's region."""
+def _continuity(regions: np.ndarray, seeds: np.ndarray, rr: np.ndarray, sec: Sections) -> np.ndarray:
+    """The area rule: a section over ``AREA_JUMP`` times the running median of the areas (over
+    ``AREA_WINDOW_MM`` of path: a branch's origin or a leak is a bump shorter than that, a real
+    widening is not) is cut back to 1.1 times the running median reach. Returns the sections cut."""
     from scipy import ndimage as ndi
 
-    out = np.zeros(len(regions))
-    for i, reg in enumerate(regions):
-        if reg.any():
-            out[i] = 2.0 * float(ndi.distance_transform_edt(np.pad(reg, 1)).max()) * h
-    return out
+    area = regions.reshape(len(regions), -1).sum(axis=1).astype(float)
+    reach = np.array([float(rr[r].max()) if r.any() else 0.0 for r in regions])
+    step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
+    size = max(3, int(round(AREA_WINDOW_MM / step)) | 1)
+    ref_a = ndi.median_filter(area, size=size, mode="nearest")
+    ref_r = ndi.median_filter(reach, size=size, mode="nearest")
+    cut = (area > AREA_JUMP * ref_a) & (ref_a > 0)
+    for i in np.nonzero(cut)[0]:
+        regions[i] = _seeded(regions[i] & (rr <= 1.1 * ref_r[i]), seeds[i])
+    return cut
+
+
+def recentred(sec: Sections, *, smooth_mm: float = 1.0, step_mm: float = 0.5) -> np.ndarray:
+    """The path (k, 3) mm moved onto the centroids of its sections' regions (clipped or empty
+    sections move as their neighbours), smoothed: a minimal path cuts the inside of bends; its
+    sections' centroids do not (as :func:`ctui.engine.measure.centreline.recentre_path`)."""
+    from ctui.engine.measure.paths import spline_resample
+
+    a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
+    n = len(sec.s)
+    move = np.zeros((n, 3))
+    good = np.zeros(n, bool)
+    for i, reg in enumerate(sec.regions):
+        if reg.any() and not sec.clipped[i]:
+            iu, iv = np.nonzero(reg)
+            move[i] = a[iu].mean() * sec.u[i] + a[iv].mean() * sec.v[i]
+            good[i] = True
+    if good.sum() < 2:
+        return sec.p.copy()
+    for k in range(3):
+        move[~good, k] = np.interp(sec.s[~good], sec.s[good], move[good, k])
+    return spline_resample(sec.p + move, step_mm, smooth_mm=smooth_mm)
+
+
+def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
+    """Diameter (mm) of the largest disc inside each plane's region (one distance transform of
+    the stack, the planes too far apart along it to see each other)."""
+    from scipy import ndimage as ndi
+
+    if not regions.any():
+        return np.zeros(len(regions))
+    padded = np.pad(regions, ((1, 1), (1, 1), (1, 1)))
+    far = 4.0 * regions.shape[1] * h
+    d = ndi.distance_transform_edt(padded, sampling=(far, h, h))[1:-1]
+    return 2.0 * d.reshape(len(regions), -1).max(axis=1)
 
 
 def _reach(sec: Sections, i: int) -> float:

@@ -19,6 +19,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
 
 COST_EPS = 0.01  # 1 / COST_EPS: the cost of one mm outside the lumen's range
+CORE_MARGIN_MM = 20.0  # the colliding fronts' box around each leg's route
 MARGIN_MM = 50.0  # the work box: the points' box grown by this much (a route may bend out of it)
 
 
@@ -108,20 +109,35 @@ def order_legs(start, vias, ends) -> Legs:
     return Legs([[start, *by_end[k], e] for k, e in enumerate(ends)])
 
 
-def minimal_path(cost: np.ndarray, legs: Legs, spacing, *, progress: Progress | None = None) -> list[np.ndarray]:
-    """Voxel routes (k, 3), (z, y, x) float indices of ``cost``, one per chain, each from the
-    start through its waypoints to its end."""
-    routes = []
-    n, done = len(legs.pairs), 0
+def _spur(before: np.ndarray, after: np.ndarray, within: float = 1.5) -> int:
+    """Points the route runs out to a waypoint and back along the same voxels: how many of the
+    last points of ``before`` lie within ``within`` voxels of the first points of ``after``."""
+    k = 0
+    n = min(len(before), len(after)) - 2
+    while k < n and np.linalg.norm(before[-2 - k] - after[k + 1]) <= within:
+        k += 1
+    return k
+
+
+def minimal_path(cost: np.ndarray, legs: Legs, spacing, *, progress: Progress | None = None
+                 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(chain routes, leg routes): voxel routes (k, 3), (z, y, x) float indices of ``cost``, one
+    per chain, from the start through its waypoints to its end; and one per leg (``legs.pairs``)."""
+    routes, leg_routes = [], []
+    n = len(legs.pairs)
     for chain in legs.chains:
         parts = []
         for a, b in zip(chain[:-1], chain[1:]):
-            report(progress, done, n, "minimal path")
+            report(progress, len(leg_routes), n, "minimal path")
             r = _leg_route(cost, a, b, spacing)
+            leg_routes.append(r)
+            if parts:  # a waypoint off the lumen's middle: the route goes out to it and back; cut the spur
+                k = _spur(parts[-1], r)
+                parts[-1] = parts[-1][: len(parts[-1]) - k]
+                r = r[k:]
             parts.append(r if not parts else r[1:])
-            done += 1
         routes.append(np.concatenate(parts))
-    return routes
+    return routes, leg_routes
 
 
 def outside_runs(route: np.ndarray, inr: np.ndarray, spacing, min_mm: float = 5.0) -> list[dict]:
@@ -146,20 +162,24 @@ def outside_runs(route: np.ndarray, inr: np.ndarray, spacing, min_mm: float = 5.
     return runs
 
 
-def colliding_fronts(cost: np.ndarray, legs: Legs, inr: np.ndarray) -> np.ndarray:
+def colliding_fronts(cost: np.ndarray, legs: Legs, inr: np.ndarray, spacing=(1.0, 1.0, 1.0), routes=None
+                     ) -> np.ndarray:
     """The core: SimpleITK's colliding fronts (the region where the fronts from a leg's two
     ends meet, negative output) on the speed ``1 / cost``, for each leg, in range, joined.
-    The fronts start at the leg's ends, so the core does not pass behind the start or an end."""
+    The fronts start at the leg's ends, so the core does not pass behind the start or an end.
+    ``routes``: each leg's voxel route; the fronts run in its box grown by ``CORE_MARGIN_MM``."""
     import SimpleITK as sitk
 
-    speed = sitk.GetImageFromArray((1.0 / cost).astype(np.float32))
     core = np.zeros(cost.shape, bool)
-    for a, b in legs.pairs:
+    for k, (a, b) in enumerate(legs.pairs):
+        r = routes[k] if routes is not None else np.array([a, b], dtype=float)
+        box = crop_box(cost.shape, r, spacing, margin_mm=CORE_MARGIN_MM)
+        lo = np.array([s.start for s in box])
+        speed = sitk.GetImageFromArray((1.0 / cost[box]).astype(np.float32))
         f = sitk.CollidingFrontsImageFilter()
-        f.SetSeedPoints1([[int(a[2]), int(a[1]), int(a[0])]])
-        f.SetSeedPoints2([[int(b[2]), int(b[1]), int(b[0])]])
+        f.SetSeedPoints1([[int(c) for c in np.subtract(a, lo)[::-1]]])
+        f.SetSeedPoints2([[int(c) for c in np.subtract(b, lo)[::-1]]])
         f.ApplyConnectivityOn()
         f.StopOnTargetsOn()
-        out = sitk.GetArrayFromImage(f.Execute(speed))
-        core |= out < 0
+        core[box] |= sitk.GetArrayFromImage(f.Execute(speed)) < 0
     return core & inr
