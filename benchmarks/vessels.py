@@ -7,7 +7,7 @@ length from its section lengths: 6.8 + 4.4 + 26.0 cm = 372 mm).
 
 Points (voxels X,Y,Z = column, row, slice from 0, as ``ctui segment --seed``), from the masks:
 start: the centroid of the aorta 3-6 mm above the plane of ``annulus_proper`` (its principal
-plane); end: the centroid of the aorta in its last 3 slices; arch waypoint: the centroid of the
+plane); end: the centroid of the true lumen in the aorta's last 3 slices (the bright lumen a user clicks); arch waypoint: the centroid of the
 aorta in its top 5 slices. They are printed so a user can reproduce each row with ``ctui vessel``.
 
 Rows: ctui vessel --lumen contrast without and with the waypoint, --lumen wall with it; the peers
@@ -68,8 +68,9 @@ def annulus_plane(annulus: np.ndarray, aorta: np.ndarray, spacing) -> tuple[np.n
     return c, n
 
 
-def points(aorta: np.ndarray, annulus: np.ndarray, spacing) -> dict:
-    """start, end, via as voxels (x, y, z) from the masks (module docstring)."""
+def points(aorta: np.ndarray, annulus: np.ndarray, spacing, lumen: np.ndarray) -> dict:
+    """start, end, via as voxels (x, y, z) from the masks (module docstring); the end in ``lumen``
+    (the bright true lumen, where a user clicks)."""
     sp = np.asarray(spacing, dtype=float)
     c, n = annulus_plane(annulus, aorta, sp)
     q = np.argwhere(aorta) * sp
@@ -85,7 +86,7 @@ def points(aorta: np.ndarray, annulus: np.ndarray, spacing) -> dict:
         return int(k[2]), int(k[1]), int(k[0])
 
     top = np.argwhere(aorta[zs[-1] - 4: zs[-1] + 1]).mean(axis=0) + [zs[-1] - 4, 0, 0]
-    bottom = np.argwhere(aorta[zs[0]: zs[0] + 3]).mean(axis=0) + [zs[0], 0, 0]
+    bottom = np.argwhere(lumen[zs[0]: zs[0] + 3]).mean(axis=0) + [zs[0], 0, 0]
     return {"start": centroid(q[sel].mean(axis=0) / sp), "end": centroid(bottom), "via": centroid(top)}
 
 
@@ -120,9 +121,9 @@ def peer_core(vol, pts: dict) -> np.ndarray:
     img = np.asarray(vol.data[box], dtype=np.float32)
     rel = [np.subtract(p, off) for p in zyx]
     lo, hi = vpath.auto_range(img, rel, vol.spacing)
-    cost, inr = vpath.cost_map(img, lo, hi, vol.spacing)
+    dist, inr = vpath.lumen_distance(img, lo, hi, vol.spacing)
     legs = vpath.order_legs(rel[0], [rel[1]], [rel[2]])
-    core = vpath.colliding_fronts(cost, legs, inr, vol.spacing, vpath.minimal_path(cost, legs, vol.spacing)[1])
+    core = vpath.colliding_fronts(dist, legs, inr, vol.spacing, vpath.minimal_path(dist, legs, vol.spacing)[1])
     out = np.zeros(vol.shape, bool)
     out[box] = core
     return out
@@ -203,6 +204,7 @@ def main() -> int:
     ap.add_argument("--no-peers", action="store_true", help="ctui's rows only")
     args = ap.parse_args()
     path = DATA / "ct_aorta_1p5mm.nii.gz"
+    shown = "../shared/data/totalseg_example/ct_aorta_1p5mm.nii.gz"
     if not path.exists():
         print(f"skipped: {path} not found")
         return 0
@@ -210,7 +212,7 @@ def main() -> int:
     aorta = mask_of("ct_aorta_1p5mm_aorta.nii.gz")
     refs = {"aorta": aorta, "true": mask_of("aorta_parts/aorta_true_lumen.nii.gz"),
             "plane": annulus_plane(mask_of("aorta_parts/annulus_proper.nii.gz"), aorta, vol.spacing)}
-    pts = points(aorta, mask_of("aorta_parts/annulus_proper.nii.gz"), vol.spacing)
+    pts = points(aorta, mask_of("aorta_parts/annulus_proper.nii.gz"), vol.spacing, refs["true"])
     xyz = {k: ",".join(map(str, v)) for k, v in pts.items()}
     print(f"points (voxel X,Y,Z): start {xyz['start']}  via {xyz['via']}  end {xyz['end']}")
     print(f"goals: path >= 95% inside, {0.95 * REPORT_LENGTH_MM:.0f}-{1.05 * REPORT_LENGTH_MM:.0f} mm; 0 mL beyond "
@@ -225,7 +227,7 @@ def main() -> int:
         res = vessel(vol, start=pts["start"], ends=[pts["end"]], vias=vias, lumen=lumen)
         row(name, res.mask, time.perf_counter() - t, refs, path_mm=res.path_mm, vol=vol)
         best = res if vias and lumen == "wall" else best
-        cmd = f"  ctui vessel {path} --start {xyz['start']} --end {xyz['end']}"
+        cmd = f"  ctui vessel {shown} --start {xyz['start']} --end {xyz['end']}"
         print(cmd + (f" --via {xyz['via']}" if vias else "") + f" --lumen {lumen}")
     if not args.no_peers:
         t = time.perf_counter()
@@ -237,7 +239,7 @@ def main() -> int:
         t = time.perf_counter()
         row("sitk geodesic active contour", peer_levelset(vol, best.path_mm), time.perf_counter() - t, refs, vol=vol)
     landmarks(vol, best)
-    branches(vol, aorta, str(path))
+    branches(vol, aorta, shown)
     return 0
 
 

@@ -118,3 +118,22 @@ def test_aorta_from_root_to_distal_end():
     n = n if (np.argwhere(true[90:100]).mean(axis=0) * 1.5 + [135, 0, 0] - c) @ n > 0 else -n
     q = np.argwhere(res.mask) * 1.5
     assert not (((q - c) @ n < 0) & (np.linalg.norm(q - c, axis=1) < 40)).any()  # nothing in the ventricle
+
+
+def test_wall_takes_the_thrombus_inside_the_wall_not_the_fat():
+    """A tube whose outer half is a grey thrombus (60 HU) in fat (-100 HU): --lumen wall takes the
+    whole tube, contrast only its bright lumen."""
+    from scipy import ndimage as ndi
+
+    vol, _, _ = u_bend(blob=False, noise=0.0)
+    vol.data[:] = np.where(vol.data > 200, 60.0, -100.0)  # the tube's whole section: thrombus, in fat
+
+    lumen = ndi.binary_erosion(vol.data > 0, iterations=2)  # the bright lumen: the inner 2 mm less
+    vol.data[lumen] = 400.0
+    tube = vol.data > 0
+    truth_w = tube & (np.indices(tube.shape)[0] >= Z0)
+    wall = vessel(vol, start=(30, 20, Z0), ends=[(30, 44, Z0)], lumen="wall")
+    contrast = vessel(vol, start=(30, 20, Z0), ends=[(30, 44, Z0)])
+    assert dice(wall.mask, truth_w) >= 0.85
+    assert wall.voxels > 1.5 * contrast.voxels
+    assert not (wall.mask & ~ndi.binary_dilation(tube, iterations=2)).any()  # no fat taken

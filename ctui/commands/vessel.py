@@ -34,8 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--range", default="auto", metavar="auto|LO:HI",
                    help="the lumen's values (default: from the values at the points)")
     p.add_argument("--lumen", choices=LUMEN_CHOICES, default="contrast",
-                   help="contrast: the bright lumen; wall: also the lower band joined to it inside the wall "
-                        "(a dissection's false lumen, mural thrombus)")
+                   help="contrast: the bright lumen; wall: also what lies inside the vessel's wall, up to the "
+                        "fat around it (a dissection's false lumen, mural thrombus)")
     p.add_argument("--project", metavar="OUT.ctui", help="write a project with the vessel as object 1")
     p.add_argument("--mask", metavar="OUT", help="write the label map (.nii, .nii.gz, .nrrd, .seg.nrrd)")
     p.add_argument("--csv", metavar="OUT.csv", help="write the sections along the path")

@@ -26,6 +26,7 @@ from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.progress import Progress
 from ctui.engine.measure.report import plot_sections, write_sections_csv
 from ctui.engine.vessel.build import LUMENS, SECTION_STEP_MM, extract, segment_maxima  # noqa: F401 (LUMENS: the CLI's choices)
+from ctui.engine.vessel.wall import CT_FLOOR
 
 VESSEL_KEYS = ("branch", "s_mm", "area_mm2", "eq_diameter_mm", "min_diameter_mm", "max_diameter_mm",
                "inscribed_diameter_mm")
@@ -35,8 +36,8 @@ VESSEL_KEYS = ("branch", "s_mm", "area_mm2", "eq_diameter_mm", "min_diameter_mm"
 class VesselResult:
     """One vessel (JSON of ``ctui vessel --json`` via :meth:`to_dict`).
 
-    start, ends, vias: the points, voxel (x, y, z); lumen; range (lo, hi) and band (lo, hi) or
-    None, in the image's units (HU for CT); path_length_mm per branch (the first: start to the
+    start, ends, vias: the points, voxel (x, y, z); lumen; range (lo, hi) and, with "wall",
+    band (floor, lo) (the values inside the wall), in the image's units (HU for CT); path_length_mm per branch (the first: start to the
     first end); voxels, volume_ml; core_voxels (colliding fronts); sections: one row per plane
     (VESSEL_KEYS, mm / mm2); maxima: the largest max diameter per 50 mm and where (arc length);
     warnings (the path out of range for more than 5 mm, where a waypoint would help); seconds.
@@ -80,17 +81,19 @@ def vessel(volume: Any, *, start: Sequence[int], ends: Sequence[Sequence[int]], 
     """Extract one vessel from ``volume`` (a :class:`~ctui.engine.core.volume.Volume`).
 
     ``start``, each of ``ends`` and ``vias``: voxels (x, y, z); ``value_range``: the lumen's
-    (lo, hi), None = from the values at the points; ``lumen``: "contrast" or "wall" (also a
-    lower band joined to the lumen: a dissection's false lumen); ``step_mm``: distance between
+    (lo, hi), None = from the values at the points; ``lumen``: "contrast" or "wall" (also what
+    lies inside the vessel's wall: a dissection's false lumen, a thrombus; bounded by the fat
+    around it, under -30 HU on CT); ``step_mm``: distance between
     the growth planes. Takes about a second per 100 mm of an aorta; ``progress`` may cancel."""
     t0 = time.perf_counter()
     if not ends:
         raise CtuiError("a vessel needs at least one end", option="ends")
     if not step_mm > 0:
         raise CtuiError(f"step must be positive, got {step_mm}", option="step_mm")
+    floor = CT_FLOOR if str(getattr(volume, "modality", "")).upper() == "CT" else None
     v = extract(np.asarray(volume.data), volume.spacing, start=_zyx(start, "start"),
                 ends=[_zyx(e, "ends") for e in ends], vias=[_zyx(w, "vias") for w in vias],
-                value_range=value_range, lumen=lumen, step_mm=step_mm, progress=progress)
+                value_range=value_range, lumen=lumen, floor=floor, step_mm=step_mm, progress=progress)
     warnings = [f"the path runs {r['length_mm']:.0f} mm outside the lumen's range between voxels "
                 f"{_xyz(r['from'])} and {_xyz(r['to'])}: a waypoint (--via) at {_xyz(r['middle'])} in the lumen "
                 f"may help" for r in v.outside]

@@ -13,7 +13,8 @@ from ctui.engine.measure.paths import arc_length, spline_resample
 from ctui.engine.vessel import grow, path
 
 LUMENS = {"contrast": "the bright lumen only (the range at the points)",
-          "wall": "the lumen and a lower band joined to it inside the wall (a dissection's false lumen, thrombus)"}
+          "wall": "the lumen and what lies inside the vessel's wall, up to the fat around it (a dissection's false "
+                  "lumen, thrombus)"}
 SECTION_STEP_MM = 1.0  # distance between growth planes
 ROUTE_SMOOTH_MM = 1.0
 RECENTRE = 0  # growth passes on the path moved onto its sections' centroids  # spline smoothing of the voxel route
@@ -48,21 +49,23 @@ def _check_points(points, shape) -> list:
     return out
 
 
-def _band(lo: float, image: np.ndarray, pts, spacing) -> tuple[float, float]:
-    """The lower band of ``--lumen wall``: from halfway between the surroundings (``bg`` of
-    :func:`path.auto_range`) and the lumen's ``lo``, up to ``lo``."""
+def _floor(lo: float, image: np.ndarray, pts, spacing) -> float:
+    """The wall's floor when the image is not CT: as far below the surroundings (``bg`` of
+    :func:`path.auto_range`) as the lumen's ``lo`` is above them."""
     auto_lo, auto_hi = path.auto_range(image, pts, spacing)
     mu = auto_lo + (auto_hi - auto_lo) / 4.0
     bg = 2.0 * auto_lo - mu
-    return 0.5 * (bg + lo), lo
+    return bg - (lo - bg)
 
 
 def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=None, lumen: str = "contrast",
-            step_mm: float = SECTION_STEP_MM, progress: Progress | None = None) -> Vessel:
+            floor: float | None = None, step_mm: float = SECTION_STEP_MM, progress: Progress | None = None) -> Vessel:
     """Extract a vessel from ``image`` (z, y, x), spacing (dz, dy, dx) mm; points voxel (z, y, x).
 
     ``value_range``: (lo, hi) of the lumen, None = from the points (:func:`path.auto_range`);
-    ``lumen``: a key of :data:`LUMENS`. Returns a :class:`Vessel`."""
+    ``lumen``: a key of :data:`LUMENS`; ``floor``: with "wall", the value under which the
+    surroundings (fat, lung) lie (None: from the points; CT: :data:`wall.CT_FLOOR`).
+    Returns a :class:`Vessel`."""
     if lumen not in LUMENS:
         raise CtuiError(f"unknown lumen {lumen!r}: one of {', '.join(LUMENS)}", option="lumen")
     sp = np.asarray(spacing, dtype=float)
@@ -75,24 +78,23 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
     img = np.asarray(image[box], dtype=np.float32)
     lo, hi = value_range if value_range is not None else path.auto_range(img, [np.subtract(p, off) for p in
                                                                                 [start, *ends_, *vias_]], sp)
-    band = _band(lo, img, [np.subtract(p, off) for p in [start, *ends_, *vias_]], sp) if lumen == "wall" else None
+    if lumen == "wall" and floor is None:
+        floor = _floor(lo, img, [np.subtract(p, off) for p in [start, *ends_, *vias_]], sp)
+    floor = floor if lumen == "wall" else None
     report(progress, 0.02, 1, "speed map")
-    cost, inr = path.cost_map(img, lo, hi, sp, band=band)
+    dist, inr = path.lumen_distance(img, lo, hi, sp)
     legs = path.order_legs(np.subtract(start, off), [np.subtract(v, off) for v in vias_],
                            [np.subtract(e, off) for e in ends_])
-    routes, leg_routes = path.minimal_path(cost, legs, sp, progress=scaled(progress, 0.05, 0.35))
+    routes, leg_routes = path.minimal_path(dist, legs, sp, progress=scaled(progress, 0.05, 0.35))
     outside = [r for route in routes for r in path.outside_runs(route, inr, sp)]
     for r in outside:
         for k in ("from", "to", "middle"):
             r[k] = (np.asarray(r[k]) + off).tolist()
     report(progress, 0.35, 1, "colliding fronts")
-    core = path.colliding_fronts(cost, legs, inr, sp, leg_routes)
-    from scipy import ndimage as ndi
-
-    dist = ndi.distance_transform_edt(inr, sampling=tuple(sp))
+    core = path.colliding_fronts(dist, legs, inr, sp, leg_routes)
     mask = np.zeros(img.shape, bool)
     rows: list = []
-    ranges = [(lo, hi)] + ([band] if band else [])
+    ranges = [(lo, hi)]
     smooth, lengths = [], []
     for b, route in enumerate(routes):
         rq = _between_ends(spline_resample(route * sp, 0.5, smooth_mm=ROUTE_SMOOTH_MM), route * sp)
@@ -102,7 +104,7 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
             if k:
                 rq = grow.recentred(sec)
             sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()))
-            sec = grow.grow_sections(sec, img, sp, ranges, core, dist,
+            sec = grow.grow_sections(sec, img, sp, ranges, core, dist, floor=floor,
                                      progress=scaled(progress, 0.45 + 0.45 * (b + k / (1 + RECENTRE)) / len(routes),
                                                      0.45 + 0.45 * (b + (k + 1) / (1 + RECENTRE)) / len(routes)))
         mask |= grow.rasterise(sec, img.shape, sp)
@@ -113,7 +115,7 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
     full[box] = _attached(mask)
     report(progress, 1, 1, "done")
     return Vessel(full, np.concatenate(smooth), int(core.sum()), (float(lo), float(hi)),
-                  None if band is None else (float(band[0]), float(band[1])), rows, outside, lengths)
+                  None if floor is None else (float(floor), float(lo)), rows, outside, lengths)
 
 
 def _between_ends(rq: np.ndarray, route_q: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ import numpy as np
 
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames
+from ctui.engine.vessel.wall import EXTRA_MM, wall_region
 
 RADIUS_FACTOR = 1.6  # reach of a section / inscribed radius (an ellipse of axes 1:1.6 fits)
 REF_MM = 10.0  # running-median window of the inscribed radius
@@ -109,17 +110,17 @@ def _radius_limit(sec: Sections, dist: np.ndarray, spacing) -> np.ndarray:
 
 
 def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core: np.ndarray, dist: np.ndarray, *,
-                  progress: Progress | None = None) -> Sections:
-    """Fill ``sec.regions``: in each plane, the pixels in one of ``ranges`` ((lo, hi) pairs;
-    the first is the lumen's, a second band is taken where joined to the lumen) connected to
-    the path point or the core's pixels, under the continuity rule (module docstring).
-    ``dist``: distance (mm) to the border of the ranges' voxels (the inscribed radius)."""
+                  floor: float | None = None, progress: Progress | None = None) -> Sections:
+    """Fill ``sec.regions``: in each plane, the pixels in the lumen's range (``ranges[0]``: (lo,
+    hi)) connected to the path point or the core's pixels, under the continuity rule (module
+    docstring); with ``floor``, the wall region around it (:func:`wall.wall_region`).
+    ``dist``: distance (mm) to the border of the lumen's voxels (the inscribed radius)."""
     from scipy import ndimage as ndi
 
     n = len(sec.s)
     limit = _radius_limit(sec, dist, spacing)
     if not sec.half:
-        sec.half = float(limit.max()) + 2.0 * sec.h
+        sec.half = float(limit.max()) + (EXTRA_MM if floor is not None else 0.0) + 2.0 * sec.h
     a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
     rr = np.hypot(a[:, None], a[None, :])
     g = len(a)
@@ -140,9 +141,8 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
         if EDGE_PX and reg.any():  # the lumen's rim, blurred below the range by partial volume
             rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & ~lumen
             reg = reg | (rim & (rr <= limit[i]))
-        if len(ranges) > 1:
-            band = ((val >= ranges[1][0]) & (val < ranges[1][1])) & (rr <= limit[i])
-            reg = _seeded(lumen | band, reg) if reg.any() else reg
+        if floor is not None:
+            reg = wall_region(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo))
         regions[i] = reg
         seeds_all[i] = seeds
     sec.regions, sec.clipped = regions, _continuity(regions, seeds_all, rr, sec)
@@ -197,7 +197,8 @@ def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
 
     if not regions.any():
         return np.zeros(len(regions))
-    padded = np.pad(regions, ((1, 1), (1, 1), (1, 1)))
+    (a, b), (c, d) = (np.nonzero(regions.any(axis=k))[0][[0, -1]] for k in ((0, 2), (0, 1)))
+    padded = np.pad(regions[:, a:b + 1, c:d + 1], ((1, 1), (1, 1), (1, 1)))
     far = 4.0 * regions.shape[1] * h
     d = ndi.distance_transform_edt(padded, sampling=(far, h, h))[1:-1]
     return 2.0 * d.reshape(len(regions), -1).max(axis=1)

@@ -68,19 +68,21 @@ def auto_range(image: np.ndarray, points, spacing) -> tuple[float, float]:
     return lo, mu + 3.0 * (mu - lo)
 
 
-def cost_map(image: np.ndarray, lo: float, hi: float, spacing, *, band: tuple[float, float] | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """(cost per mm, in-range mask) of a (cropped) image: ``1 / (eps + d**2)``, d (mm) the
-    distance to the border of the in-range voxels (0 outside them). ``band``: a second range
-    (the lower band of ``--lumen wall``) counted as lumen for the route."""
+def lumen_distance(image: np.ndarray, lo: float, hi: float, spacing) -> tuple[np.ndarray, np.ndarray]:
+    """(d, in-range mask) of a (cropped) image: d (mm) the distance to the border of the
+    in-range voxels (0 outside them)."""
     from scipy import ndimage as ndi
 
     img = np.asarray(image)
     inr = (img >= lo) & (img <= hi)
-    if band is not None:
-        inr |= (img >= band[0]) & (img < band[1])
-    d = ndi.distance_transform_edt(inr, sampling=tuple(float(s) for s in spacing))
-    return (1.0 / (COST_EPS + d * d)).astype(np.float64), inr
+    return ndi.distance_transform_edt(inr, sampling=tuple(float(s) for s in spacing)), inr
+
+
+def leg_cost(dist: np.ndarray, a, b, spacing, box=None) -> np.ndarray:
+    """Cost per mm of one leg (from ``a`` to ``b``; ``box``: the part of ``dist`` it runs in):
+    ``1 / (eps + d**2)``, d the distance to the lumen's border (mm)."""
+    d = dist if box is None else dist[box]
+    return 1.0 / (COST_EPS + d * d)
 
 
 def _leg_route(cost: np.ndarray, a, b, spacing) -> np.ndarray:
@@ -119,9 +121,10 @@ def _spur(before: np.ndarray, after: np.ndarray, within: float = 1.5) -> int:
     return k
 
 
-def minimal_path(cost: np.ndarray, legs: Legs, spacing, *, progress: Progress | None = None
+def minimal_path(dist: np.ndarray, legs: Legs, spacing, *, progress: Progress | None = None
                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """(chain routes, leg routes): voxel routes (k, 3), (z, y, x) float indices of ``cost``, one
+    """(chain routes, leg routes) on the cost of :func:`leg_cost` from ``dist`` (the lumen's
+    distance map, :func:`lumen_distance`): voxel routes (k, 3), (z, y, x) float indices, one
     per chain, from the start through its waypoints to its end; and one per leg (``legs.pairs``)."""
     routes, leg_routes = [], []
     n = len(legs.pairs)
@@ -129,7 +132,7 @@ def minimal_path(cost: np.ndarray, legs: Legs, spacing, *, progress: Progress | 
         parts = []
         for a, b in zip(chain[:-1], chain[1:]):
             report(progress, len(leg_routes), n, "minimal path")
-            r = _leg_route(cost, a, b, spacing)
+            r = _leg_route(leg_cost(dist, a, b, spacing), a, b, spacing)
             leg_routes.append(r)
             if parts:  # a waypoint off the lumen's middle: the route goes out to it and back; cut the spur
                 k = _spur(parts[-1], r)
@@ -162,7 +165,7 @@ def outside_runs(route: np.ndarray, inr: np.ndarray, spacing, min_mm: float = 5.
     return runs
 
 
-def colliding_fronts(cost: np.ndarray, legs: Legs, inr: np.ndarray, spacing=(1.0, 1.0, 1.0), routes=None
+def colliding_fronts(dist: np.ndarray, legs: Legs, inr: np.ndarray, spacing=(1.0, 1.0, 1.0), routes=None
                      ) -> np.ndarray:
     """The core: SimpleITK's colliding fronts (the region where the fronts from a leg's two
     ends meet, negative output) on the speed ``1 / cost``, for each leg, in range, joined.
@@ -170,12 +173,12 @@ def colliding_fronts(cost: np.ndarray, legs: Legs, inr: np.ndarray, spacing=(1.0
     ``routes``: each leg's voxel route; the fronts run in its box grown by ``CORE_MARGIN_MM``."""
     import SimpleITK as sitk
 
-    core = np.zeros(cost.shape, bool)
+    core = np.zeros(dist.shape, bool)
     for k, (a, b) in enumerate(legs.pairs):
         r = routes[k] if routes is not None else np.array([a, b], dtype=float)
-        box = crop_box(cost.shape, r, spacing, margin_mm=CORE_MARGIN_MM)
+        box = crop_box(dist.shape, r, spacing, margin_mm=CORE_MARGIN_MM)
         lo = np.array([s.start for s in box])
-        speed = sitk.GetImageFromArray((1.0 / cost[box]).astype(np.float32))
+        speed = sitk.GetImageFromArray((1.0 / leg_cost(dist, a, b, spacing, box)).astype(np.float32))
         f = sitk.CollidingFrontsImageFilter()
         f.SetSeedPoints1([[int(c) for c in np.subtract(a, lo)[::-1]]])
         f.SetSeedPoints2([[int(c) for c in np.subtract(b, lo)[::-1]]])
