@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames
+from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames, spline_resample
 from ctui.engine.vessel.wall import EXTRA_MM, wall_region
 
 RADIUS_FACTOR = 1.6  # reach of a section / inscribed radius (an ellipse of axes 1:1.6 fits)
@@ -172,8 +172,6 @@ def recentred(sec: Sections, *, smooth_mm: float = 1.0, step_mm: float = 0.5) ->
     """The path (k, 3) mm moved onto the centroids of its sections' regions (clipped or empty
     sections move as their neighbours), smoothed: a minimal path cuts the inside of bends; its
     sections' centroids do not (as :func:`ctui.engine.measure.centreline.recentre_path`)."""
-    from ctui.engine.measure.paths import spline_resample
-
     a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
     n = len(sec.s)
     move = np.zeros((n, 3))
