@@ -26,6 +26,7 @@ from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
+from ctui.screens.vessel_tool import VESSEL_BINDINGS, VesselMixin
 from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
 
 
@@ -35,10 +36,10 @@ class SidePanel(Static):
     """
 
 
-class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
+class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
     """Slice views + side panel. Thin: every computation is an engine call."""
 
-    BINDINGS = BINDINGS + MOUSE_BINDINGS
+    BINDINGS = BINDINGS + MOUSE_BINDINGS + VESSEL_BINDINGS
 
     DEFAULT_CSS = """
     WorkspaceScreen #views { height: 1fr; }

@@ -142,3 +142,14 @@ def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", pro
                       inputs=inputs)
         written.append(plot)
     return written
+
+
+def vessel_proposal(result: VesselResult, object_id: int) -> Any:
+    """The vessel as a pending proposal for object ``object_id`` (the TUI shows it hatched on every
+    plane; accepting it makes the object exactly the vessel, one undo step)."""
+    from ctui.engine.segment.proposal import Proposal  # the TUI's proposal type (the workspace reviews it)
+
+    start_slice = int(result.start[2])
+    return Proposal.of_mask(int(object_id), start_slice, result.mask,
+                            settings={"vessel": {k: to_jsonable(getattr(result, k)) for k in
+                                                 ("start", "ends", "vias", "lumen", "range")}})
