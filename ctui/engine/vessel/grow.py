@@ -26,6 +26,7 @@ from ctui.engine.measure.paths import arc_length, path_points, rotation_minimisi
 from ctui.engine.vessel.wall import EXTRA_MM, wall_region
 
 RADIUS_FACTOR = 1.6  # reach of a section / inscribed radius (an ellipse of axes 1:1.6 fits)
+LIMIT_MARGIN_MM = 1.5  # ... and at least this much beyond it (a small vessel's rim, blurred below the range)
 REF_MM = 10.0  # running-median window of the inscribed radius
 AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond which it is clipped
 EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
@@ -106,7 +107,7 @@ def _radius_limit(sec: Sections, dist: np.ndarray, spacing) -> np.ndarray:
     r = _sample(dist.astype(np.float32), sec.p, spacing, order=1, cval=0.0)
     step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
     r = ndi.median_filter(r, size=max(3, int(round(REF_MM / step)) | 1), mode="nearest")
-    return np.maximum(RADIUS_FACTOR * r, r + 2.0 * sec.h)
+    return np.maximum(RADIUS_FACTOR * r, r + LIMIT_MARGIN_MM)
 
 
 def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core: np.ndarray, dist: np.ndarray, *,

@@ -18,6 +18,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
 
+COST_POWER = 2.0  # cost per mm 1 / (eps + d**COST_POWER)
 COST_EPS = 0.01  # 1 / COST_EPS: the cost of one mm outside the lumen's range
 CORE_MARGIN_MM = 20.0  # the colliding fronts' box around each leg's route
 MARGIN_MM = 50.0  # the work box: the points' box grown by this much (a route may bend out of it)
@@ -82,7 +83,7 @@ def leg_cost(dist: np.ndarray, a, b, spacing, box=None) -> np.ndarray:
     """Cost per mm of one leg (from ``a`` to ``b``; ``box``: the part of ``dist`` it runs in):
     ``1 / (eps + d**2)``, d the distance to the lumen's border (mm)."""
     d = dist if box is None else dist[box]
-    return 1.0 / (COST_EPS + d * d)
+    return 1.0 / (COST_EPS + d ** COST_POWER)
 
 
 def _leg_route(cost: np.ndarray, a, b, spacing) -> np.ndarray:
