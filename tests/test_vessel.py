@@ -137,3 +137,21 @@ def test_wall_takes_the_thrombus_inside_the_wall_not_the_fat():
     assert dice(wall.mask, truth_w) >= 0.85
     assert wall.voxels > 1.5 * contrast.voxels
     assert not (wall.mask & ~ndi.binary_dilation(tube, iterations=2)).any()  # no fat taken
+
+
+def test_batch_row_with_start_via_end(tmp_path):
+    """A ``ctui batch`` manifest row with start, via and end columns runs the vessel action."""
+    import SimpleITK as sitk
+
+    from ctui.engine.actions.batch import read_manifest, run_job
+
+    vol, truth, length = u_bend(noise=0.0)
+    src = tmp_path / "u.nii.gz"
+    sitk.WriteImage(sitk.GetImageFromArray(vol.data), str(src))
+    (tmp_path / "m.csv").write_text(f'series,start,via,end,sections\nu.nii.gz,"30,20,{Z0}","30,32,42","30,44,{Z0}",auto\n')
+    (job,) = read_manifest(tmp_path / "m.csv", default_outdir=str(tmp_path / "out"))
+    assert job.vessel == ((30, 20, Z0), [(30, 44, Z0)], [(30, 32, 42)]) and not job.error
+    row = run_job(job)
+    assert row["status"] == "ok", row["error"]
+    assert row["voxels"] == pytest.approx(truth.sum(), rel=0.1)
+    assert row["path_length_mm"] == pytest.approx(length, rel=0.1)  # measure's own centreline of the vessel

@@ -46,6 +46,7 @@ from ctui.engine.actions.opened import Opened, existing_path
 from ctui.engine.actions.options import parse_pair
 from ctui.engine.actions.project import new_project, propagation_record, save_project
 from ctui.engine.actions.segment import METHODS, SegmentOptions, segment
+from ctui.engine.actions.vessel import vessel
 from ctui.engine.io.meshes import save_mesh
 from ctui.engine.io.series import load
 from ctui.engine.segment.pipeline import Pipeline, parse_filter_spec
@@ -54,7 +55,8 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.safetext import csv_cell
 
-MANIFEST_COLUMNS = ("series", "seed", "range", "method", "mode", "background", "filter", "outdir", "sections", "name")
+MANIFEST_COLUMNS = ("series", "seed", "range", "method", "mode", "background", "filter", "outdir", "sections", "name",
+                    "start", "end", "via")  # start, end "X,Y,Z;..." and via "X,Y,Z;...": a vessel (actions.vessel)
 WRITE_EVERY_S = 2.0  # RESULTS.csv rewritten (atomically) at most this often while jobs finish, and at the end
 RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", "error", "voxels", "volume_voxels_ml",
                   "volume_mesh_ml", "area_mm2", "path_length_mm", "section_area_min_mm2", "section_area_max_mm2",
@@ -80,11 +82,13 @@ class Job:
     sections: bool = False
     name: str = ""
     error: str = ""  # a manifest error: the job is reported failed without running
+    vessel: tuple | None = None  # (start, ends, vias) voxels (x, y, z): a vessel row (actions.vessel), not a seed
 
     @property
     def key(self) -> str:
         text = "|".join(map(str, (os.path.abspath(self.series), self.seed, self.range, self.method, self.mode,
                                   self.background, self.filters, self.sections)))
+        text += f"|{self.vessel}" if self.vessel else ""
         return hashlib.sha1(text.encode("utf-8", "surrogateescape")).hexdigest()[:10]
 
     @property
@@ -128,7 +132,12 @@ def _job(n: int, row: dict, base: Path, default_outdir: str) -> Job:
     try:
         if not series:
             raise CtuiError("no series")
-        job.seed = _xyz(get["seed"], "seed")
+        if get["start"]:
+            ends = [_xyz(v, "end") for v in get["end"].split(";") if v.strip()]
+            if not ends:
+                raise CtuiError("a vessel row (start) needs an end")
+            job.vessel = (_xyz(get["start"], "start"), ends, [_xyz(v, "via") for v in get["via"].split(";") if v.strip()])
+        job.seed = job.vessel[0] if job.vessel else _xyz(get["seed"], "seed")
         job.range = _range(get["range"])
         job.method = (get["method"] or "fill").lower()
         if job.method not in METHODS:
@@ -153,7 +162,7 @@ def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[
         cols = [c.strip().lower() for c in reader.fieldnames or []]
     except csv.Error as exc:
         raise CtuiError(f"not a readable CSV manifest ({exc})", path=p) from None
-    missing = [c for c in ("series", "seed") if c not in cols]
+    missing = [c for c in ("series", "seed") if c not in cols and not (c == "seed" and "start" in cols)]
     if missing:
         raise CtuiError(f"the manifest lacks the column(s) {', '.join(missing)} (columns: series, seed, "
                         "optional range, background, filter, outdir, sections, name)", path=p)
@@ -206,6 +215,13 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
     return res.segmentation.labels, pipeline.to_dict(), propagation_record(res.settings)
 
 
+def _vessel(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
+    """(labels uint8, pipeline dict, propagation dict) of a vessel row (the vessel action, ``ctui vessel``)."""
+    start, ends, vias = job.vessel
+    res = vessel(volume, start=start, ends=ends, vias=vias, value_range=job.range)
+    return res.mask.astype(np.uint8), {}, propagation_record([])
+
+
 def run_job(job: Job) -> dict:
     """Run one job (on a Dask worker); returns its RESULTS row. Never raises: a failure is a row."""
     t0, c0 = time.perf_counter(), time.process_time()
@@ -227,7 +243,7 @@ def run_job(job: Job) -> dict:
 
 def _run(job: Job) -> dict:
     volume = load(existing_path(job.series, "series folder or file"))
-    labels, pipeline, propagation = _segment(volume, job)
+    labels, pipeline, propagation = _vessel(volume, job) if job.vessel else _segment(volume, job)
     project = new_project(volume, source_path=job.series, labels=labels, pipeline=pipeline, propagation=propagation,
                           objects=[{"id": 1, "name": job.name, "color": [230, 60, 60], "seeds": [list(job.seed)]}])
     opened = Opened.of_volume(volume, labels, path=job.series, project=project)
