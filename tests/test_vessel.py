@@ -155,3 +155,27 @@ def test_batch_row_with_start_via_end(tmp_path):
     assert row["status"] == "ok", row["error"]
     assert row["voxels"] == pytest.approx(truth.sum(), rel=0.1)
     assert row["path_length_mm"] == pytest.approx(length, rel=0.1)  # measure's own centreline of the vessel
+
+
+def test_bifurcation_two_ends_mr_values():
+    """Two --end: a tree from one start (an aortic bifurcation in MR-like values, no HU): the first
+    branch runs from the start to the first end, the second from where it leaves the first's vessel."""
+    shape = (80, 60, 60)
+
+    def seg(a, b):
+        t = np.linspace(0.0, 1.0, 200)[:, None]
+        return np.asarray(a, float) * (1 - t) + np.asarray(b, float) * t
+
+    grid = np.indices(shape).reshape(3, -1).T.astype(float)
+    d_trunk, _ = cKDTree(seg((75, 30, 30), (40, 30, 30))).query(grid)
+    d_legs, _ = cKDTree(np.vstack([seg((40, 30, 30), (5, 30, 12)), seg((40, 30, 30), (5, 30, 48))])).query(grid)
+    tube = ((d_trunk <= 6) | (d_legs <= 4)).reshape(shape)
+    data = np.where(tube, 900.0, 200.0) + np.random.default_rng(0).normal(0.0, 20.0, shape)
+    vol = Volume(data.astype(np.float32), spacing=(1.0, 1.0, 1.0), modality="MR")
+    res = vessel(vol, start=(30, 30, 70), ends=[(14, 30, 9), (46, 30, 9)])
+    z = np.indices(shape)[0]
+    truth = tube & (z >= 9) & (z <= 70)
+    assert dice(res.mask, truth) >= 0.93
+    assert res.path_length_mm[0] == pytest.approx(30 + np.hypot(31, 18 * 31 / 35), rel=0.03)
+    assert {r["branch"] for r in res.sections} == {0, 1}
+    assert 20 < res.path_length_mm[1] < 36  # the second leg from the bifurcation (36 mm from its centre)
