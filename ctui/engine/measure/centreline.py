@@ -120,8 +120,6 @@ def _voxel_route(sub: np.ndarray, dist: np.ndarray, ends, sp: np.ndarray, power:
                  open_ends: list | None = None) -> np.ndarray:
     """Minimal path (k, 3) crop indices between the ends (the extremities when None; an
     open end, where the object is cut by the volume's boundary, is one of them)."""
-    from skimage.graph import MCP_Geometric
-
     if ends is None and open_ends:
         unit = np.where(sub, 1.0, np.inf)
         core = dist > float(sp.max())
@@ -142,9 +140,20 @@ def _voxel_route(sub: np.ndarray, dist: np.ndarray, ends, sp: np.ndarray, power:
         raise CtuiError("centreline: the object has no two distinct ends (too small)")
     cost = np.full(sub.shape, np.inf)
     cost[sub] = 1.0 / np.power(dist[sub], power) + eps
-    mcp = MCP_Geometric(cost, fully_connected=True, sampling=tuple(sp))
-    mcp.find_costs([ends[0]], [ends[1]])
-    return np.asarray(mcp.traceback(ends[1]), dtype=np.float64)  # start -> end
+    return minimal_route(cost, ends[0], ends[1], sp)  # start -> end
+
+
+def minimal_route(cost: np.ndarray, a, b, spacing) -> np.ndarray:
+    """The minimal path (k, 3) float voxel indices (z, y, x) from voxel ``a`` to voxel ``b``
+    through ``cost`` (per mm; inf: not crossed) on the 26-connected grid with mm steps (Dijkstra,
+    scikit-image ``MCP_Geometric``). The one route solver of ctui's centrelines: this module's
+    and ``ctui vessel``'s (:mod:`ctui.engine.vessel.path`)."""
+    from skimage.graph import MCP_Geometric
+
+    a, b = tuple(int(v) for v in a), tuple(int(v) for v in b)
+    mcp = MCP_Geometric(cost, fully_connected=True, sampling=tuple(float(s) for s in spacing))
+    mcp.find_costs([a], [b])
+    return np.asarray(mcp.traceback(b), dtype=np.float64)
 
 
 def centreline(

@@ -5,8 +5,9 @@ path of :mod:`ctui.engine.measure.paths`. The cost of one mm of travel is
 ``1 / (eps + d**2)`` with ``d`` (mm) the distance to the border of the in-range region (the
 lumen), so the route keeps to the lumen's middle and crossing out-of-range voxels costs
 ``1 / eps`` per mm (a stenosis or an artefact is crossed, lung or fat is not); the route is
-found by Dijkstra on the 26-connected voxel graph with mm steps (scikit-image
-``MCP_Geometric``), the same solver as :func:`ctui.engine.measure.centreline.centreline`.
+found by Dijkstra on the 26-connected voxel graph with mm steps
+(:func:`ctui.engine.measure.centreline.minimal_route`, the solver of ``ctui measure --path auto``'s
+centreline too).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Progress, report
+from ctui.engine.measure.centreline import minimal_route
 
 COST_POWER = 2.0  # cost per mm 1 / (eps + d**COST_POWER)
 COST_EPS = 0.01  # 1 / COST_EPS: the cost of one mm outside the lumen's range
@@ -86,14 +88,6 @@ def leg_cost(dist: np.ndarray, a, b, spacing, box=None) -> np.ndarray:
     return 1.0 / (COST_EPS + d ** COST_POWER)
 
 
-def _leg_route(cost: np.ndarray, a, b, spacing) -> np.ndarray:
-    from skimage.graph import MCP_Geometric
-
-    mcp = MCP_Geometric(cost, fully_connected=True, sampling=tuple(float(s) for s in spacing))
-    mcp.find_costs([tuple(int(v) for v in a)], [tuple(int(v) for v in b)])
-    return np.asarray(mcp.traceback(tuple(int(v) for v in b)), dtype=np.float64)
-
-
 def order_legs(start, vias, ends) -> Legs:
     """Chains from ``start`` through the waypoints to each end. One end: the waypoints in the
     order given. Several ends (a tree): each waypoint belongs to the end it lies nearest, in
@@ -133,7 +127,7 @@ def minimal_path(dist: np.ndarray, legs: Legs, spacing, *, progress: Progress | 
         parts = []
         for a, b in zip(chain[:-1], chain[1:]):
             report(progress, len(leg_routes), n, "minimal path")
-            r = _leg_route(leg_cost(dist, a, b, spacing), a, b, spacing)
+            r = minimal_route(leg_cost(dist, a, b, spacing), a, b, spacing)
             leg_routes.append(r)
             if parts:  # a waypoint off the lumen's middle: the route goes out to it and back; cut the spur
                 k = _spur(parts[-1], r)
