@@ -25,8 +25,8 @@ from ctui.engine.core.progress import Progress, report
 from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames, spline_resample
 from ctui.engine.vessel.wall import EXTRA_MM, wall_region
 
-RADIUS_FACTOR = 1.6  # reach of a section / inscribed radius (an ellipse of axes 1:1.6 fits)
-LIMIT_MARGIN_MM = 1.5  # ... and at least this much beyond it (a small vessel's rim, blurred below the range)
+RADIUS_FACTOR = 1.3  # reach of a section / inscribed radius (a round vessel; a neighbour touching it is cut off)
+LIMIT_MARGIN_MM = 4.0  # ... and at least this much beyond it (a small vessel's rim, blurred below the range)
 REF_MM = 10.0  # running-median window of the inscribed radius
 AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond which it is clipped
 EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
