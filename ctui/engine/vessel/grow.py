@@ -6,8 +6,9 @@ sections ``step`` mm apart (default 1 mm), each a plane normal to the path carri
 rotation-minimising frames. In each plane the image is sampled (trilinear, on a grid of half
 the smallest voxel side), and the vessel's section is the in-range region holding the path
 point or the core's pixels, holes filled. Continuity: the section may not reach further from
-the path than ``RADIUS_FACTOR`` times the lumen's inscribed radius there (the 3D distance to
-the range's border, running median over ``REF_MM`` of path, so a branch's origin or a
+the path than ``RADIUS_FACTOR`` times the lumen's inscribed radius there, or that radius plus
+``LIMIT_MARGIN_MM`` (the 3D distance to the range's border, running median over ``REF_MM`` of
+path, so a branch's origin or a
 neighbour touching the vessel is cut off), nor exceed ``AREA_JUMP`` times the running median of
 the areas around it (it is then cut back to 1.1 times the running median reach). Every voxel
 takes the section of its nearest path point: it is in the vessel when it lies in that
