@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -104,13 +105,14 @@ def beyond_annulus_ml(mask: np.ndarray, plane, spacing) -> float:
     return float(below.sum()) * float(np.prod(spacing)) / 1000.0
 
 
-def row(name: str, mask, secs: float, refs: dict, *, path_mm=None, vol=None) -> None:
+def row(name: str, mask, secs: float, refs: dict, *, path_mm=None, vol=None, cpu: float | None = None) -> None:
     length = inside = float("nan")
     if path_mm is not None:
         length = float(np.linalg.norm(np.diff(path_mm, axis=0), axis=1).sum())
         inside = path_inside(path_mm, vol, refs["aorta"])
     print(f"{name:34s} {length:7.1f} {100 * inside:6.1f}% {dice(mask, refs['true']):6.3f} "
-          f"{dice(mask, refs['aorta']):6.3f} {beyond_annulus_ml(mask, refs['plane'], vol.spacing):7.2f} {secs:6.2f}")
+          f"{dice(mask, refs['aorta']):6.3f} {beyond_annulus_ml(mask, refs['plane'], vol.spacing):7.2f} {secs:6.2f}"
+          + ("" if cpu is None else f" {cpu:6.2f}"))
 
 
 def peer_core(vol, pts: dict) -> np.ndarray:
@@ -225,15 +227,18 @@ def main() -> int:
     print(f"points (voxel X,Y,Z): start {xyz['start']}  via {xyz['via']}  end {xyz['end']}")
     print(f"goals: path >= 95% inside, {0.95 * REPORT_LENGTH_MM:.0f}-{1.05 * REPORT_LENGTH_MM:.0f} mm; 0 mL beyond "
           "the annulus; Dice >= 0.90 true lumen (contrast), >= 0.85 aorta (wall); < 10 s\n")
-    print(f"{'method':34s} {'len mm':>7s} {'inside':>7s} {'DiceTL':>6s} {'DiceAo':>6s} {'vent mL':>7s} {'s':>6s}")
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (s: wall clock; cpu s: this process, all "
+          "its threads)")
+    print(f"{'method':34s} {'len mm':>7s} {'inside':>7s} {'DiceTL':>6s} {'DiceAo':>6s} {'vent mL':>7s} {'s':>6s} "
+          f"{'cpu s':>6s}")
     runs = [("ctui vessel contrast, no waypoint", [], "contrast"), ("ctui vessel contrast + arch", [pts["via"]],
                                                                       "contrast"),
             ("ctui vessel wall + arch", [pts["via"]], "wall")]
     best = None
     for name, vias, lumen in runs:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         res = vessel(vol, start=pts["start"], ends=[pts["end"]], vias=vias, lumen=lumen)
-        row(name, res.mask, time.perf_counter() - t, refs, path_mm=res.path_mm, vol=vol)
+        row(name, res.mask, time.perf_counter() - t, refs, path_mm=res.path_mm, vol=vol, cpu=time.process_time() - c)
         best = res if vias and lumen == "wall" else best
         cmd = f"  ctui vessel {shown} --start {xyz['start']} --end {xyz['end']}"
         print(cmd + (f" --via {xyz['via']}" if vias else "") + f" --lumen {lumen}")
