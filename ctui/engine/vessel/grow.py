@@ -24,7 +24,7 @@ import numpy as np
 
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames, spline_resample
-from ctui.engine.vessel.wall import EXTRA_MM, wall_region
+from ctui.engine.vessel.wall import EXTRA_MM, wall_rays, wall_regions
 
 RADIUS_FACTOR = 1.3  # reach of a section / inscribed radius (a round vessel; a neighbour touching it is cut off)
 LIMIT_MARGIN_MM = 4.0  # ... and at least this much beyond it (a small vessel's rim, blurred below the range)
@@ -115,7 +115,7 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
                   floor: float | None = None, progress: Progress | None = None) -> Sections:
     """Fill ``sec.regions``: in each plane, the pixels in the lumen's range (``ranges[0]``: (lo,
     hi)) connected to the path point or the core's pixels, under the continuity rule (module
-    docstring); with ``floor``, the wall region around it (:func:`wall.wall_region`).
+    docstring); with ``floor``, the wall region around it (:func:`wall.wall_rays`, :func:`wall.wall_regions`).
     ``dist``: distance (mm) to the border of the lumen's voxels (the inscribed radius)."""
     from scipy import ndimage as ndi
 
@@ -130,6 +130,7 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
     centre[g // 2, g // 2] = True
     regions = np.zeros((n, g, g), bool)
     seeds_all = np.zeros((n, g, g), bool)
+    walls: list = []
     img = np.asarray(image, dtype=np.float32)
     for i in range(n):
         if i % 32 == 0:
@@ -144,9 +145,11 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
             rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & ~lumen
             reg = reg | (rim & (rr <= limit[i]))
         if floor is not None:
-            reg = wall_region(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo))
+            walls.append(wall_rays(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo)))
         regions[i] = reg
         seeds_all[i] = seeds
+    if floor is not None:
+        regions = wall_regions(regions, walls, h=sec.h, half=sec.half)
     sec.regions, sec.clipped = regions, _continuity(regions, seeds_all, rr, sec)
     sec.inscribed = _inscribed(regions, sec.h)
     return sec

@@ -20,27 +20,30 @@ ITERATIONS = 3  # rays cast from the lumen's centroid, then from their polygon's
 EXTRA_MM = 20.0  # ... and at most this much beyond it
 WALL_MM = 1.5  # a vessel's wall: what a ray adds beyond the lumen where it meets no fat
 MIN_FOUND = 12  # rays that met fat or another lumen needed to fit the outline
+ALONG = 7  # planes (mm at the default step) the wall's rays are smoothed over along the path
 CT_FLOOR = -30.0  # HU: fat and lung lie below it, a thrombosed false lumen above
 
 
-def _rays(val: np.ndarray, c: np.ndarray, h: float, half: float, rmax: float, floor: float, lo: float,
-          bright: float) -> np.ndarray:
-    """Lengths (N_RAYS,) mm of the rays from c (mm, grid frame): to the first value under
-    ``floor`` (fat, lung); where a ray leaves the lumen (under ``lo``) and meets another bright
-    lumen (``bright`` or more: a chamber, a neighbouring vessel) first, to the darkest point
-    between them; where it meets neither within ``rmax``, to the lumen's edge plus one wall."""
+def _rays(val: np.ndarray, lumen: np.ndarray, c: np.ndarray, h: float, half: float, rmax: float, floor: float,
+          lo: float, bright: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lengths (N_RAYS,) mm, found (N_RAYS,) bool) of the rays from c (mm, grid frame): to the
+    first value under ``floor`` (fat, lung); where a ray leaves the vessel's lumen (the region
+    ``lumen``) and meets another bright lumen (``bright`` or more, not ``lumen``: a chamber, a
+    neighbouring vessel) first, to the darkest point between them; ``rmax`` where it meets
+    neither (not found)."""
     from scipy import ndimage as ndi
 
     ang = np.linspace(0.0, 2 * np.pi, N_RAYS, endpoint=False)
     t = np.arange(0.0, rmax + 1e-9, 0.5 * h)
     pts = c[None, None, :] + t[None, :, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)[:, None, :]
     idx = (pts + half) / h
-    v = ndi.map_coordinates(val, [idx[..., 0].ravel(), idx[..., 1].ravel()], order=1, mode="constant",
-                            cval=-1e4).reshape(len(ang), len(t))
-    out_lumen = np.maximum.accumulate(v < lo, axis=1)
+    at = [idx[..., 0].ravel(), idx[..., 1].ravel()]
+    v = ndi.map_coordinates(val, at, order=1, mode="constant", cval=-1e4).reshape(len(ang), len(t))
+    own = ndi.map_coordinates(lumen.astype(np.float32), at, order=0, mode="constant").reshape(v.shape) > 0.5
+    out_lumen = np.maximum.accumulate(~own & (v < lo), axis=1)
     edge = np.where(out_lumen.any(axis=1), np.argmax(out_lumen, axis=1), len(t) - 1)
     below = v < floor
-    again = out_lumen & (v >= bright)
+    again = out_lumen & ~own & (v >= bright)  # another lumen: the vessel's own (seen from its wall's centre) is not
     n = len(t)
     first_floor = np.where(below.any(axis=1), np.argmax(below, axis=1), n)
     first_again = np.where(again.any(axis=1), np.argmax(again, axis=1), n)
@@ -97,23 +100,44 @@ def _polygon(rho: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.hypot(du, dv) <= r
 
 
-def wall_region(lumen: np.ndarray, val: np.ndarray, *, h: float, half: float, floor: float, lo: float,
-                bright: float) -> np.ndarray:
-    """The wall region (g, g) bool of one plane: the lumen region ``lumen`` and the polygon of
-    the rays from its centroid until the fat (module docstring). ``val``: the plane's values."""
+def wall_rays(lumen: np.ndarray, val: np.ndarray, *, h: float, half: float, floor: float, lo: float,
+              bright: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(centre (2,) mm in the plane's grid frame, ray lengths (N_RAYS,) mm) of the wall around
+    the lumen region ``lumen`` of one plane (module docstring); None without a lumen. ``val``:
+    the plane's values."""
     if not lumen.any():
-        return lumen
+        return None
     a = np.arange(-half, half + 1e-9, h)
     iu, iv = np.nonzero(lumen)
     c = np.array([a[iu].mean(), a[iv].mean()])
     reach = float(np.hypot(a[iu] - c[0], a[iv] - c[1]).max())
     rmax = min(max(REACH * reach, 12.0), reach + EXTRA_MM, half)
     for it in range(ITERATIONS):
-        rho, found = _rays(val, c, h, half, rmax, floor, lo, bright)
+        rho, found = _rays(val, lumen, c, h, half, rmax, floor, lo, bright)
         rho = _smoothed(_circle_clip(rho, found, c) if it else rho)
         if it < ITERATIONS - 1:
             c = c + _centroid(rho)
-    return _polygon(rho, c, a) | lumen
+    return c, rho
+
+
+def wall_regions(lumens: np.ndarray, walls: list, *, h: float, half: float) -> np.ndarray:
+    """Each plane's wall region (n, g, g) bool: its lumen and the polygon of its rays, the rays'
+    lengths and the centres first smoothed along the path (running median over ``ALONG`` planes:
+    the wall does not jump from one plane to the next)."""
+    from scipy import ndimage as ndi
+
+    a = np.arange(-half, half + 1e-9, h)
+    ok = np.array([w is not None for w in walls])
+    out = lumens.copy()
+    if not ok.any():
+        return out
+    cs = np.array([w[0] for w in walls if w is not None])
+    rhos = np.array([w[1] for w in walls if w is not None])
+    cs = ndi.median_filter(cs, size=(ALONG, 1), mode="nearest")
+    rhos = ndi.median_filter(rhos, size=(ALONG, 1), mode="nearest")
+    for k, i in enumerate(np.nonzero(ok)[0]):
+        out[i] |= _polygon(rhos[k], cs[k], a)
+    return out
 
 
 def _centroid(rho: np.ndarray) -> np.ndarray:
