@@ -7,7 +7,7 @@ length from its section lengths: 6.8 + 4.4 + 26.0 cm = 372 mm).
 
 Points (voxels X,Y,Z = column, row, slice from 0, as ``ctui segment --seed``), from the masks:
 start: the centroid of the aorta 3-6 mm above the plane of ``annulus_proper`` (its principal
-plane); end: the centroid of the true lumen in the aorta's last 3 slices (the bright lumen a user clicks); arch waypoint: the centroid of the
+plane); end: the centroid of the aorta in its last 3 slices; arch waypoint: the centroid of the
 aorta in its top 5 slices. They are printed so a user can reproduce each row with ``ctui vessel``.
 
 Rows: ctui vessel --lumen contrast without and with the waypoint, --lumen wall with it; the peers
@@ -69,9 +69,8 @@ def annulus_plane(annulus: np.ndarray, aorta: np.ndarray, spacing) -> tuple[np.n
     return c, n
 
 
-def points(aorta: np.ndarray, annulus: np.ndarray, spacing, lumen: np.ndarray) -> dict:
-    """start, end, via as voxels (x, y, z) from the masks (module docstring); the end in ``lumen``
-    (the bright true lumen, where a user clicks)."""
+def points(aorta: np.ndarray, annulus: np.ndarray, spacing) -> dict:
+    """start, end, via as voxels (x, y, z) from the masks (module docstring)."""
     sp = np.asarray(spacing, dtype=float)
     c, n = annulus_plane(annulus, aorta, sp)
     q = np.argwhere(aorta) * sp
@@ -87,7 +86,7 @@ def points(aorta: np.ndarray, annulus: np.ndarray, spacing, lumen: np.ndarray) -
         return int(k[2]), int(k[1]), int(k[0])
 
     top = np.argwhere(aorta[zs[-1] - 4: zs[-1] + 1]).mean(axis=0) + [zs[-1] - 4, 0, 0]
-    bottom = np.argwhere(lumen[zs[0]: zs[0] + 3]).mean(axis=0) + [zs[0], 0, 0]
+    bottom = np.argwhere(aorta[zs[0]: zs[0] + 3]).mean(axis=0) + [zs[0], 0, 0]
     return {"start": centroid(q[sel].mean(axis=0) / sp), "end": centroid(bottom), "via": centroid(top)}
 
 
@@ -222,7 +221,7 @@ def main() -> int:
     aorta = mask_of("ct_aorta_1p5mm_aorta.nii.gz")
     refs = {"aorta": aorta, "true": mask_of("aorta_parts/aorta_true_lumen.nii.gz"),
             "plane": annulus_plane(mask_of("aorta_parts/annulus_proper.nii.gz"), aorta, vol.spacing)}
-    pts = points(aorta, mask_of("aorta_parts/annulus_proper.nii.gz"), vol.spacing, refs["true"])
+    pts = points(aorta, mask_of("aorta_parts/annulus_proper.nii.gz"), vol.spacing)
     xyz = {k: ",".join(map(str, v)) for k, v in pts.items()}
     print(f"points (voxel X,Y,Z): start {xyz['start']}  via {xyz['via']}  end {xyz['end']}")
     print(f"goals: path >= 95% inside, {0.95 * REPORT_LENGTH_MM:.0f}-{1.05 * REPORT_LENGTH_MM:.0f} mm; 0 mL beyond "
@@ -248,7 +247,10 @@ def main() -> int:
         row("ctui segment (one seed, auto)", seg.segmentation.labels == seg.objects[0].id, time.perf_counter() - t,
             refs, vol=vol)
         t = time.perf_counter()
-        row("sitk colliding fronts alone", peer_core(vol, pts), time.perf_counter() - t, refs, vol=vol)
+        core = peer_core(vol, pts)
+        row("sitk colliding fronts alone", core, time.perf_counter() - t, refs, vol=vol)
+        print(f"  (a core: {int(core.sum())} voxels, {100 * (core & refs['true']).sum() / max(core.sum(), 1):.1f}% "
+              f"inside the true lumen, {100 * (core & refs['aorta']).sum() / max(core.sum(), 1):.1f}% inside the aorta)")
         t = time.perf_counter()
         row("sitk geodesic active contour", peer_levelset(vol, best.path_mm), time.perf_counter() - t, refs, vol=vol)
     landmarks(vol, best)
