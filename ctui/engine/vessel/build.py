@@ -16,8 +16,7 @@ LUMENS = {"contrast": "the bright lumen only (the range at the points)",
           "wall": "the lumen and what lies inside the vessel's wall, up to the fat around it (a dissection's false "
                   "lumen, thrombus)"}
 SECTION_STEP_MM = 1.0  # distance between growth planes
-ROUTE_SMOOTH_MM = 1.0
-RECENTRE = 0  # growth passes on the path moved onto its sections' centroids  # spline smoothing of the voxel route
+ROUTE_SMOOTH_MM = 1.0  # spline smoothing of the voxel route
 
 
 @dataclass
@@ -100,13 +99,10 @@ def extract(image: np.ndarray, spacing, *, start, ends, vias=(), value_range=Non
         rq = _between_ends(spline_resample(route * sp, 0.5, smooth_mm=ROUTE_SMOOTH_MM), route * sp)
         if b:  # a branch: from where it leaves the trunk's vessel
             rq = _leaving(rq, mask, sp)
-        for k in range(1 + RECENTRE):
-            if k:
-                rq = grow.recentred(sec)
-            sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()))
-            sec = grow.grow_sections(sec, img, sp, ranges, core, dist, floor=floor,
-                                     progress=scaled(progress, 0.45 + 0.45 * (b + k / (1 + RECENTRE)) / len(routes),
-                                                     0.45 + 0.45 * (b + (k + 1) / (1 + RECENTRE)) / len(routes)))
+        sec = grow.planes(rq, step_mm=step_mm, h=0.5 * float(sp.min()))
+        sec = grow.grow_sections(sec, img, sp, ranges, core, dist, floor=floor,
+                                 progress=scaled(progress, 0.45 + 0.45 * b / len(routes),
+                                                 0.45 + 0.45 * (b + 1) / len(routes)))
         mask |= grow.rasterise(sec, img.shape, sp)
         rows += _rows(sec, branch=b)
         smooth.append(rq / sp + off)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames, spline_resample
+from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames
 from ctui.engine.vessel.wall import EXTRA_MM, wall_rays, wall_regions
 
 RADIUS_FACTOR = 1.3  # reach of a section / inscribed radius (a round vessel; a neighbour touching it is cut off)
@@ -171,26 +171,6 @@ def _continuity(regions: np.ndarray, seeds: np.ndarray, rr: np.ndarray, sec: Sec
     for i in np.nonzero(cut)[0]:
         regions[i] = _seeded(regions[i] & (rr <= 1.1 * ref_r[i]), seeds[i])
     return cut
-
-
-def recentred(sec: Sections, *, smooth_mm: float = 1.0, step_mm: float = 0.5) -> np.ndarray:
-    """The path (k, 3) mm moved onto the centroids of its sections' regions (clipped or empty
-    sections move as their neighbours), smoothed: a minimal path cuts the inside of bends; its
-    sections' centroids do not (as :func:`ctui.engine.measure.centreline.recentre_path`)."""
-    a = np.arange(-sec.half, sec.half + 1e-9, sec.h)
-    n = len(sec.s)
-    move = np.zeros((n, 3))
-    good = np.zeros(n, bool)
-    for i, reg in enumerate(sec.regions):
-        if reg.any() and not sec.clipped[i]:
-            iu, iv = np.nonzero(reg)
-            move[i] = a[iu].mean() * sec.u[i] + a[iv].mean() * sec.v[i]
-            good[i] = True
-    if good.sum() < 2:
-        return sec.p.copy()
-    for k in range(3):
-        move[~good, k] = np.interp(sec.s[~good], sec.s[good], move[good, k])
-    return spline_resample(sec.p + move, step_mm, smooth_mm=smooth_mm)
 
 
 def _inscribed(regions: np.ndarray, h: float) -> np.ndarray:
