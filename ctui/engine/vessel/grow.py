@@ -145,7 +145,8 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
             rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & ~lumen
             reg = reg | (rim & (rr <= limit[i]))
         if floor is not None:
-            walls.append(wall_rays(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo)))
+            walls.append(wall_rays(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo),
+                                   inset=0.5 * float(max(spacing))))
         regions[i] = reg
         seeds_all[i] = seeds
     if floor is not None:

@@ -3,10 +3,13 @@
 A dissection's false lumen or a mural thrombus is as grey as the tissue around the vessel, so no
 range tells it apart; the fat (CT: below ``floor`` HU, -30 by default) or lung around the vessel
 does. From the lumen's centroid, rays every 5 degrees run out until the first value under the
-floor; each ray's length is capped at ``SPREAD`` times their median (where the vessel touches an
-organ, the oesophagus, the spine, no fat parts them), smoothed over neighbouring rays, and the
-polygon they draw is re-cast once from its own centroid (the lumen is often off-centre in a
-dissection). The wall region is that polygon joined with the lumen.
+floor, or, where the vessel touches another bright lumen (a chamber, a neighbouring vessel), to
+the darkest point between the two. The rays that found such an end fit a circle (the outline is
+round; rays that ran on along an organ, the oesophagus, the spine, are cut at it, half a voxel
+inside the ray ends); each ray is capped at ``SPREAD`` times their median and smoothed over
+neighbouring rays, and the rays are re-cast from their polygon's centroid (``ITERATIONS``: the
+lumen is often off-centre in a dissection). The rays and centres are then smoothed along the path
+over ``ALONG`` planes, and each plane's wall region is its polygon joined with the lumen.
 """
 
 from __future__ import annotations
@@ -15,12 +18,11 @@ import numpy as np
 
 N_RAYS = 72
 SPREAD = 1.3  # a ray may run this many times the median ray's length
-REACH = 3.0  # rays run at most this many times the lumen's reach from its centroid (and 12 mm)
+REACH = 3.0  # rays run at most this many times the lumen's reach from its centroid (and 12 mm),
+EXTRA_MM = 15.0  # ... and at most this much beyond it
 ITERATIONS = 3  # rays cast from the lumen's centroid, then from their polygon's
-EXTRA_MM = 20.0  # ... and at most this much beyond it
-WALL_MM = 1.5  # a vessel's wall: what a ray adds beyond the lumen where it meets no fat
 MIN_FOUND = 12  # rays that met fat or another lumen needed to fit the outline
-ALONG = 7  # planes (mm at the default step) the wall's rays are smoothed over along the path
+ALONG = 13  # planes (mm at the default step) the wall's rays are smoothed over along the path
 CT_FLOOR = -30.0  # HU: fat and lung lie below it, a thrombosed false lumen above
 
 
@@ -59,7 +61,7 @@ def _rays(val: np.ndarray, lumen: np.ndarray, c: np.ndarray, h: float, half: flo
     return rho, found
 
 
-def _circle_clip(rho: np.ndarray, found: np.ndarray, c: np.ndarray) -> np.ndarray:
+def _circle_clip(rho: np.ndarray, found: np.ndarray, c: np.ndarray, inset: float) -> np.ndarray:
     """Rays cut at the circle fitted (least squares, twice, the second time without the points
     more than 2 mm outside the first) to the ends of the rays that met fat or another lumen: the
     vessel's outline is round, the rays that ran on (along an organ, the spine) are not."""
@@ -81,7 +83,7 @@ def _circle_clip(rho: np.ndarray, found: np.ndarray, c: np.ndarray) -> np.ndarra
     b = d @ m
     disc = b * b - (m @ m - r * r)
     reach = np.where(disc >= 0, b + np.sqrt(np.maximum(disc, 0.0)), rho)
-    return np.minimum(rho, reach + WALL_MM)
+    return np.minimum(rho, reach - inset)
 
 
 def _smoothed(rho: np.ndarray) -> np.ndarray:
@@ -101,10 +103,11 @@ def _polygon(rho: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 
 def wall_rays(lumen: np.ndarray, val: np.ndarray, *, h: float, half: float, floor: float, lo: float,
-              bright: float) -> tuple[np.ndarray, np.ndarray] | None:
+              bright: float, inset: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
     """(centre (2,) mm in the plane's grid frame, ray lengths (N_RAYS,) mm) of the wall around
     the lumen region ``lumen`` of one plane (module docstring); None without a lumen. ``val``:
-    the plane's values."""
+    the plane's values; ``inset`` (mm): the fitted outline is drawn this much inside the ray
+    ends (a ray ends at its first sample in the fat, about half a voxel beyond the border)."""
     if not lumen.any():
         return None
     a = np.arange(-half, half + 1e-9, h)
@@ -114,7 +117,7 @@ def wall_rays(lumen: np.ndarray, val: np.ndarray, *, h: float, half: float, floo
     rmax = min(max(REACH * reach, 12.0), reach + EXTRA_MM, half)
     for it in range(ITERATIONS):
         rho, found = _rays(val, lumen, c, h, half, rmax, floor, lo, bright)
-        rho = _smoothed(_circle_clip(rho, found, c) if it else rho)
+        rho = _smoothed(_circle_clip(rho, found, c, inset) if it else rho)
         if it < ITERATIONS - 1:
             c = c + _centroid(rho)
     return c, rho
