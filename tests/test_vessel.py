@@ -111,13 +111,16 @@ def test_aorta_from_root_to_distal_end():
     k = np.clip(np.rint(vol.mm_to_index(res.path_mm)).astype(int), 0, np.asarray(vol.shape) - 1)
     assert aorta[k[:, 0], k[:, 1], k[:, 2]].mean() >= 0.95
     assert res.path_length_mm[0] == pytest.approx(372.0, rel=0.05)
-    assert dice(res.mask, true) >= 0.78
+    assert dice(res.mask, true) >= 0.85  # 0.874 measured (benchmarks/vessels.py)
+    wall = vessel(vol, start=(56, 47, 83), vias=[(61, 77, 148)], ends=[(48, 77, 1)], lumen="wall")
+    assert dice(wall.mask, aorta) >= 0.78  # 0.804 measured: the false lumen inside the wall
     pa = np.argwhere(read("aorta_parts/annulus_proper.nii.gz")) * 1.5  # the annulus' principal plane, mm (z, y, x)
     c = pa.mean(axis=0)
     n = np.linalg.svd(pa - c)[2][2]
     n = n if (np.argwhere(true[90:100]).mean(axis=0) * 1.5 + [135, 0, 0] - c) @ n > 0 else -n
-    q = np.argwhere(res.mask) * 1.5
-    assert not (((q - c) @ n < 0) & (np.linalg.norm(q - c, axis=1) < 40)).any()  # nothing in the ventricle
+    for m in (res.mask, wall.mask):
+        q = np.argwhere(m) * 1.5
+        assert not (((q - c) @ n < 0) & (np.linalg.norm(q - c, axis=1) < 40)).any()  # nothing in the ventricle
 
 
 def test_wall_takes_the_thrombus_inside_the_wall_not_the_fat():
