@@ -13,7 +13,7 @@ import time
 
 from textual.worker import get_current_worker
 
-from ctui.engine.actions.segment import segment as segment_action
+from ctui.engine.actions.segment import METHODS, segment as segment_action
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Cancelled
 from ctui.engine.segment import propagate
@@ -135,7 +135,8 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
     try:
         with s._lock:
             labels = s.seg.labels.copy()
-            labels[labels == oid] = 0
+            if "prompts" not in METHODS[opts.method].options:  # a model's prompts refine the object as it is
+                labels[labels == oid] = 0
             scratch = Segmentation(s.seg.shape, labels=labels)
             res = segment_action(s.volume, [seed], th, background=list(getattr(s, "background_seeds", []) or []),
                                  options=opts, pipeline=s.pipeline, segmentation=scratch, progress=progress,
