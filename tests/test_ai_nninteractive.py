@@ -248,3 +248,47 @@ def test_series_file_is_what_was_sent(server, series):
     segment(vol, [(20, 20, 10)], [], options=SegmentOptions(method="nninteractive", server=server.url))
     (lease,) = server.leases.values()
     assert lease.image.shape == (1, *SHAPE) and np.array_equal(lease.image[0], vol.data)
+
+
+@pytest.mark.slow
+async def test_tui_clicks_refine_the_object(server, series, tmp_path, monkeypatch):
+    """The TUI: method nninteractive (the G panel's choice), S at the cursor sends a positive point, the
+    proposal is accepted with a; S elsewhere with a background seed refines the same object (one session,
+    the image sent once); u undoes the last accept."""
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.session import Session
+    from ctui.screens.testing import wait_for, wait_workspace
+
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.setenv("CTUI_NNI_SERVER", server.url)
+    monkeypatch.chdir(tmp_path)
+    vol = load(str(series))
+    s = Session(vol, source_path=str(series), z=10, y=20, x=20)
+    s.segment_options = {"method": "nninteractive"}
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(160, 50)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        s.z, s.y, s.x = 10, 20, 20
+        await pilot.press("S")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=60, what="the first proposal")
+        assert "nnInteractive: 1 prompt (image sent)" in str(ws.query_one("#status").render())
+        await pilot.press("a")
+        await pilot.pause()
+        first = expected([(20, 20, 10)])
+        assert np.array_equal(s.seg.labels == s.current, first)
+        s.z, s.y, s.x = 12, 22, 30
+        s.background_seeds.append((25, 21, 11))
+        await pilot.press("S")
+        await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=60, what="the second proposal")
+        await pilot.press("a")
+        await pilot.pause()
+        assert np.array_equal(s.seg.labels == s.current, expected([(20, 20, 10), (30, 22, 12)], [(25, 21, 11)]))
+        assert np.array_equal(s.seg.labels == s.current, server.returned(SHAPE) != 0)
+        assert server.claims == 1 and server.images == 1
+        assert server.log == [("point", (10, 20, 20)), ("point", (12, 22, 30)), ("negative", (11, 21, 25))]
+        await pilot.press("u")
+        await pilot.pause()
+        assert np.array_equal(s.seg.labels == s.current, first)
