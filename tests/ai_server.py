@@ -134,6 +134,7 @@ class PromptServer:
 def _handler(server: PromptServer) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         protocol_version = "HTTP/1.1"
+        disable_nagle_algorithm = True  # headers and body go out as two writes: no 40 ms Nagle wait
 
         def log_message(self, *args: Any) -> None:  # quiet
             pass

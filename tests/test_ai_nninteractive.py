@@ -182,6 +182,21 @@ def test_same_session_reused(server):
     assert np.array_equal(res2.segmentation.labels == 1, expected([(20, 20, 10), (30, 20, 10)], [(25, 20, 10)]))
 
 
+def test_edited_object_is_sent_again(server):
+    """An object edited between prompts (a brush stroke away from the server's boxes) no longer matches the
+    server's copy: it goes as the initial segmentation before the next prompt, so nothing is lost."""
+    vol = load_volume_array()
+    opts = SegmentOptions(method="nninteractive", server=server.url)
+    seg = segment(vol, [(20, 20, 10)], [], options=opts).segmentation
+    drawn = np.zeros(SHAPE, bool)
+    drawn[15:17, 35:38, 40:44] = True
+    seg.apply_mask(drawn, 1, label="brush")
+    segment(vol, [(30, 20, 10)], [], options=opts, segmentation=seg, object_ids=[1])
+    first = expected([(20, 20, 10)])
+    assert server.log[-2:] == [("initial", int((first | drawn).sum())), ("point", (10, 20, 30))]
+    assert np.array_equal(seg.labels == 1, expected([(20, 20, 10), (30, 20, 10)]) | drawn)
+
+
 def _closed_port() -> int:
     s = socket.socket()
     s.bind(("127.0.0.1", 0))

@@ -128,6 +128,7 @@ class Remote:
         self.buffer: np.ndarray | None = None
         self.object_id = 0
         self.sent: set[tuple[str, Any]] = set()
+        self.region: list[list[int]] | None = None  # the box outside which the buffer is zero (None: all zero)
 
     def ensure_image(self, data: np.ndarray, spacing: tuple[float, ...]) -> bool:
         """Upload ``data`` (nz, ny, nx) unless the server holds it; True when it was sent."""
@@ -138,22 +139,32 @@ class Remote:
         self.client.set_image(np.asarray(data)[None], {"spacing": [float(v) for v in spacing]})
         self.buffer = np.zeros(data.shape, np.uint8)
         self.client.set_target_buffer(self.buffer)
-        self.image_key, self.object_id, self.sent = key, 0, set()
+        self.image_key, self.object_id, self.sent, self.region = key, 0, set(), None
         return True
 
-    def sync_object(self, current: np.ndarray, oid: int) -> bool:
-        """Make the server's object equal ``current`` (bool (nz, ny, nx)): nothing when it does and is the
-        same object; else its interactions are reset and a non-empty object sent as the initial
-        segmentation. True when an object was sent."""
+    def sync_object(self, seg: Any, oid: int) -> bool:
+        """Make the server's object equal object ``oid`` of ``seg``: nothing when it does and is the same
+        object; else its interactions are reset and a non-empty object sent as the initial segmentation.
+        True when an object was sent. The check reads only the box holding both (the buffer is zero
+        outside ``region``, the object outside its bounding box): no whole-volume comparison."""
         assert self.buffer is not None
-        if oid == self.object_id and np.array_equal(self.buffer.view(bool), current):
-            return False
+        ob = seg.object_bbox(oid)
+        box = _union(self.region, None if ob is None else [[b.start, b.stop] for b in ob])
+        if oid == self.object_id:
+            sl = None if box is None else tuple(slice(a, b) for a, b in box)
+            if sl is None or np.array_equal(seg.labels[sl] == oid, self.buffer[sl].view(bool)):
+                return False
         self.client.reset_interactions()
-        self.object_id, self.sent = oid, set()
-        if not current.any():
+        self.object_id, self.sent, self.region = oid, set(), None
+        if ob is None:
             return False
-        self.client.add_initial_seg_interaction(current.view(np.uint8), run_prediction=False)
+        self.client.add_initial_seg_interaction((seg.labels == oid).view(np.uint8), run_prediction=False)
+        self.region = [[b.start, b.stop] for b in ob]
         return True
+
+    def written(self, box: list[list[int]]) -> None:
+        """The server wrote ``box`` (half-open (z, y, x)) of the buffer: it may hold the object there."""
+        self.region = _union(self.region, box)
 
     def send(self, kind: str, value: Any) -> list[list[int]] | None:
         """One prompt; returns the box the server changed ([[z0, z1], [y0, y1], [x0, x1]], half-open) or None."""
@@ -173,6 +184,13 @@ class Remote:
 
 _SESSIONS: dict[tuple[str, str], Remote] = {}
 _LOCK = threading.Lock()
+
+
+def _union(a: list[list[int]] | None, b: list[list[int]] | None) -> list[list[int]] | None:
+    """The box holding boxes ``a`` and ``b`` ([[start, stop], ...] per axis; None: empty)."""
+    if a is None or b is None:
+        return b if a is None else a
+    return [[min(p[0], q[0]), max(p[1], q[1])] for p, q in zip(a, b)]
 
 
 def _image_key(data: np.ndarray) -> tuple:
@@ -264,13 +282,14 @@ def _exchange(volume: Any, seg: Any, oid: int, todo: list[tuple[str, Any]], url:
     data = volume.data
     report(progress, 1, len(todo) + 2, "sending the image")
     rep.image_sent |= remote.ensure_image(data, tuple(volume.spacing))
-    rep.refined |= remote.sync_object(seg.labels == oid, oid)
+    rep.refined |= remote.sync_object(seg, oid)
     fresh = [(k, v) for k, v in todo if (k, v) not in remote.sent]
     for i, (kind, value) in enumerate(fresh):
         report(progress, i + 2, len(fresh) + 2, f"{kind} prompt {i + 1}/{len(fresh)}")
         box = remote.send(kind, value)
         rep.prompts += 1
         if box is not None:
+            remote.written(box)
             _write_box(seg, oid, remote.buffer, box, f"nninteractive {kind} {_text(value)} -> object {oid}")
             rep.boxes.append(box)
 
