@@ -168,7 +168,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON report")
     p.add_argument("--server", metavar="URL", default="",
                    help="--method nninteractive: the nnInteractive server (default: $CTUI_NNI_SERVER), e.g. "
-                        "http://127.0.0.1:1527 through `ssh -L 1527:127.0.0.1:1527 gpu-box`; never saved")
+                        "http://127.0.0.1:8000 through `ssh -L 8000:127.0.0.1:8000 gpu-box`; never saved")
     p.add_argument("--key", metavar="KEY", default=None,
                    help="--method nninteractive: the server's API key (default: $CTUI_NNI_KEY); never saved")
     p.add_argument("--refine", action="store_true",

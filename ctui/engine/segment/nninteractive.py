@@ -96,7 +96,7 @@ def server_of(server: str | None = None, api_key: str | None = None) -> tuple[st
     url = (server or os.environ.get(ENV_SERVER, "")).strip()
     key = (api_key if api_key is not None else os.environ.get(ENV_KEY, "")).strip()
     if not url:
-        raise CtuiError(f"no nnInteractive server: give its URL (e.g. http://127.0.0.1:1527 through an ssh -L "
+        raise CtuiError(f"no nnInteractive server: give its URL (e.g. http://127.0.0.1:8000 through an ssh -L "
                         f"tunnel) or set {ENV_SERVER}", option="server")
     if not url.startswith(("http://", "https://")):
         raise CtuiError(f"the server URL {url!r} must start with http:// or https://", option="server")
