@@ -98,7 +98,7 @@ def test_points_and_negative(server, series, tmp_path, capsys):
     report = json.loads(out)
     obj = report["objects"][0]
     assert obj["voxels"] == int(got.sum()) and obj["range"] is None
-    assert [w for w in obj["warnings"] if "licence" in w] == ["the server's model licence: CC BY-NC-SA 4.0 (test model)"]
+    assert obj["message"].endswith("; the server's model licence: CC BY-NC-SA 4.0 (test model)")
     text = zipfile.ZipFile(proj).read("project.json").decode()
     assert server.url not in text and "127.0.0.1" not in text  # the server is never saved
 
@@ -178,8 +178,10 @@ def test_same_session_reused(server):
     res2 = segment(vol, [(30, 20, 10)], [], background=[(25, 20, 10)], options=opts,
                    segmentation=res.segmentation, object_ids=[1])
     assert server.claims == 1 and server.images == 1  # the image went once
-    assert not any(w.startswith("the server's model licence") for w in res2.objects[0].warnings)  # shown once
+    assert "licence" in res.objects[0].message() and "licence" not in res2.objects[0].message()  # shown once
     assert np.array_equal(res2.segmentation.labels == 1, expected([(20, 20, 10), (30, 20, 10)], [(25, 20, 10)]))
+    nninteractive.close_sessions()
+    assert not server.leases and server.requests[-1] == "/release"  # the session is released
 
 
 def test_edited_object_is_sent_again(server):
@@ -289,7 +291,8 @@ async def test_tui_clicks_refine_the_object(server, series, tmp_path, monkeypatc
         s.z, s.y, s.x = 10, 20, 20
         await pilot.press("S")
         await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=60, what="the first proposal")
-        assert "nnInteractive: 1 prompt (image sent)" in str(ws.query_one("#status").render())
+        status = str(ws.query_one("#status").render())
+        assert "nnInteractive: 1 prompt (image sent)" in status and "model licence: CC BY-NC-SA" in status
         await pilot.press("a")
         await pilot.pause()
         first = expected([(20, 20, 10)])
@@ -298,6 +301,8 @@ async def test_tui_clicks_refine_the_object(server, series, tmp_path, monkeypatc
         s.background_seeds.append((25, 21, 11))
         await pilot.press("S")
         await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=60, what="the second proposal")
+        status = str(ws.query_one("#status").render())
+        assert "nnInteractive: 2 prompts," in status and "licence" not in status  # the licence once a session
         await pilot.press("a")
         await pilot.pause()
         assert np.array_equal(s.seg.labels == s.current, expected([(20, 20, 10), (30, 22, 12)], [(25, 21, 11)]))

@@ -151,7 +151,8 @@ class PromptedResult(ObjectResult):
 
     def message(self) -> str:
         sl = "" if self.slices is None else f", slices {self.slices[0]}..{self.slices[1]}"
-        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, {self.stops.get('nninteractive', '')}"
+        lic = f"; the server's model licence: {self.stops['licence']}" if self.stops.get("licence") else ""
+        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, {self.stops.get('nninteractive', '')}{lic}"
 
 
 @dataclass
@@ -420,7 +421,10 @@ def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[
     if not oid:
         raise CtuiError("at most 10 objects: no free object id")
     seg.add_object(names[0] if names else f"object {oid}", object_id=oid)
-    rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, opts.box), server=opts.server,
+    roi = None if opts.box is None else tuple((max(a, 0), min(b, n - 1)) for (a, b), n in zip(opts.box, shape))
+    if roi is not None and any(a > b for a, b in roi):
+        raise CtuiError(f"the box {_box_text(opts.box)} lies outside the volume", option="box")
+    rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, roi), server=opts.server,
                                     api_key=opts.api_key or None, progress=progress)
     box = seg.object_bbox(oid)
     res = PromptedResult(id=oid, seed=fg[0] if fg else bg[0] if bg else (0, 0, 0), range=(float("nan"),) * 2,
@@ -428,9 +432,9 @@ def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[
     res.voxels = 0 if box is None else int(np.count_nonzero(seg.labels[box] == oid))
     res.volume_ml = res.voxels * float(np.prod(volume.spacing)) / 1000.0
     res.slices = None if box is None else (box[0].start, box[0].stop - 1)
-    if rep.licence_new:
-        res.warnings.append(f"the server's model licence: {rep.licence}")
-    settings = {"method": opts.method, "prompts": rep.to_dict(), "box": opts.box,
+    if rep.licence_new:  # once a session: the message says it
+        res.stops["licence"] = rep.licence
+    settings = {"method": opts.method, "prompts": rep.to_dict(), "box": roi,
                 "seeds": [list(s) for s in fg], "background": [list(b) for b in bg]}
     info = seg.objects[oid]
     info.seeds.extend(s for s in fg if s not in info.seeds)
