@@ -283,7 +283,8 @@ def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=
     seeds = [parse_seed(s) for s in args.seed]
     prompted = getattr(args, "method", "fill") == "nninteractive"  # seeds, background seeds or a box are prompts
     if not seeds and not (prompted and (args.background or args.box)):
-        raise _err("give at least one --seed X,Y,Z")
+        raise _err("give a prompt: --seed X,Y,Z, --background X,Y,Z or --box" if prompted
+                   else "give at least one --seed X,Y,Z")
     background = [parse_seed(s) for s in getattr(args, "background", [])]
     pipeline = pipeline or build_pipeline(args)
     res = segment(volume, seeds, _thresholds(args), background=background, options=_options(args), pipeline=pipeline,
