@@ -95,6 +95,8 @@ def test_points_and_negative(server, series, tmp_path, capsys):
     assert np.array_equal(got, expected([(20, 20, 10), (30, 22, 12)], [(25, 21, 11)]))
     assert 0 < got.sum() < expected([(20, 20, 10), (30, 22, 12)]).sum()  # the negative point removed voxels
     assert server.log == [("point", (10, 20, 20)), ("point", (12, 22, 30)), ("negative", (11, 21, 25))]
+    assert server.requests[:4] == ["/claim", "/capabilities", "/set_image", "/set_target_buffer"]
+    assert "/reset_interactions" not in server.requests  # a fresh image needs none (a minimal server may lack it)
     report = json.loads(out)
     obj = report["objects"][0]
     assert obj["voxels"] == int(got.sum()) and obj["range"] is None

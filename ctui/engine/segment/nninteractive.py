@@ -129,6 +129,7 @@ class Remote:
         self.object_id = 0
         self.sent: set[tuple[str, Any]] = set()
         self.region: list[list[int]] | None = None  # the box outside which the buffer is zero (None: all zero)
+        self.fresh = False  # the image was just sent: the server holds no interactions
 
     def ensure_image(self, data: np.ndarray, spacing: tuple[float, ...]) -> bool:
         """Upload ``data`` (nz, ny, nx) unless the server holds it; True when it was sent."""
@@ -139,7 +140,7 @@ class Remote:
         self.client.set_image(np.asarray(data)[None], {"spacing": [float(v) for v in spacing]})
         self.buffer = np.zeros(data.shape, np.uint8)
         self.client.set_target_buffer(self.buffer)
-        self.image_key, self.object_id, self.sent, self.region = key, 0, set(), None
+        self.image_key, self.object_id, self.sent, self.region, self.fresh = key, 0, set(), None, True
         return True
 
     def sync_object(self, seg: Any, oid: int) -> bool:
@@ -154,8 +155,9 @@ class Remote:
             sl = None if box is None else tuple(slice(a, b) for a, b in box)
             if sl is None or np.array_equal(seg.labels[sl] == oid, self.buffer[sl].view(bool)):
                 return False
-        self.client.reset_interactions()
-        self.object_id, self.sent, self.region = oid, set(), None
+        if not self.fresh:  # a new image holds no interactions: nothing to reset (a minimal server may lack it)
+            self.client.reset_interactions()
+        self.object_id, self.sent, self.region, self.fresh = oid, set(), None, False
         if ob is None:
             return False
         self.client.add_initial_seg_interaction((seg.labels == oid).view(np.uint8), run_prediction=False)
@@ -176,6 +178,7 @@ class Remote:
             x, y, z = value
             got = c.add_point_interaction((z, y, x), include_interaction=kind == "point")
         self.sent.add((kind, value))
+        self.fresh = False
         return None if got is None else [[int(a), int(b)] for a, b in got]
 
     def close(self) -> None:
