@@ -54,7 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--roi-subset", default="", metavar="NAME,...",
                    help="only these classes, e.g. liver,spleen,kidney_left (TotalSegmentator's --roi_subset)")
     p.add_argument("--fast", action="store_true", help="TotalSegmentator's 3 mm model (about a minute on a CPU)")
-    p.add_argument("--device", choices=("cpu", "gpu"), default="cpu", help="where the model runs (default cpu)")
+    p.add_argument("--device", choices=_Choices("DEVICES"), default="cpu", metavar="cpu|gpu",
+                   help="where the model runs (default cpu)")
     p.add_argument("--merge", choices=_Choices("MERGE"), default="add", metavar="add|replace|keep",
                    help="with a .ctui PATH: add (default: new objects, existing voxels stay theirs), replace "
                         "(a class named like an object replaces it), keep (such a class is skipped)")
