@@ -72,6 +72,7 @@ class PromptServer:
         self.leases: dict[str, Lease] = {}
         self.expire_next: set[str] = set()
         self.delay_s = 0.0
+        self.expire_all = False  # every request with a lease answers 410 (a server that loses every session)
         self.bytes_in = self.bytes_out = 0
         self.requests: list[str] = []
         self.claims = self.images = 0
@@ -182,6 +183,8 @@ def _handler(server: PromptServer) -> type[BaseHTTPRequestHandler]:
                 return self._json(200, _CAPS)
             token = self.headers.get("X-Lease-Token", "")
             with server.lock:
+                if server.expire_all:
+                    server.leases.pop(token, None)
                 if path in server.expire_next:
                     server.expire_next.discard(path)
                     server.leases.pop(token, None)

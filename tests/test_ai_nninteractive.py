@@ -21,6 +21,7 @@ pytest.importorskip("nnInteractive.inference.remote", reason="nninteractive-clie
 from ai_server import NEG_R, POS_R, PromptServer  # noqa: E402 - after the skip
 from ctui.cli import main as cli_main  # noqa: E402
 from ctui.engine.actions.segment import METHODS, SegmentOptions, segment  # noqa: E402
+from ctui.engine.actions.series import Segmentation  # noqa: E402
 from ctui.engine.core.errors import CtuiError  # noqa: E402
 from ctui.engine.io.labels import load_labels  # noqa: E402
 from ctui.engine.io.series import load  # noqa: E402
@@ -152,6 +153,14 @@ def test_lost_session_cli(server, series, tmp_path, capsys):
     assert "re-established" in json.loads(out)["objects"][0]["message"]
 
 
+def test_session_lost_twice_is_one_line(server, series, capsys):
+    server.expire_all = True
+    rc, _, err = run_cli(["segment", str(series), "--method", "nninteractive", "--server", server.url,
+                          "--seed", "20,20,10"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "lost the session twice" in err
+    assert server.claims == 2
+
+
 def test_lost_session_keeps_the_object(server):
     """A restart between two prompts (the TUI's clicks): the second claims again, sends the image and
     the object as it stands, then its prompt."""
@@ -245,12 +254,16 @@ def test_errors_one_line(case, series, tmp_path, capsys, monkeypatch):
         srv.close()
 
 
-def test_timeout(server):
+def test_timeout(server, series, capsys, monkeypatch):
     server.delay_s = 2.0
+    monkeypatch.setenv("CTUI_NNI_TIMEOUT", "0.5")
+    rc, _, err = run_cli(["segment", str(series), "--method", "nninteractive", "--server", server.url,
+                          "--seed", "20,20,10"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "did not answer within 0.5 s" in err
     vol = load_volume_array()
-    seg = segment.__globals__["Segmentation"](SHAPE)
+    seg = Segmentation(SHAPE)
     with pytest.raises(CtuiError, match=r"did not answer within 0.5 s"):
-        nninteractive.run_prompts(vol, seg, 1, nninteractive.Prompts([(20, 20, 10)]), server=server.url, timeout=0.5)
+        nninteractive.run_prompts(vol, seg, 1, nninteractive.Prompts([(20, 20, 10)]), server=server.url)
     assert not (seg.labels == 1).any()
 
 

@@ -22,7 +22,8 @@ Coordinates: seeds (x, y, z) = (column, row, slice); the server gets (z, y, x) i
 coordinates of the array it was sent, boxes as half-open [start, stop) per axis.
 
 The server's URL and API key come from the caller or the environment (``CTUI_NNI_SERVER``,
-``CTUI_NNI_KEY``) and are never stored in a project or a report.
+``CTUI_NNI_KEY``) and are never stored in a project or a report; ``CTUI_NNI_TIMEOUT`` (seconds,
+default 60) bounds a prediction (the image upload gets ten times as long).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from ctui.engine.core.progress import Progress, report
 
 ENV_SERVER = "CTUI_NNI_SERVER"
 ENV_KEY = "CTUI_NNI_KEY"
+ENV_TIMEOUT = "CTUI_NNI_TIMEOUT"
 INSTALL = "pip install 'ctui[ai]' (the nninteractive-client package)"
 TIMEOUT_S = 60.0  # a prediction; the image upload gets 10x this
 CONNECT_TIMEOUT_S = 5.0
@@ -101,6 +103,19 @@ def server_of(server: str | None = None, api_key: str | None = None) -> tuple[st
     if not url.startswith(("http://", "https://")):
         raise CtuiError(f"the server URL {url!r} must start with http:// or https://", option="server")
     return url.rstrip("/"), key
+
+
+def timeout_of(timeout: float | None) -> float:
+    """Seconds a prediction may take: ``timeout``, else ``CTUI_NNI_TIMEOUT``, else 60."""
+    if timeout is None:
+        text = os.environ.get(ENV_TIMEOUT, "").strip()
+        try:
+            timeout = float(text) if text else TIMEOUT_S
+        except ValueError:
+            raise CtuiError(f"{ENV_TIMEOUT}={text!r}: expected seconds, e.g. 60") from None
+    if not 0 < timeout < 1e6:
+        raise CtuiError(f"the server timeout must be a positive number of seconds, got {timeout:g}")
+    return float(timeout)
 
 
 def client_library() -> Any:
@@ -217,7 +232,7 @@ atexit.register(close_sessions)
 
 
 def run_prompts(volume: Any, seg: Any, oid: int, prompts: Prompts, *, server: str | None = None,
-                api_key: str | None = None, timeout: float = TIMEOUT_S, progress: Progress | None = None
+                api_key: str | None = None, timeout: float | None = None, progress: Progress | None = None
                 ) -> PromptReport:
     """Send ``prompts`` for object ``oid`` and write each answer into ``seg`` (one undo step a prompt).
 
@@ -227,6 +242,7 @@ def run_prompts(volume: Any, seg: Any, oid: int, prompts: Prompts, *, server: st
     before an error stay as undo steps (the caller's scratch segmentation is what the TUI drops).
     """
     url, key = server_of(server, api_key)
+    timeout = timeout_of(timeout)
     lib = client_library()
     import httpx  # the client's HTTP library (installed with it): its exceptions name what failed
 
@@ -250,6 +266,9 @@ def run_prompts(volume: Any, seg: Any, oid: int, prompts: Prompts, *, server: st
                 _drop(url, key)
                 raise CtuiError(f"the nnInteractive server at {url} is full ({exc}): try again when a user "
                                 "leaves, or ask for more sessions (--max-sessions)") from None
+            except httpx.InvalidURL as exc:
+                _drop(url, key)
+                raise CtuiError(f"the server URL {url!r} is not valid: {exc}", option="server") from None
             except httpx.HTTPError as exc:
                 _drop(url, key)
                 raise CtuiError(_http_message(httpx, exc, url, timeout)) from None
