@@ -18,6 +18,11 @@ carry warnings; an empty result raises. Each object is one or a few undo steps o
 :class:`Segmentation`. Slices are numbered from 0 (the lowest along the slice normal), in
 the CLI and the TUI alike. Coordinates: seeds are (x, y, z) = (column, row, slice).
 
+A method whose registry ``options`` hold ``"prompts"`` (``nninteractive``: a model on a server)
+takes another path: no range and no seed fill; every seed is a positive point, every background
+seed a negative one, the box a box prompt, for one object, refined from what the segmentation
+already holds (:mod:`ctui.engine.segment.nninteractive`).
+
 Memory: the fill works on crops and the sweep on a box of at most 300 mm; 3D mode and
 ``grow`` without the guard hold one bool in-range volume (1 byte a voxel) plus crop-sized
 work arrays, checked against the memory available before they are allocated.
