@@ -110,6 +110,7 @@ def env(tmp_path, monkeypatch):
     bindir.mkdir()
     install(bindir)
     monkeypatch.setenv("PATH", f"{bindir}{os.pathsep}{os.environ.get('PATH', '')}")
+    monkeypatch.chdir(tmp_path)  # the default output, <stem>-auto.ctui, goes to the working folder
     return series, home, bindir
 
 
@@ -209,6 +210,7 @@ def test_licensed_task(env, capsys):
     rc, out, err = run(["auto", str(series), "--task", "tissue_types", "--roi-subset", "liver"], capsys)
     assert rc == 0, err
     assert "licensed TotalSegmentator task" in out
+    assert project(Path("ct-auto.ctui"))[1][0]["name"] == "liver"  # the default output name
 
 
 def test_not_installed(env, capsys, monkeypatch, tmp_path):
