@@ -45,3 +45,5 @@ PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
 LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
 MRIC_SUFFIXES = (".mric",)
+#: ``ctui report --format``: a DICOM SR (TID 1500) over a DICOM-SEG, the measurements as JSON, one CSV row per object
+REPORT_FORMATS = ("sr", "json", "csv")
