@@ -233,3 +233,25 @@ def test_dcmqi_reads_the_same_numbers(case):
         assert [float(i["value"]) for i in t["measurementItems"]] == pytest.approx(
             [m["value"] for m in g["measurements"]], rel=1e-12)
         assert [i["quantity"]["CodeValue"] for i in t["measurementItems"]][:3] == ["118565006", "118565006", "42798000"]
+
+
+def test_report_over_a_dcmqi_seg(tmp_path, capsys):
+    """dcmqi's liver SEG over its real CT: referenced as it is, numbers those of `ctui measure --labels`."""
+    from conftest import shared
+
+    from ctui.engine.actions.report import read_report
+
+    data = shared("dcmqi_seg")
+    seg, ct = data / "liver.dcm", data / "ct-3slice"
+    out = tmp_path / "liver-sr.dcm"
+    assert main(["report", str(seg), "--series", str(ct), "--out", str(out)]) == 0
+    m = _measure_json(capsys, ct, "--labels", seg, "--object", 1)
+    (g,) = read_report(out).groups
+    import pydicom
+
+    assert g["segment"]["sop_instance_uid"] == str(pydicom.dcmread(seg, stop_before_pixels=True).SOPInstanceUID)
+    assert g["site"] == "Liver" and g["name"] == "Liver"
+    exp = _expected(m)
+    assert {k: g["values"][k] for k in exp if exp[k] is not None} == pytest.approx(
+        {k: v for k, v in exp.items() if v is not None}, abs=1e-6)
+    assert not list(tmp_path.glob("*-seg.dcm"))
