@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         subparsers, "web", run,
         help="serve the TUI to a browser (loopback by default; reach it with ssh -L)",
         description="Serve the same TUI to a web browser: every tab runs `ctui open PATH`, its slices drawn "
-        "as sixel images at full resolution (capped at 1280x960 pixels, redraws debounced). Binds 127.0.0.1 "
+        "as sixel images at full resolution (capped at 1280x960 pixels, at most one image per 40 ms). Binds 127.0.0.1 "
         "by default; from another machine use `ssh -L 8000:127.0.0.1:8000 HOST` and open "
         "http://127.0.0.1:8000. Bound to any other address, a token is required (--token, CTUI_WEB_TOKEN, "
         "or one printed at start). Needs the web extra: pip install 'ctui[web]'.",

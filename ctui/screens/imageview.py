@@ -51,7 +51,8 @@ class ImageView(Widget):
         self._strips_key: tuple | None = None
         self._tii = None  # textual-image child widget for sixel/kitty
         self._tii_key: tuple | None = None
-        self._tii_timer = None  # web mode: the pending (debounced) image update
+        self._tii_timer = None  # web mode: the pending (throttled) image update
+        self._tii_sent = 0.0  # when the last image update went out
 
     # ----------------------------------------------------------------- public
     def set_image(self, rgb: np.ndarray | None, *, token: object = None, spacing_yx=None, zoom=None, center=None, cursor=...) -> None:
@@ -87,14 +88,16 @@ class ImageView(Widget):
     def _invalidate(self) -> None:
         self._strips = None
         if self.mode in ("sixel", "kitty"):
-            if pixel_cap() is None:
-                self._update_tii()
-            elif self._tii_timer is None:  # web mode: one image per WEB_DEBOUNCE_S, the latest
-                self._tii_timer = self.set_timer(WEB_DEBOUNCE_S, self._flush_tii)
+            wait = WEB_DEBOUNCE_S - (time.perf_counter() - self._tii_sent)
+            if pixel_cap() is None or (wait <= 0 and self._tii_timer is None):
+                self._flush_tii()
+            elif self._tii_timer is None:  # web mode: at most one image per WEB_DEBOUNCE_S, the latest
+                self._tii_timer = self.set_timer(max(wait, 0.001), self._flush_tii)
         self.refresh()
 
     def _flush_tii(self) -> None:
         self._tii_timer = None
+        self._tii_sent = time.perf_counter()
         self._update_tii()
 
     def _grid(self, out_size: tuple[int, int]) -> np.ndarray | None:
