@@ -210,6 +210,7 @@ def write_sr(path: str | os.PathLike, objects: Sequence[SrObject], sources: Sequ
     dataset (pydicom, pixels not needed) whose segments ``objects`` name by number.
     """
     import highdicom as hd
+    from pydicom.dataset import Dataset
     from pydicom.sr.codedict import codes
 
     from ctui.engine.io.dicomseg import TYPE2_IDENTIFIERS, blank_identifiers  # pydicom
@@ -240,6 +241,10 @@ def write_sr(path: str | os.PathLike, objects: Sequence[SrObject], sources: Sequ
         series_number=int(first.get("SeriesNumber", 0) or 0) + 2000, sop_instance_uid=hd.UID(), instance_number=1,
         manufacturer="ctui", is_complete=True, series_description=title[:64])
     blank_identifiers(sr, keep=keep_identifiers)
+    scheme = Dataset()  # the private coding scheme's declaration (PS3.3 C.12.1.1.2)
+    scheme.CodingSchemeDesignator, scheme.CodingSchemeName = PRIVATE, "ctui measurement codes"
+    scheme.CodingSchemeResponsibleOrganization = "ctui"
+    sr.CodingSchemeIdentificationSequence = [*sr.get("CodingSchemeIdentificationSequence", []), scheme]
     p = Path(path)
     with atomic_path(p) as tmp:
         sr.save_as(str(tmp), enforce_file_format=True)
