@@ -173,3 +173,15 @@ def test_served_command_opens_the_path(tmp_path):
 
     argv = shlex.split(served_command(str(tmp_path / "a b.nii.gz")))
     assert argv[:4] == [sys.executable, "-m", "ctui.cli", "open"] and argv[4].endswith("a b.nii.gz")
+
+
+def test_web_without_the_extra_or_with_a_missing_path(monkeypatch, capsys, tmp_path):
+    import sys
+
+    from ctui.cli import main
+
+    assert main(["web", str(tmp_path / "nothing")]) == 2
+    assert "no such file or folder" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "uvicorn", None)  # "import uvicorn" -> ImportError
+    assert main(["web"]) == 2
+    assert "pip install 'ctui[web]'" in capsys.readouterr().err
