@@ -255,3 +255,17 @@ def test_report_over_a_dcmqi_seg(tmp_path, capsys):
     assert {k: g["values"][k] for k in exp if exp[k] is not None} == pytest.approx(
         {k: v for k, v in exp.items() if v is not None}, abs=1e-6)
     assert not list(tmp_path.glob("*-seg.dcm"))
+
+
+@pytest.mark.slow
+def test_all_sections(case, capsys):
+    """--sections all: every section of `ctui measure --json` is a planar group with its numbers."""
+    out = case["out"] / "all.dcm"
+    assert main(["report", str(case["project"]), "--object", "2", "--path", "auto", "--step", "4",
+                 "--sections", "all", "--seg", str(case["seg"]), "--out", str(out)]) == 0
+    m = _measure_json(capsys, case["project"], "--object", 2, "--path", "auto", "--step", 4)
+    _, volumetric, planar = _groups_by_highdicom(out)
+    assert len(volumetric) == 1 and len(planar) == len(m["sections"]) > 10
+    got = sorted((float(next(x.value for x in g.get_measurements() if x.name.meaning == "Arc length along the path")),
+                  float(next(x.value for x in g.get_measurements() if x.name.meaning == "Area"))) for g in planar)
+    assert got == pytest.approx([(r["s_mm"], r["area_mm2"]) for r in m["sections"]], abs=1e-6)

@@ -43,6 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="sections along the automatic centreline ('auto') or a path through points in mm")
     p.add_argument("--step", type=number("--step", 0.01, 1000), default=defaults.SECTION_STEP_MM, metavar="MM",
                    help=f"distance between sections (default {defaults.SECTION_STEP_MM:g} mm)")
+    p.add_argument("--sections", choices=defaults.REPORT_SECTIONS, default=defaults.REPORT_SECTIONS[0],
+                   help="with --path: the sections of largest and smallest diameter and area (default), or all of "
+                   "them (each a planar group of the SR with its contour)")
     p.add_argument("--keep-identifiers", action="store_true",
                    help="keep the patient name, ID and birth date of the source series (sr)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -54,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, inputs=[args.input, args.series, args.seg], label="--out")
     with progress_bar(args, f"report {args.format}") as progress:
         res = write_report(args.input, out=args.out, format=args.format, series=args.series, seg=args.seg,
-                           objects=args.object, path=args.path, step_mm=args.step,
+                           objects=args.object, path=args.path, step_mm=args.step, sections=args.sections,
                            keep_identifiers=args.keep_identifiers, progress=progress)
     if args.json:
         from ctui.engine.core.jsonio import dumps

@@ -42,6 +42,8 @@ REPORT_FORMATS = dict(zip(defaults.REPORT_FORMATS, (
 ROW_KEYS = ("volume_voxels_ml", "volume_mesh_ml", "area_mm2", "mean", "sd", "mean_value", "sd_value", "axis_1_mm",
             "axis_2_mm", "axis_3_mm", "path_length_mm", "max_diameter_mm", "max_diameter_s_mm", "min_diameter_mm",
             "min_diameter_s_mm", "max_area_mm2", "max_area_s_mm", "min_area_mm2", "min_area_s_mm")
+#: which sections of a path go in a report (:func:`write_report`'s ``sections``)
+SECTION_CHOICES = defaults.REPORT_SECTIONS
 #: a segment of a given SEG matches an object when their masks' Dice is at least this
 SEG_MATCH_DICE = 0.99
 
@@ -68,10 +70,11 @@ class ReportResult:
                 "warnings": list(self.warnings)}
 
 
-def row_of(res: MeasureResult) -> tuple[dict[str, float | None], list[dict]]:
-    """A measurement's report values {ROW_KEYS key: number or None} and its extreme sections
-    (the ``ctui measure --json`` section rows of largest and smallest diameter and area, each
-    once, with ``extremes`` naming which and ``contour_mm`` (k, 3) patient mm)."""
+def row_of(res: MeasureResult, *, sections: str = "extremes") -> tuple[dict[str, float | None], list[dict]]:
+    """A measurement's report values {ROW_KEYS key: number or None} and its sections: the
+    ``ctui measure --json`` section rows of largest and smallest diameter and area (each once,
+    ``extremes`` naming which), or every section (``sections="all"``), with ``contour_mm`` (k, 3)
+    patient mm."""
     v: dict[str, float | None] = dict.fromkeys(ROW_KEYS)
     v["volume_voxels_ml"], v["volume_mesh_ml"] = res.volume_ml.get("voxels"), res.volume_ml.get("mesh")
     v["area_mm2"] = res.area_mm2
@@ -94,6 +97,10 @@ def row_of(res: MeasureResult) -> tuple[dict[str, float | None], list[dict]]:
         s = round(float(best["s_mm"]), 6)
         sec = picked.setdefault(s, {**best, "extremes": [], "contour_mm": contours.get(s)})
         sec["extremes"].append(key)
+    if sections == "all":
+        for r in res.sections:
+            s = round(float(r["s_mm"]), 6)
+            picked.setdefault(s, {**r, "extremes": [], "contour_mm": contours.get(s)})
     return v, sorted(picked.values(), key=lambda r: r["s_mm"])
 
 
@@ -207,15 +214,19 @@ def _is_seg(path: str) -> bool:
 def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, format: str = "sr",
                  series: str | os.PathLike | None = None, seg: str | os.PathLike | None = None,
                  objects: int | Sequence[int] | None = None, path: Any = None,
-                 step_mm: float = defaults.SECTION_STEP_MM, keep_identifiers: bool = False,
-                 progress: Progress | None = None) -> ReportResult:
+                 step_mm: float = defaults.SECTION_STEP_MM, sections: str = "extremes",
+                 keep_identifiers: bool = False, progress: Progress | None = None) -> ReportResult:
     """Measure every object (or ``objects``) of a project or a label file over ``series`` and write
     the report ``out`` in ``format`` (:data:`REPORT_FORMATS`).
 
     ``path``: None, "auto" (sections along the centreline every ``step_mm``) or points, as
     :func:`measure_object`; ``seg``: a DICOM-SEG over the same series whose segments the SR
     references (default: the input when it is one, else ``<out>-seg.dcm`` written now).
+    ``sections``: "extremes" (the sections of largest and smallest diameter and area) or "all":
+    each one a planar group of the SR with its contour, and a row in ``objects``.
     """
+    if sections not in SECTION_CHOICES:
+        raise CtuiError(f"sections must be one of {', '.join(SECTION_CHOICES)}, got {sections!r}", option="sections")
     fmt = str(format).lower()
     if fmt not in REPORT_FORMATS:
         raise CtuiError(f"unknown report format {format!r} (one of {', '.join(REPORT_FORMATS)})", option="format")
@@ -237,7 +248,7 @@ def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, 
         report(progress, 0.1 + 0.5 * n / len(ids), 1.0, f"measuring {names[oid]}")
         m = measure_object(opened, object=oid, path=path, step_mm=step_mm, values=True)
         res.measures.append(m)
-        rows.append(row_of(m))
+        rows.append(row_of(m, sections=sections))
         res.warnings += [w for w in m.warnings if w not in res.warnings]
     numbers: dict[int, int] = {}
     if fmt == "sr":
