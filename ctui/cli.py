@@ -18,15 +18,18 @@ import sys
 from ctui import __version__
 
 OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
-COMMANDS = ("open", "info", "demo", "segment", "edit", "drift", "mesh", "render", "measure", "export", "batch", "auto")
+COMMANDS = ("open", "info", "demo", "segment", "edit", "drift", "mesh", "render", "measure", "export", "batch", "auto",
+            "report", "web")
 
 
 def _command_modules() -> tuple:
     """The subcommand modules, in COMMANDS order (each imports nothing heavy at top level)."""
     from ctui.commands import auto, batch, demo, drift, edit, export, info, measure, mesh, open, render, segment
+    from ctui.commands import report, web
 
     mods = {"open": open, "info": info, "demo": demo, "segment": segment, "edit": edit, "drift": drift, "mesh": mesh,
-            "render": render, "measure": measure, "export": export, "batch": batch, "auto": auto}
+            "render": render, "measure": measure, "export": export, "batch": batch, "auto": auto,
+            "report": report, "web": web}
     return tuple(mods[name] for name in COMMANDS)
 
 

@@ -26,6 +26,12 @@ import subprocess
 import sys
 
 MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
+#: ``ctui web`` sets ``CTUI_WEB=1`` for the TUI it serves to a browser: sixel images (xterm.js draws
+#: them; the kitty protocol blanks the page and "auto" finds no tty), at most WEB_MAX_PIXELS
+#: (w, h) each (sixel bytes grow with the area), redrawn at most every WEB_DEBOUNCE_S seconds
+WEB_ENV = "CTUI_WEB"
+WEB_MAX_PIXELS = (1280, 960)
+WEB_DEBOUNCE_S = 0.04
 
 _chosen: str | None = None
 _cell_px: tuple[int, int] = (10, 20)
@@ -44,6 +50,8 @@ def prepare_graphics(mode: str | None = None) -> str:
     mode = aliases.get(mode, mode)
     if mode not in MODES:
         raise ValueError(f"unknown graphics mode {mode!r}; choose one of {', '.join(MODES)}")
+    if web_mode() and mode in ("auto", "kitty"):
+        mode = "sixel"  # in a browser: never kitty, and auto would fall back to half-blocks (no tty)
     if mode in ("halfblock", "ascii"):
         _chosen = mode
         return mode
@@ -77,6 +85,16 @@ def use_graphics(mode: str, *, unless_chosen: bool = False) -> None:
     global _chosen
     if not (unless_chosen and _chosen is not None):
         _chosen = mode
+
+
+def web_mode(env=None) -> bool:
+    """True in the TUI ``ctui web`` serves to a browser."""
+    return (os.environ if env is None else env).get(WEB_ENV) == "1"
+
+
+def pixel_cap() -> tuple[int, int] | None:
+    """The largest (w, h) of an image in pixels: :data:`WEB_MAX_PIXELS` in web mode, else None."""
+    return WEB_MAX_PIXELS if web_mode() else None
 
 
 def graphics_mode() -> str:

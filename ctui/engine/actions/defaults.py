@@ -45,3 +45,7 @@ PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
 LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
 MRIC_SUFFIXES = (".mric",)
+#: ``ctui report --format``: a DICOM SR (TID 1500) over a DICOM-SEG, the measurements as JSON, one CSV row per object
+REPORT_FORMATS = ("sr", "json", "csv")
+#: ``ctui report --sections``: the path's sections in a report: the extreme ones (the first: default) or all
+REPORT_SECTIONS = ("extremes", "all")
