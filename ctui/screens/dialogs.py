@@ -101,14 +101,17 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
     ConfirmScreen > Vertical { width: 64; height: auto; border: round $warning; background: $surface; padding: 0 1; }
     ConfirmScreen Horizontal { height: auto; }
     ConfirmScreen Button { margin: 0 1; }
+    ConfirmScreen.at-bottom { align: center bottom; background: $background 10%; }
     """
     BINDINGS = [
         Binding("y", "answer(True)", "Yes"),
         Binding("n,escape", "answer(False)", "No"),
     ]
 
-    def __init__(self, question: str, yes: str = "Yes", no: str = "No") -> None:
-        super().__init__()
+    def __init__(self, question: str, yes: str = "Yes", no: str = "No", *, at_bottom: bool = False) -> None:
+        """``at_bottom``: at the foot of the screen over a light backdrop, so the image the
+        question is about stays in view."""
+        super().__init__(classes="at-bottom" if at_bottom else None)
         self.question = question
         self.yes, self.no = yes, no
 

@@ -112,7 +112,11 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
             return gray
         lab2 = planes.take(s.seg.labels, pv, idx)
         pending = self.pending
-        return planes.compose(gray, lab2, pending.plane(pv, idx, s.shape), proposal_id=pending.object_id)
+        rgb = planes.compose(gray, lab2, pending.plane(pv, idx, s.shape), proposal_id=pending.object_id)
+        if self.edit_tools.doomed is not None:  # an edit waiting for its confirmation: what it removes, in red
+            gone = planes.take(self.edit_tools.doomed, pv, idx)
+            rgb[gone] = (rgb[gone] * 0.3 + np.array([255, 40, 40]) * 0.7).astype(np.uint8)
+        return rgb
 
     def caption(self, plane: str) -> str:
         s = self.s
@@ -213,6 +217,22 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         relayout = lines != getattr(self, "_status_lines", 1)
         self._status_lines = lines
         self.query_one("#status", Static).update(msg, layout=relayout)
+
+    def saved_to(self, path: str, *, asked: bool) -> None:
+        """The project was saved to ``path``: say where. Saved with no dialog (a second Ctrl+S),
+        the next key, if it is Enter (the habit of confirming a save dialog), fills nothing."""
+        self.edit_tools.enter_guard = not asked
+        again = "; an Enter now fills nothing" if not asked else ""
+        self.set_status(f"Project saved to {path} (Ctrl+S saves there again{again})")
+        self.update_panel()
+
+    def on_key(self, event) -> None:
+        if self.edit_tools.enter_guard:
+            self.edit_tools.enter_guard = False
+            if event.key == "enter":
+                event.prevent_default()
+                event.stop()
+                self.set_status("Enter right after Ctrl+S: nothing filled (the project is saved); Enter again fills")
 
     def action_toggle_panel(self) -> None:
         """\\: hide or show the side panel (the views get its width: 80x24 terminals)."""

@@ -12,7 +12,7 @@ from ctui.screens.dialogs import PromptScreen
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.session import VIEWS
-from ctui.screens.ws_state import describe
+from ctui.screens.ws_state import describe, mm, value_unit
 
 BINDINGS = keys("""
 left,h                move(-1,0)             Cursor left                        hidden
@@ -153,8 +153,22 @@ class NavMixin:
 
         self.app.push_screen(PromptScreen(f"Go to slice (0..{last})", str(self.s.z)), done)
 
-    def action_zoom(self, d: int) -> None:
-        self.viewstate.zoom_by(d)
+    def action_zoom(self, d: int, at: tuple[float, float] | None = None) -> None:
+        """+/- (and Ctrl+wheel): zoom in or out keeping the image point ``at`` (x, y image
+        pixel: the pointer's) where it is on screen; with keys, the cursor's point."""
+        s, vs = self.s, self.viewstate
+        pv = planes.plane_view(s.volume, s.plane)
+        iv = next((v for p, _view, v in self._targets() if p == s.plane), None)
+        old = vs.zoom
+        point = at if at is not None else planes.cursor_in(pv, s.zyx, s.shape)
+        seen = None
+        if iv is not None and iv.view_map is not None:
+            w, h = iv.target_pixels()
+            seen = iv.view_map.to_image(w / 2.0, h / 2.0)  # the image point at the view's centre now
+        new = vs.zoom_by(d)
+        if seen is not None and new > 1.0 and new != old:
+            k = old / new
+            vs.pan_to((point[0] - (point[0] - seen[0]) * k, point[1] - (point[1] - seen[1]) * k), cursor=s.zyx)
         self._repaint_cursor()
 
     # ------------------------------------------------------------------ windows and views
@@ -205,9 +219,9 @@ class NavMixin:
         self._layout(grid=not self.viewstate.grid_mode)
 
     def action_plane(self, plane: str) -> None:
-        """1/2/3: axial, sagittal or coronal (the active plane of the 2x2 layout)."""
+        """1/2/3: axial, sagittal or coronal alone (from a 2x2 layout too: a click picks a pane there)."""
         self.s.plane = plane
-        self._layout(ortho=self.viewstate.ortho_mode)
+        self._layout()
         self.set_status(f"{plane.capitalize()} view: arrows move in it, PageUp/PageDown step across it")
 
     def action_ortho(self) -> None:
@@ -349,18 +363,25 @@ def panel_text(ws) -> Text:
         t.append(f" ({vs.window_name})", style="dim")
     view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
     t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
-    dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
+    dom = value_unit(s)
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
     t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
+    pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
+    if pending is not None and pending.proposal is not None and pending.notes:  # the proposal's warnings (not toasts)
+        t.append("Notes on the proposal\n", style="bold yellow")
+        for note in pending.notes:
+            t.append(f"• {note}\n", style="yellow")
     tools = ws.edit_tools
     pen = f" {tools.pen} down" if tools.pen else ""
-    t.append(f"Mode {s.edit_mode}  brush {s.brush:g} mm{pen}\n")
+    t.append(f"Mode {s.edit_mode}  brush {mm(s.brush)} mm{pen}\n")
     if tools.click_fills:
         t.append("Click fills (z)\n", style="yellow")
     if s.roi_box is not None:
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
-        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}\n", style="rgb(255,150,0)")
+        drawn = ws.edit_tools.box_drawn_on
+        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}{'' if drawn is None else f' (drawn {drawn})'}\n",
+                 style="rgb(255,150,0)")
     if s.background_seeds:
         t.append(f"Background seeds {len(s.background_seeds)}\n", style="cyan")
     if s.limits.slices is not None or s.limits.values is not None:

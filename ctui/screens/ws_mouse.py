@@ -35,6 +35,7 @@ from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_keys import panel_text
+from ctui.screens.ws_state import mm
 from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -292,7 +293,7 @@ class MouseMixin(ToolsMixin):
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
             box = "; inside the ROI box" if self.s.roi_box is not None else ""
-            self.set_status(f"Painted along the drag (brush {self.s.brush:g} mm{within}{box}); u undoes step by step")
+            self.set_status(f"Painted along the drag (brush {mm(self.s.brush)} mm{within}{box}); u undoes step by step")
 
     def on_click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
@@ -332,13 +333,14 @@ class MouseMixin(ToolsMixin):
         iv = self._image_view(event)
         if iv is None:
             return
-        if event.ctrl:  # zoom in on the pointer: the cursor goes there and the view centres on it
+        if event.ctrl:  # zoom on the pointer: the cursor goes there, the point under it stays put
             got = self._voxel_at(iv, event) if d > 0 else None
+            region = iv.content_region
+            at = iv.display_to_image(int(event.screen_x - region.x), int(event.screen_y - region.y))
             if got is not None:
                 self.s.plane = got[0]
                 self.s.z, self.s.y, self.s.x = got[1]
-                self.viewstate.pan_to(None)
-            self.action_zoom(d)
+            self.action_zoom(d, at=at if _plane_of(self, iv) == self.s.plane else None)
             return
         plane = _plane_of(self, iv)
         if plane != self.s.plane:
@@ -408,8 +410,11 @@ class MouseMixin(ToolsMixin):
             return
         s.roi_box = _corner_box(a, b, pv.normal, s.shape, s.limits.slices)
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
-        self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}: fills, painting and edits stay "
-                        "inside (Y removes it)")
+        one = a[0] == b[0] and z0 != z1  # drawn on one axial slice, spanning more: scissors ask which
+        self.edit_tools.box_drawn_on = int(a[0]) if one else None
+        drawn = f" (drawn on slice {a[0]}: scissors ask which slices)" if one else ""
+        self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}{drawn}: fills, painting and edits "
+                        "stay inside (Y removes it)")
         self.refresh_view()
 
     def action_box_clear(self) -> None:
@@ -516,10 +521,15 @@ class MouseMixin(ToolsMixin):
         p = self._proposal_to_review("No proposal to cut: p propagates")
         if p is None:
             return
-        cut = review.cut_at(p, self.s.z, seed_mask=self._seed_mask(p))
+        z, start = self.s.z, int(p.start_slice)
+        marked = z != start and z in {m.z for m in self.review_marks()}
+        if marked:  # a mark is where it leaks (the area jumps, the centre moves): keep the slice before it
+            z += -1 if z > start else 1
+        cut = review.cut_at(p, z, seed_mask=self._seed_mask(p))
         self.pending.replace(cut)
         rng = cut.slices
-        self.set_status(f"Cut at slice {self.s.z}: {cut.voxels} voxels (was {p.voxels}), "
+        where = f"before the marked slice {self.s.z}, kept to {z}" if marked else f"at slice {z}"
+        self.set_status(f"Cut {where}: {cut.voxels} voxels (was {p.voxels}), "
                         f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
         self.refresh_view()
 

@@ -45,3 +45,7 @@ PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
 LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
 MRIC_SUFFIXES = (".mric",)
+
+#: A 3D edit (island, scissors, smoothing) that would remove more than this share of the object is
+#: shown (the voxels drawn in red, voxels and mL) and asked about before it is done (the TUI).
+EDIT_CONFIRM_SHARE = 0.25

@@ -1,0 +1,201 @@
+"""The workspace without traps (issue 37), with Textual's Pilot on small synthetic volumes
+whose answers are known: a 3D edit that would take much of an object is drawn and asked
+about, an island edit never takes the main body unasked, a box drawn on one slice asks
+which slices the scissors cut; no key both confirms a dialog and edits; text that fits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine.core.volume import Volume
+from ctui.screens import graphics, planes
+from ctui.screens.app import CtuiApp
+from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen
+from ctui.screens.session import Session
+from ctui.screens.testing import cell_of_voxel, choose, drag, wait_for, wait_workspace, wheel
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+
+
+def _body_and_island(nz: int = 20, n: int = 48) -> Session:
+    """A cylinder (r 10 px, every slice) labelled as object 1, plus a 4x4x4 island of it
+    at (x 3..6, y 3..6, z 8..11); the cursor on the cylinder's axis."""
+    yy, xx = np.mgrid[0:n, 0:n]
+    disk = (yy - n / 2) ** 2 + (xx - n / 2) ** 2 <= 100
+    data = np.full((nz, n, n), -1000, np.int16)
+    data[:, disk] = 300
+    s = Session(Volume(data, spacing=(2.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=nz // 2,
+                y=n // 2, x=n // 2)
+    s.seg.labels[:, disk] = 1
+    s.seg.labels[8:12, 3:7, 3:7] = 1
+    return s
+
+
+async def _tool(pilot, name: str) -> None:
+    await pilot.press("t")
+    await choose(pilot, name)
+
+
+async def test_island_edit_spares_the_main_body_and_big_edits_ask():
+    s = _body_and_island()
+    body = int((s.seg.labels == 1).sum()) - 64
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        before = s.seg.labels.copy()
+        # remove the island under the cursor, with the cursor on the main body: asked, drawn in red
+        await _tool(pilot, "remove_island")
+        await wait_for(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the confirmation")
+        assert np.array_equal(s.seg.labels, before)  # nothing removed while asking
+        assert int(ws.edit_tools.doomed.sum()) == body
+        q = app.screen.question
+        assert f"{body} voxels" in q and f"{body * 2 / 1000:.1f} mL" in q and "main body" in q
+        c, r = planes.cursor_in(planes.plane_view(s.volume, s.plane), s.zyx, s.shape)
+        red = ws.plane_image(s.plane)[r, c]
+        assert red[0] > 150 > red[1]  # the doomed voxel under the cursor is drawn red
+        await pilot.press("n")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        assert np.array_equal(s.seg.labels, before) and ws.edit_tools.doomed is None
+        assert "Nothing removed" in str(ws.query_one("#status").render())
+        # the cursor on the small island: removed at once, the body stays
+        s.z, s.y, s.x = 9, 4, 4
+        await _tool(pilot, "remove_island")
+        await pilot.pause()
+        assert app.screen is ws and s.seg.voxels(1) == body
+        # keep the slice island at slice 9 takes most of the object: asked; y does it
+        s.z, s.y, s.x = 9, 24, 24
+        await _tool(pilot, "keep_island")  # the only island left: nothing to remove
+        assert app.screen is ws and s.seg.voxels(1) == body
+        s.roi_box = ((0, 19), (0, 47), (0, 23))
+        await _tool(pilot, "scissors_in_box")  # half the cylinder on every slice: 50% > the share
+        await wait_for(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the confirmation")
+        await pilot.press("y")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        assert s.seg.voxels(1) == int((before[:, :, 24:] == 1).sum()) - 0
+        await pilot.press("u")
+        assert s.seg.voxels(1) == body
+        assert not app.internal_errors
+
+
+async def test_box_drawn_on_one_slice_asks_which_slices_to_cut():
+    s = _body_and_island()
+    s.seg.labels[8:12, 3:7, 3:7] = 0
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        per_slice = int((s.seg.labels[10] == 1).sum())
+        await pilot.press("y")
+        await drag(pilot, "#main", [cell_of_voxel(app, (10, 14, 14)), cell_of_voxel(app, (10, 34, 34))])
+        (z0, z1), _, _ = s.roi_box
+        assert (z0, z1) == (0, 19) and ws.edit_tools.box_drawn_on == 10
+        panel = str(ws.query_one("#panel").render())
+        assert "z 0..19 (drawn 10)" in panel
+        await _tool(pilot, "scissors_in_box")
+        await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="which slices")
+        await choose(pilot, "drawn")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        # only slice 10 lost its voxels inside the box: the rest of the object is whole
+        assert (s.seg.labels[10] == 1).sum() < per_slice
+        for z in (0, 9, 11, 19):
+            assert (s.seg.labels[z] == 1).sum() == per_slice
+        assert not app.internal_errors
+
+
+async def test_second_ctrl_s_says_where_and_its_enter_fills_nothing(tmp_path):
+    s = _body_and_island()
+    s.seg.labels[:] = 0
+    s.range_ = (200.0, 400.0)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: app.screen is not ws, what="the save dialog")
+        app.focused.value = str(tmp_path / "p.ctui")
+        await pilot.press("enter")  # the dialog's own Enter saves
+        await wait_for(pilot, lambda: app.screen is ws and s.project_path, what="the save")
+        assert s.seg.voxels(1) == 0
+        # the second Ctrl+S has no dialog: the status says where; the habitual Enter fills nothing
+        await pilot.press("ctrl+s", "enter")
+        await pilot.pause()
+        status = str(ws.query_one("#status").render())
+        assert "nothing filled" in status and s.seg.voxels(1) == 0 and not s.dirty
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        assert str(tmp_path / "p.ctui") in str(ws.query_one("#status").render())
+        await pilot.press("l", "enter")  # any other key first: Enter fills again
+        await pilot.pause()
+        assert s.seg.voxels(1) > 0
+        assert not app.internal_errors
+
+
+@pytest.mark.parametrize("size", [(120, 40), (80, 24)])
+async def test_zoom_keeps_the_point_under_the_pointer(size):
+    s = _body_and_island()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        iv = ws.main_view
+        await pilot.pause()
+        cell = cell_of_voxel(app, (s.z, 19, 18))  # off the centre (24, 24): a recentring zoom would move it
+        point = iv.display_to_image(*cell)
+        for notch in (1, 2, 3):
+            await wheel(pilot, "#main", cell, up=True, control=True)
+            await pilot.pause()
+            assert ws.viewstate.zoom == 2.0 ** notch
+            xd, yd = iv.view_map.to_display(*point)
+            # within one voxel (the view crops whole voxels) of the pointer, on every notch: no drift
+            vm = iv.view_map
+            assert abs(xd - (cell[0] + 0.5)) <= max(1.0, vm.sx) and abs(yd - (2 * cell[1] + 1.0)) <= max(2.0, vm.sy), \
+                (notch, xd, yd)
+        # keys: + and - keep the cursor's point where it is on screen
+        s.y, s.x = 20, 20
+        ws.refresh_view()
+        await pilot.pause()
+        before = iv.view_map.to_display(s.x, s.y)
+        await pilot.press("minus")
+        await pilot.pause()
+        after = iv.view_map.to_display(s.x, s.y)
+        assert abs(after[0] - before[0]) <= 1.5 and abs(after[1] - before[1]) <= 2.5
+        assert not app.internal_errors
+
+
+async def test_proposal_warnings_go_to_the_panel_not_toasts():
+    """A segmentation's warnings are notes in the side panel while its proposal waits (counted on
+    the status line), never a toast over the image, the proposal line or the review strip."""
+    import time
+    from types import SimpleNamespace
+
+    from ctui.engine.segment.propagate import Proposal
+    from ctui.screens.propagation import finished
+
+    s = _body_and_island()
+    s.seg.labels[:] = 0
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        p = Proposal(object_id=1, start_slice=10, shape=s.shape)
+        p.masks[11] = (0, 0, s.volume.data[11] > 0)
+        report = SimpleNamespace(warnings=["wrapped in a brighter shell: check slice 12"], message=lambda: "1 object")
+        run = SimpleNamespace(proposal=p, seed=(24, 24, 10), object_settings={}, started=time.perf_counter(),
+                              report=report)
+        before = len(app._notifications)
+        finished(ws, run)
+        await pilot.pause()
+        assert len(app._notifications) == before  # no toast
+        assert "1 note in the panel" in str(ws.query_one("#status").render())
+        assert "brighter shell: check slice 12" in str(ws.query_one("#panel").render())
+        await pilot.press("x")  # rejected: the note goes with it
+        await pilot.pause()
+        assert "brighter shell" not in str(ws.query_one("#panel").render())
+        assert not app.internal_errors
