@@ -199,3 +199,72 @@ async def test_proposal_warnings_go_to_the_panel_not_toasts():
         await pilot.pause()
         assert "brighter shell" not in str(ws.query_one("#panel").render())
         assert not app.internal_errors
+
+
+async def test_text_that_fits_and_keys_that_do_what_they_say():
+    data = np.full((20, 48, 48), 100, np.int16)
+    s = Session(Volume(data, spacing=(2.0, 1.0, 1.0), modality="MR"), source_path="synthetic", z=10, y=24, x=24)
+    s.brush = 3.22266
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        panel = str(ws.query_one("#panel").render())
+        assert "brush 3.2 mm" in panel and "3.22" not in panel
+        assert "(signal)" in panel and "HU" not in panel  # an MR's values are no Hounsfield units
+        # 2 inside the planes' 2x2 shows the sagittal view alone
+        await pilot.press("0")
+        assert ws.viewstate.ortho_mode
+        await pilot.press("2")
+        assert not ws.viewstate.ortho_mode and s.plane == "sagittal"
+        # Ctrl+P finds every segmentation method ("grow") and picking it sets the method S uses
+        cmds = {c.title: c for c in app.get_system_commands(ws)}
+        assert "Segmentation method: grow" in cmds
+        cmds["Segmentation method: grow"].callback()
+        assert s.segment_options["method"] == "grow" and "grow" in str(ws.query_one("#status").render())
+        assert not app.internal_errors
+
+
+async def test_80x24_dialogs_fit_the_objects_show_and_the_readout_stays():
+    from ctui.screens.segpanel import SegmentPanel
+    from ctui.screens.ws_keys import panel_text
+
+    s = _body_and_island()
+    for name in ("liver", "spleen", "kidney_left", "kidney_right"):
+        s.seg.add_object(name)
+    s.seg.labels[0, 0, 0:5] = 5
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.pause()
+        # the objects list, with each volume, is inside the panel's height
+        lines = panel_text(ws).plain.splitlines()
+        last = max(i for i, line in enumerate(lines) if "kidney_right" in line)
+        assert "ml" in lines[last] and last < ws.query_one("#panel").size.height
+        # the G dialog's Apply is on screen (the fields scroll above it)
+        await pilot.press("G")
+        await wait_for(pilot, lambda: isinstance(app.screen, SegmentPanel), what="the G panel")
+        await pilot.pause()
+        for bid in ("#apply", "#cancel"):
+            r = app.screen.query_one(bid).region
+            assert r.height > 0 and r.bottom <= 24 and r.right <= 80, (bid, r)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        # the confirmation of a big edit fits too, its buttons in view
+        await _tool(pilot, "remove_island")
+        await wait_for(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the confirmation")
+        await pilot.pause()
+        for bid in ("#yes", "#no"):
+            r = app.screen.query_one(bid).region
+            assert r.height > 0 and r.bottom <= 24 and r.right <= 80, (bid, r)
+        await pilot.press("n")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        # the panel hidden: the value under the cursor is in the view's caption
+        await pilot.press("backslash")
+        await pilot.pause()
+        assert f"x {s.x} y {s.y} = 300 HU" in str(ws.query_one("#main-caption").render())
+        await pilot.press("l")
+        await pilot.pause()
+        assert f"x {s.x} y {s.y} =" in str(ws.query_one("#main-caption").render())
+        assert not app.internal_errors

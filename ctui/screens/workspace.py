@@ -125,6 +125,9 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         left, right, top, bottom = pv.letters
         idx, last = s.zyx[pv.normal], s.shape[pv.normal] - 1
         note = "  [yellow]≈ oblique[/]" if pv.note else ""
+        if self.query("#panel") and self.query_one("#panel").has_class("hidden"):  # the panel's readout, here
+            unit = " HU" if s.volume.modality == "CT" else ""
+            note += f"  x {s.x} y {s.y} = [b]{s.value():g}{unit}[/b]"
         return f"{plane} {axis} {idx}/{last}  [b]{left}[/b]◀▶[b]{right}[/b]  [b]{top}[/b]▲▼[b]{bottom}[/b]{note}"
 
     def _targets(self) -> list[tuple[str, str, ImageView]]:

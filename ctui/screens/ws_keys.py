@@ -108,6 +108,7 @@ class NavMixin:
         for plane, _view, iv in self._targets():
             pv = planes.plane_view(s.volume, plane)
             iv.set_view(zoom=self.viewstate.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+        self._captions()  # the value readout is in the caption while the panel is hidden
         self.update_panel()
 
     def action_pan(self, dx: int, dy: int) -> None:
@@ -347,8 +348,11 @@ def panel_text(ws) -> Text:
     slice_pos = float(v.slice_positions[s.z]) if v.slice_positions is not None and len(v.slice_positions) == nz else zmm
     t.append(f"Slice {s.z}/{nz - 1}", style="bold")
     t.append(f"  {slice_pos:.1f} mm\n")
+    size = getattr(ws, "size", None)
+    compact = size is not None and 0 < size.height < 30  # 80x24: the objects (their volumes) must show
     t.append(f"Cursor x {s.x}  y {s.y}\n")
-    t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
+    if not compact:
+        t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
     t.append("Value ", style="bold")
     t.append(f"{s.value():g} {'HU' if v.modality == 'CT' else ''}")
     try:
@@ -356,16 +360,12 @@ def panel_text(ws) -> Text:
     except Exception:  # a filter error is reported by the views; the readout stays
         fv = None
     t.append(f"  filtered {fv:.4g}\n" if fv is not None else "\n")
-    c, w = s.window
-    t.append(f"Window C {c:g} W {w:g}")
-    vs = ws.viewstate
-    if vs.window_name:
-        t.append(f" ({vs.window_name})", style="dim")
-    view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
-    t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
+    if not compact:
+        _window_text(ws, t)
     dom = value_unit(s)
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
-    t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
+    if not compact:
+        t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
     pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
     if pending is not None and pending.proposal is not None and pending.notes:  # the proposal's warnings (not toasts)
@@ -386,15 +386,26 @@ def panel_text(ws) -> Text:
         t.append(f"Background seeds {len(s.background_seeds)}\n", style="cyan")
     if s.limits.slices is not None or s.limits.values is not None:
         t.append(f"Limits {s.limits.describe()}\n", style="yellow")
-    t.append("\nPipeline", style="bold underline")
     steps = s.pipeline_steps()
-    t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
-    for line in steps[:6]:
-        t.append(f" {line[:34]}\n")
-    _objects_text(ws, t)
+    if steps or not compact:
+        t.append("\nPipeline", style="bold underline")
+        t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
+        for line in steps[:3 if compact else 6]:
+            t.append(f" {line[:34]}\n")
+    _objects_text(ws, t, compact)
     if s.dirty:
         t.append("\n● unsaved changes", style="yellow")
     return t
+
+
+def _window_text(ws, t: Text) -> None:
+    s, vs = ws.s, ws.viewstate
+    c, w = s.window
+    t.append(f"Window C {c:g} W {w:g}")
+    if vs.window_name:
+        t.append(f" ({vs.window_name})", style="dim")
+    view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
+    t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
 
 
 _BARS = " ▁▂▃▄▅▆▇█"
@@ -442,7 +453,7 @@ def _seed_text(ws, t: Text) -> None:
     t.append("\n")
 
 
-def _objects_text(ws, t: Text) -> None:
+def _objects_text(ws, t: Text, compact: bool = False) -> None:
     s = ws.s
     t.append("\nObjects", style="bold underline")
     t.append("  (n new, Tab next)\n")
@@ -459,7 +470,9 @@ def _objects_text(ws, t: Text) -> None:
         name = info.name if info is not None else f"object {i}"
         a = int(area[i]) if i < len(area) else 0
         stats = f"{a * px_mm2:7.0f}mm² {vols.get(i, 0.0):6.1f}ml"
-        if len(name) <= 10:
+        if compact:  # one line each (80x24): the name and the volume
+            t.append(f" {name if len(name) <= 20 else name[:19] + '…':<20} {vols.get(i, 0.0):6.1f}ml\n")
+        elif len(name) <= 10:
             t.append(f" {name:<10} {stats}\n")
         else:  # a long name gets a line of its own (the panel holds 36 columns), the figures under it
             t.append(f" {name if len(name) <= 32 else name[:31] + '…'}\n{'':15}{stats}\n")
