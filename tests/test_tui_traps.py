@@ -268,3 +268,45 @@ async def test_80x24_dialogs_fit_the_objects_show_and_the_readout_stays():
         await pilot.pause()
         assert f"x {s.x} y {s.y} =" in str(ws.query_one("#main-caption").render())
         assert not app.internal_errors
+
+
+async def test_a_project_reopens_as_it_was_saved(tmp_path):
+    from ctui.engine.actions.project import load_project, save_project
+    from ctui.screens.projects import project_from_session, session_from_project
+    from ctui.screens.segpanel import SegmentPanel
+
+    s = _body_and_island()
+    s.brush = 3.22266
+    s.prop_mode = "3d"
+    s.segment_options = {"method": "grow", "neck": 5.0, "range": (100.0, 400.0), "fill_holes": False,
+                         "keep_largest": True, "min_island": 7, "interpolate": True}
+    s.background_seeds = [(3, 40, 2), (44, 5, 17)]
+    s.roi_box = ((2, 15), (10, 30), (12, 36))
+    s.zoom = 4.0
+    path = tmp_path / "p.ctui"
+    save_project(path, project_from_session(s))
+    proj = load_project(path)
+    r = session_from_project(proj, s.volume, str(path))
+    assert r.brush == pytest.approx(3.22266) and r.prop_mode == "3d" and r.zoom == 4.0
+    assert r.segment_options == s.segment_options
+    assert r.background_seeds == s.background_seeds and r.roi_box == s.roi_box
+    # odd values (a hand edit, a method this build lacks) are dropped, the project still opens
+    proj.meta.update({"roi_box": [[0, 99], [0, 1], [0, 1]], "background_seeds": [[1, 2], [999, 1, 1], [1, 1, 1]],
+                      "zoom": "big", "segment_options": {"method": 3, "range": [5, 1], "neck": None}})
+    odd = session_from_project(proj, s.volume, str(path))
+    assert odd.roi_box is None and odd.background_seeds == [(1, 1, 1)] and odd.zoom == 1.0
+    assert odd.segment_options == {}
+    # an older project (none of these fields) opens with the defaults
+    for key in ("segment_options", "background_seeds", "roi_box", "zoom"):
+        proj.meta.pop(key)
+    old = session_from_project(proj, s.volume, str(path))
+    assert old.segment_options == {} and old.roi_box is None and old.zoom == 1.0
+    # the workspace shows it: the zoom, the method in G
+    app = CtuiApp(session=r, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        assert app.workspace.viewstate.zoom == 4.0
+        await pilot.press("G")
+        await wait_for(pilot, lambda: isinstance(app.screen, SegmentPanel), what="the G panel")
+        assert app.screen.query_one("#method").value == "grow" and app.screen.query_one("#neck").value == "5"
+        assert not app.internal_errors

@@ -89,7 +89,8 @@ class SegmentPanel(ModalScreen):
     def _fields(self, o: dict, rtxt: str, neck) -> ComposeResult:
         with Horizontal():
             yield Label("Method")
-            yield Select([(m, m) for m in METHODS], value=o.get("method", "fill"), allow_blank=False, id="method")
+            yield Select([(m, m) for m in METHODS], value=o.get("method") if o.get("method") in METHODS else "fill",
+                   allow_blank=False, id="method")
         with Horizontal():
             yield Label("Mode")
             yield Select([("slice by slice", "slice"), ("3D", "3d")], value=self.s.prop_mode, allow_blank=False,

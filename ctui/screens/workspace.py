@@ -20,7 +20,7 @@ from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import (CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
-                                   SegmentationFailed, StageViewsReady, Status)
+                                   SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
@@ -58,6 +58,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
         super().__init__()
         self.s = session
         self.viewstate = ViewState()  # layout, pan, window preset, pipeline-views requests
+        self.viewstate.zoom = session.zoom  # as the project was saved
         self.edit_tools = EditTools()  # pen, click fills, box corner, scissors polygon
         self.jobs = Jobs()  # the running worker and segmentation
         self.pending = ProposalState()  # the proposal waiting for a (accept) or x (reject)
@@ -292,6 +293,11 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
     @on(Status)
     def _status_msg(self, msg: Status) -> None:
         self.set_status(msg.text)
+
+    @on(SeedRangeReady)
+    def _seed_range_ready(self, _msg: SeedRangeReady) -> None:
+        if self.query("#panel"):  # composed (a message may arrive while the screen is taken down)
+            self.update_panel()
 
     @on(LabelsChanged)
     def _labels_msg(self, _msg: LabelsChanged) -> None:

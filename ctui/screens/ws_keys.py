@@ -11,6 +11,7 @@ from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
+from ctui.screens.messages import SeedRangeReady
 from ctui.screens.session import VIEWS
 from ctui.screens.ws_state import describe, mm, value_unit
 
@@ -166,7 +167,7 @@ class NavMixin:
         if iv is not None and iv.view_map is not None:
             w, h = iv.target_pixels()
             seen = iv.view_map.to_image(w / 2.0, h / 2.0)  # the image point at the view's centre now
-        new = vs.zoom_by(d)
+        new = s.zoom = vs.zoom_by(d)  # the session keeps it for the project
         if seen is not None and new > 1.0 and new != old:
             k = old / new
             vs.pan_to((point[0] - (point[0] - seen[0]) * k, point[1] - (point[1] - seen[1]) * k), cursor=s.zyx)
@@ -435,8 +436,8 @@ def _seed_text(ws, t: Text) -> None:
                     rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
             except Exception:  # off the image, a filter error: the views report it
                 return
-            if ws.is_attached and ws.seed_range.store(key, rc):
-                ws.app.call_from_thread(ws.update_panel)
+            if ws.seed_range.store(key, rc):  # a message: dropped when the screen is gone (no widget touched here)
+                ws.post_message(SeedRangeReady())
 
         ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
         t.append("Seed range here ...\n", style="dim")
