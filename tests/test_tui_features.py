@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
+from ctui.engine.io.project import autosave_path
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.imageview import ImageView
@@ -251,9 +252,12 @@ async def test_autosave_is_offered_on_next_start(tmp_path):
         await pilot.press("enter")
         await pilot.pause()
         labels = app.session.seg.labels.copy()
-        app.autosave_worker()
-        auto = tmp_path / "autosave"
-        await wait_for(pilot, lambda: auto.exists() and any(auto.iterdir()), what="the autosave")
+        worker = app.autosave_worker()
+        final = autosave_path(app.session.project_path or app.session.source_path)
+        # the final file, once the writer has finished (its temporary file, or a write still deciding
+        # whether it is stale, is no autosave yet: waiting on any file raced the writer)
+        await wait_for(pilot, lambda: worker.is_finished and final.exists(), what="the autosave")
+        assert final.parent == tmp_path / "autosave"
         app.session.dirty = False  # as if the app was killed: no save, no question
     app2 = CtuiApp()
     async with app2.run_test(size=(120, 40)) as pilot:
