@@ -35,7 +35,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
 from ctui.engine.measure.fields import ObjectField, object_field
-from ctui.engine.measure.flags import OK, classify_sections
+from ctui.engine.measure.flags import BRANCH, CAP, OK, classify_sections
 from ctui.engine.measure.paths import (
     path_points,
     path_spline,
@@ -177,6 +177,7 @@ def sections_along_path(
     timings: dict | None = None,
     average_mm: float = 0.0,
     flags: bool = True,
+    cuts: bool = False,
 ) -> list[dict[str, Any]]:
     """Cross-sections of an object in planes normal to a path.
 
@@ -215,6 +216,10 @@ def sections_along_path(
     flags : bool
         Classify the sections (``status``, see the module docstring); False leaves
         every measured section "ok".
+    cuts : bool
+        Keep every section that cuts the object (a path the user gave, not a centreline:
+        its planes may meet the object's ends or a branch by intent): "cap" and "branch"
+        rows become "ok" (their old status in ``flag``); "outside" and "open" stay out.
 
     Returns
     -------
@@ -232,9 +237,9 @@ def sections_along_path(
         field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
     timings["field"] = timings.get("field", 0.0) + time.perf_counter() - t0
     if average_mm and average_mm > 0:
-        return _averaged(path_mm, field, step_mm=step_mm, at_s=at_s, average_mm=average_mm, flags=flags,
-                         half_size_mm=half_size_mm, grid_step_mm=grid_step_mm, max_grid=max_grid, area=area,
-                         batch=batch, timings=timings)
+        return keep_cuts(_averaged(path_mm, field, step_mm=step_mm, at_s=at_s, average_mm=average_mm, flags=flags,
+                                   half_size_mm=half_size_mm, grid_step_mm=grid_step_mm, max_grid=max_grid,
+                                   area=area, batch=batch, timings=timings), cuts)
     _, total = path_spline(path_mm)
     if at_s is None:
         if not step_mm > 0:
@@ -258,6 +263,16 @@ def sections_along_path(
         tf = time.perf_counter()
         classify_sections(rows, field)
         timings["flags"] = timings.get("flags", 0.0) + time.perf_counter() - tf
+    return keep_cuts(rows, cuts)
+
+
+def keep_cuts(rows: list[dict[str, Any]], cuts: bool = True) -> list[dict[str, Any]]:
+    """With ``cuts``: every row that is a section of the object ("cap", "branch") made "ok",
+    its old status kept in ``flag``; rows with no section ("outside", "open") unchanged."""
+    if cuts:
+        for r in rows:
+            if r.get("status") in (CAP, BRANCH):
+                r["flag"], r["status"] = r["status"], OK
     return rows
 
 
