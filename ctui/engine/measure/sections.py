@@ -183,23 +183,17 @@ def sections_along_path(
 
     Parameters
     ----------
-    mask : ndarray (z, y, x) or None
-        The object (ignored when ``field`` is given).
+    mask, spacing, origin, direction : the object (z, y, x; ignored when ``field`` is given), its geometry.
     path_mm : ndarray (n, 3)
-        The path, patient mm (x, y, z); a dense polyline (e.g. from
-        :func:`~ctui.engine.measure.centreline.centreline`).
-    spacing, origin, direction
-        Geometry of ``mask``.
+        The path, patient mm (x, y, z); a dense polyline (e.g. :func:`~ctui.engine.measure.centreline.centreline`).
     step_mm : float
         Distance along the path between sections (from s = 0).
     field : ObjectField, optional
-        Precomputed :func:`~ctui.engine.measure.fields.object_field` (reuse it for
-        several calls).
+        Precomputed :func:`~ctui.engine.measure.fields.object_field` (reuse it for several calls).
     at_s : sequence of float, optional
         Explicit arc lengths (mm) instead of a regular step.
     half_size_mm : float, optional
-        Initial half side of the square grid (grown automatically when the
-        section does not fit).
+        Initial half side of the square grid (grown when the section does not fit).
     grid_step_mm : float, optional
         Grid spacing; default a quarter of the smallest voxel size, coarsened so the
         grid has at most ``max_grid`` points a side.
@@ -217,9 +211,7 @@ def sections_along_path(
         Classify the sections (``status``, see the module docstring); False leaves
         every measured section "ok".
     cuts : bool
-        Keep every section that cuts the object (a path the user gave, not a centreline:
-        its planes may meet the object's ends or a branch by intent): "cap" and "branch"
-        rows become "ok" (their old status in ``flag``); "outside" and "open" stay out.
+        Keep every section that cuts the object (a path the user gave): see :func:`keep_cuts`.
 
     Returns
     -------
@@ -268,7 +260,8 @@ def sections_along_path(
 
 def keep_cuts(rows: list[dict[str, Any]], cuts: bool = True) -> list[dict[str, Any]]:
     """With ``cuts``: every row that is a section of the object ("cap", "branch") made "ok",
-    its old status kept in ``flag``; rows with no section ("outside", "open") unchanged."""
+    its old status kept in ``flag`` (a path the user gave, not a centreline, may meet the
+    object's ends or a branch by intent); rows with no section ("outside", "open") unchanged."""
     if cuts:
         for r in rows:
             if r.get("status") in (CAP, BRANCH):
