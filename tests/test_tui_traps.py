@@ -310,3 +310,42 @@ async def test_a_project_reopens_as_it_was_saved(tmp_path):
         await wait_for(pilot, lambda: isinstance(app.screen, SegmentPanel), what="the G panel")
         assert app.screen.query_one("#method").value == "grow" and app.screen.query_one("#neck").value == "5"
         assert not app.internal_errors
+
+
+async def test_sections_from_the_measure_screen_at_the_cursor_and_along_a_two_click_line():
+    """A kidney-like ellipsoid (semi-axes 18, 12, 8 mm along x, y, z; not a tube: no automatic
+    sections): x gives the section through the cursor normal to the slices' axis (an ellipse
+    of pi*12*18 mm² at the centre) or to the object's axis (pi*12*8); P + a click gives a line."""
+    from ctui.screens.measure_screen import MeasureScreen
+
+    n = 48
+    zz, yy, xx = np.mgrid[0:24, 0:n, 0:n].astype(float)
+    ell = ((xx - 24) / 18) ** 2 + ((yy - 24) / 12) ** 2 + ((zz - 12) / 8) ** 2 <= 1.0
+    data = np.where(ell, 300, -1000).astype(np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=12, y=24, x=24)
+    s.seg.labels[ell] = 1
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("P")
+        s.x = 10
+        await pilot.press("P")  # the line's other end: x 10..24 on slice 12
+        await pilot.press("M")
+        await wait_for(pilot, lambda: isinstance(app.screen, MeasureScreen) and app.screen.stats, what="the measures")
+        ms = app.screen
+        status = lambda: str(ms.query_one("#ms-status").render())  # noqa: E731
+        s.x = 24
+        for axis, area in (("z", np.pi * 18 * 12), ("object", np.pi * 12 * 8)):
+            await pilot.press("x")
+            await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="the axes")
+            await choose(pilot, axis)
+            await wait_for(pilot, lambda a=axis: f"normal to {a}: area" in status(), what=f"the {axis} section")
+            got = float(status().split("area ")[1].split(" mm")[0])
+            assert got == pytest.approx(area, rel=0.06), (axis, got, area)
+        await pilot.press("l")
+        await wait_for(pilot, lambda: ms.sections and ms.result is not None and ms.result.path_length_mm < 20,
+                       what="the line's sections")
+        assert ms.result.path_length_mm == pytest.approx(14.0, abs=0.5) and len(ms.sections) >= 20
+        assert ws.edit_tools.polygon  # the line stays for another look
+        assert not app.internal_errors
