@@ -322,6 +322,7 @@ async def test_rename_and_clear_object():
         n = int((s.seg.labels == 1).sum())
         assert n > 50
         await pilot.press("N")
+        await choose(pilot, "_type")  # not one of the common structures: typed
         await answer_prompt(pilot, "spine L1")
         assert s.seg.objects[1].name == "spine L1"
         await pilot.press("delete", "y")

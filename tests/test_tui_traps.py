@@ -349,3 +349,22 @@ async def test_sections_from_the_measure_screen_at_the_cursor_and_along_a_two_cl
         assert ms.result.path_length_mm == pytest.approx(14.0, abs=0.5) and len(ms.sections) >= 20
         assert ws.edit_tools.polygon  # the line stays for another look
         assert not app.internal_errors
+
+
+async def test_names_from_a_short_list_of_structures():
+    from ctui.engine.actions.defaults import STRUCTURE_NAMES
+
+    s = _body_and_island()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.press("N")
+        await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="the names")
+        await choose(pilot, "kidney_left")
+        assert s.seg.objects[1].name == "kidney_left"
+        await pilot.press("n", "N")  # a second object: the names taken are not offered again
+        await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="the names")
+        ol = app.screen.query_one("OptionList")
+        ids = [ol.get_option_at_index(i).id for i in range(ol.option_count)]
+        assert "kidney_left" not in ids and "kidney_right" in ids and len(ids) == len(STRUCTURE_NAMES)
+        assert not app.internal_errors

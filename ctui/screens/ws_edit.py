@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.actions import defaults
 from ctui.engine.actions import edit as et
 from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen, PromptScreen
 from ctui.screens.planes import plane_view
@@ -288,7 +289,17 @@ class EditMixin:
                 s.dirty = True
                 self.update_panel()
 
-        self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+        def picked(choice: str | None) -> None:
+            if choice == "_type":
+                self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+            elif choice:
+                done(choice)
+
+        # the common structures first (no typing); names other objects have are left out
+        taken = {o.name for i, o in s.seg.objects.items() if i != s.current}
+        names = [n for n in defaults.STRUCTURE_NAMES if n not in taken]
+        self.app.push_screen(ChoiceScreen(f"Name of object {s.current} (now {info.name})",
+                                          [("_type", "type a name ...")] + [(n, n) for n in names]), picked)
 
     def action_clear_object(self) -> None:
         s = self.s
