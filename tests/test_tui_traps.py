@@ -368,3 +368,30 @@ async def test_names_from_a_short_list_of_structures():
         ids = [ol.get_option_at_index(i).id for i in range(ol.option_count)]
         assert "kidney_left" not in ids and "kidney_right" in ids and len(ids) == len(STRUCTURE_NAMES)
         assert not app.internal_errors
+
+
+async def test_range_picked_on_the_panels_histogram():
+    from ctui.screens.ws_keys import panel_text
+
+    yy, xx = np.mgrid[0:48, 0:48]
+    data = np.full((20, 48, 48), -1000, np.int16)
+    data[:, (yy - 24) ** 2 + (xx - 24) ** 2 <= 100] = 300
+    data = data + np.random.default_rng(0).normal(0, 20, data.shape).astype(np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=10, y=24, x=24)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await wait_for(pilot, lambda: ws.seed_range.result is not None, what="the seed range")
+        await pilot.pause()
+        lines = panel_text(ws).plain.split("\n")
+        row = next(i for i, line in enumerate(lines) if line.startswith("Seed range here "))
+        rc = ws.seed_range.result
+        await pilot.click("#panel", offset=(3, row))  # on the words: the seed range as it is
+        assert s.range_ == (float(rc.low), float(rc.high))
+        start = lines[row].index(" ", len("Seed range here ")) + 1
+        await pilot.click("#panel", offset=(1 + start + 1, row))  # bar 1, then bar 4: the range over them
+        assert "other end" in str(ws.query_one("#status").render())
+        await pilot.click("#panel", offset=(1 + start + 4, row))
+        assert s.range_ == (float(rc.edges[1]), float(rc.edges[5]))
+        assert not app.internal_errors

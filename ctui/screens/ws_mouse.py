@@ -302,10 +302,26 @@ class MouseMixin(ToolsMixin):
             return
         w = self._under(event)
         if w is not None and w.id == "panel":
-            self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y))
+            self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y),
+                              int(event.screen_x - w.content_region.x))
 
-    def _panel_click(self, panel, row: int) -> None:
+    def _pick_range(self, line: str, col: int) -> None:
+        """A click on the seed range's line: its text takes the range, two bars of its histogram
+        give the two ends (no numbers typed)."""
+        start = line.index(" ", len("Seed range here ")) + 1  # the bars follow "Seed range here LO..HI "
+        got = self.seed_range.pick(col - start if col >= start else None)
+        if got is None:
+            self.set_status("One end of the range picked: click the bar of the other end")
+            return
+        self.s.range_ = got
+        self.set_status(f"Range {got[0]:g}..{got[1]:g} picked on the histogram (S and Enter use it; T edits it)")
+        self.update_panel()
+
+    def _panel_click(self, panel, row: int, col: int = 0) -> None:
         lines = panel_text(self).plain.split("\n")
+        if 0 <= row < len(lines) and lines[row].startswith("Seed range here ") and ".." in lines[row]:
+            self._pick_range(lines[row], col)
+            return
         if 0 < row < len(lines) and "██" not in lines[row] and lines[row].startswith(" " * 8) and "██" in lines[row - 1]:
             row -= 1  # the figures' line under an object with a long name
         if not 0 <= row < len(lines) or "██" not in lines[row]:

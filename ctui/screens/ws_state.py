@@ -278,6 +278,24 @@ class SeedRange:
         self.key = None
         self.result = None
         self.painted = False  # the workspace has been painted once (the engine may load now)
+        self.first_end: float | None = None  # a histogram bar clicked: one end of the range being picked
+
+    def pick(self, bar: int | None) -> tuple[float, float] | None:
+        """A click on the panel's histogram: ``bar`` None (the text) takes the seed range; a bar
+        gives one end of the range, a second bar the other (returned then, ordered; None
+        while waiting for it)."""
+        rc = self.result
+        if rc is None:
+            return None
+        if bar is None or not 0 <= bar < len(rc.hist):
+            self.first_end = None
+            return (float(rc.low), float(rc.high))
+        lo, hi = float(rc.edges[bar]), float(rc.edges[bar + 1])
+        if self.first_end is None:
+            self.first_end = lo
+            return None
+        first, self.first_end = self.first_end, None
+        return (min(first, lo), max(first + (hi - lo), hi))
 
     def wants(self, key) -> bool:
         """True when ``key`` is new (its range is to be computed; the old one is forgotten)."""
