@@ -395,3 +395,38 @@ async def test_range_picked_on_the_panels_histogram():
         await pilot.click("#panel", offset=(1 + start + 4, row))
         assert s.range_ == (float(rc.edges[1]), float(rc.edges[5]))
         assert not app.internal_errors
+
+
+async def test_80x24_menus_prompts_and_help_are_not_cut():
+    from textual.widgets import Label
+
+    from ctui.screens.dialogs import PromptScreen, TextScreen
+
+    s = _body_and_island()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        for key in ("t", "e"):  # the edit tools' menu, the export menu with its note
+            await pilot.press(key)
+            await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what=f"the {key} menu")
+            await pilot.pause()
+            box = app.screen.query_one("Vertical").region
+            assert box.bottom <= 24 and box.right <= 80, (key, box)
+            for label in app.screen.query(Label):  # every line of the title and the note on screen, uncut
+                assert label.region.bottom <= 24
+                assert label.size.width * label.size.height >= len(str(label.render()).rstrip()), key
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        await pilot.press("i")  # the limits prompt: its title wraps instead of being cut
+        await wait_for(pilot, lambda: isinstance(app.screen, PromptScreen), what="the limits prompt")
+        await pilot.pause()
+        title = app.screen.query(Label).first()
+        text = str(title.render())
+        assert "(empty: none)" in text and title.size.width * title.size.height >= len(text) and title.region.right <= 80
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        await pilot.press("question_mark")
+        await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), what="the help")
+        assert "…" not in str(app.screen.body)
+        assert not app.internal_errors

@@ -34,7 +34,9 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
 
     DEFAULT_CSS = """
     PromptScreen { align: center middle; }
-    PromptScreen > Vertical { width: 60; height: auto; border: round $accent; background: $surface; padding: 0 1; }
+    PromptScreen > Vertical { width: 90%; max-width: 100; height: auto; border: round $accent; background: $surface;
+                              padding: 0 1; }
+    PromptScreen Label { width: 1fr; }
     """
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
@@ -98,7 +100,9 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
 
     DEFAULT_CSS = """
     ConfirmScreen { align: center middle; }
-    ConfirmScreen > Vertical { width: 64; height: auto; border: round $warning; background: $surface; padding: 0 1; }
+    ConfirmScreen > Vertical { width: 90%; max-width: 90; height: auto; border: round $warning; background: $surface;
+                               padding: 0 1; }
+    ConfirmScreen Label { width: 1fr; }
     ConfirmScreen Horizontal { height: auto; }
     ConfirmScreen Button { margin: 0 1; }
     ConfirmScreen.at-bottom { align: center bottom; background: $background 10%; }
@@ -134,8 +138,11 @@ class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
 
     DEFAULT_CSS = """
     ChoiceScreen { align: center middle; }
-    ChoiceScreen > Vertical { width: 64; height: auto; max-height: 80%; border: round $accent; background: $surface; padding: 0 1; }
+    ChoiceScreen > Vertical { width: 90%; max-width: 90; height: auto; max-height: 100%; border: round $accent;
+                              background: $surface; padding: 0 1; }
+    ChoiceScreen Label { width: 1fr; }
     ChoiceScreen OptionList { height: auto; max-height: 20; }
+    ChoiceScreen.small OptionList { max-height: 10; }
     """
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
@@ -156,6 +163,7 @@ class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
 
     def on_mount(self) -> None:
         self.query_one(OptionList).focus()
+        self.set_class(self.app.size.height < 30, "small")  # 80x24: the list scrolls, the note stays in view
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
         self.dismiss(event.option.id)

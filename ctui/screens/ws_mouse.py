@@ -51,14 +51,14 @@ POLY_COLOR = (255, 220, 60)
 
 MOUSE_BINDINGS = keys("""
 z                    click_fills      Click fills on/off                                                hidden
-B                    background_seed  Background seed at the cursor (again: remove)                     hidden
-y                    box_corner       ROI box: a corner at the cursor (or drag)                         hidden
+B                    background_seed  Background seed here on/off                                       hidden
+y                    box_corner       ROI box corner here (or drag)                                     hidden
 Y                    box_clear        ROI box off                                                       hidden
-right_curly_bracket  mark(1)          Next marked slice of the proposal                                 hidden
-left_curly_bracket   mark(-1)         Previous marked slice of the proposal                             hidden
+right_curly_bracket  mark(1)          Next marked slice                                                 hidden
+left_curly_bracket   mark(-1)         Previous marked slice                                             hidden
 C                    cut_here         Cut the proposal at this slice                                    hidden
-A                    accept_to_here   Accept the proposal from the seed to here                         hidden
-P                    scissors_point   Scissors polygon: a point at the cursor (then clicks add points)  hidden
+A                    accept_to_here   Accept from the seed to here                                      hidden
+P                    scissors_point   Polygon point here (then clicks)                                  hidden
 """)
 
 
