@@ -19,9 +19,10 @@ from ctui.screens.testing import answer_prompt, cell_of_voxel, choose, drag, wai
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _cylinder(nz: int = 30, n: int = 48, r: float = 10.0) -> Session:

@@ -18,9 +18,10 @@ from ctui.screens.testing import cell_of_voxel, choose, drag, wait_for, wait_wor
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _body_and_island(nz: int = 20, n: int = 48) -> Session:
