@@ -431,3 +431,25 @@ async def test_80x24_menus_prompts_and_help_are_not_cut():
         await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), what="the help")
         assert "…" not in str(app.screen.body)
         assert not app.internal_errors
+
+
+@pytest.mark.parametrize("size", [(80, 24), (160, 50)])
+async def test_3d_view_uses_the_width_it_has(size):
+    from ctui.screens.view3d import View3DScreen
+
+    s = _body_and_island()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        app.push_screen(View3DScreen(s, image=np.full((60, 80, 3), 128, np.uint8)))
+        await wait_for(pilot, lambda: isinstance(app.screen, View3DScreen), what="the 3D view")
+        await pilot.pause()
+        view, info = app.screen.query_one("#v3-view"), app.screen.query_one("#v3-info")
+        if size[0] < 100:  # the info panel is off: the render gets all 80 columns (it had 50)
+            assert view.size.width == size[0] and not info.display
+            await pilot.press("backslash")
+            await pilot.pause()
+            assert info.display and view.size.width == size[0] - 30
+        else:
+            assert info.display and view.size.width == size[0] - 30
+        assert not app.internal_errors
