@@ -168,6 +168,8 @@ class MouseMixin(ToolsMixin):
             z = w.slice_at(int(event.screen_x - w.content_region.x))
             if z is not None:
                 self._go_slice(z)
+                self._drag = ("strip", w, z)  # a drag along the strip picks the slice limits
+                w.capture_mouse()
             return
         iv = self._image_view(event)
         if iv is None:
@@ -245,6 +247,8 @@ class MouseMixin(ToolsMixin):
         if drag[0] == "pan":
             self._pan_drag(event)
             return
+        if drag[0] == "strip":
+            return  # the limits are taken where the button comes up
         got = self._voxel_at(drag[1], event, inside=False)
         if got is None:
             return
@@ -287,13 +291,26 @@ class MouseMixin(ToolsMixin):
         if drag is None:
             return
         drag[1].release_mouse()
-        if drag[0] == "box":
+        if drag[0] == "strip":
+            self._strip_limits(drag[1], drag[2], int(event.screen_x - drag[1].content_region.x))
+        elif drag[0] == "box":
             self._finish_box(drag[2], drag[3], self._box_end, previous=drag[4])
         elif drag[0] == "paint":
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
             box = "; inside the ROI box" if self.s.roi_box is not None else ""
             self.set_status(f"Painted along the drag (brush {mm(self.s.brush)} mm{within}{box}); u undoes step by step")
+
+    def _strip_limits(self, strip: ReviewStrip, z0: int, col: int) -> None:
+        """A drag along the review strip from slice ``z0``: the slice limits (edits and propagation
+        stay inside them; ``i`` changes or clears them), no slice numbers typed."""
+        z1 = strip.slice_at(col, clamp=True)
+        if z1 is None or z1 == z0:
+            return
+        lo, hi = sorted((z0, z1))
+        self.s.limits.slices = (lo, hi)
+        self.set_status(f"Slice limits {lo}..{hi} from the strip: edits and propagation stay inside (i changes them)")
+        self.update_panel()
 
     def on_click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
