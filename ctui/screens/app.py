@@ -49,6 +49,8 @@ class CtuiApp(App):
     TITLE = "ctui"
     CSS = """
     Screen { background: $background; }
+    ModalScreen { background: $background 50%; }
+    ModalScreen.at-bottom { background: $background 10%; }
     """
     BINDINGS = [
         Binding("question_mark", "help", "Help"),

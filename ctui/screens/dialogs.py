@@ -114,8 +114,10 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
 
     def __init__(self, question: str, yes: str = "Yes", no: str = "No", *, at_bottom: bool = False) -> None:
         """``at_bottom``: at the foot of the screen over a light backdrop, so the image the
-        question is about stays in view."""
+        question is about stays in view; the focus starts on "no" there (a destructive
+        question: an Enter out of habit keeps the work)."""
         super().__init__(classes="at-bottom" if at_bottom else None)
+        self.at_bottom = at_bottom
         self.question = question
         self.yes, self.no = yes, no
 
@@ -125,6 +127,10 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
             with Horizontal():
                 yield Button(f"{self.yes} (y)", id="yes", variant="primary")
                 yield Button(f"{self.no} (n)", id="no")
+
+    def on_mount(self) -> None:
+        if self.at_bottom:
+            self.query_one("#no", Button).focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id == "yes")
