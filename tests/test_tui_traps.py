@@ -199,6 +199,9 @@ async def test_proposal_warnings_go_to_the_panel_not_toasts():
         await pilot.press("x")  # rejected: the note goes with it
         await pilot.pause()
         assert "brighter shell" not in str(ws.query_one("#panel").render())
+        await pilot.press("w")  # a window preset: said on the status line, no toast
+        await pilot.pause()
+        assert len(app._notifications) == before and "Window" in str(ws.query_one("#status").render())
         assert not app.internal_errors
 
 

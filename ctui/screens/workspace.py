@@ -266,8 +266,7 @@ class WorkspaceScreen(MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
     def _job_finished(self, msg: JobFinished) -> None:
         self.jobs.worker_ended()
         self.show_progress(None)
-        self.app.notify(msg.text, timeout=5)
-        self.set_status(msg.text)
+        self.set_status(msg.text)  # the status line, not a toast over the image and the review strip
 
     @on(JobFailed)
     def _job_failed(self, msg: JobFailed) -> None:

@@ -178,7 +178,7 @@ class NavMixin:
         name, win = self.viewstate.next_window(self.s.window_presets())
         self.s.window = win
         self.refresh_view()
-        self.app.notify(f"Window {name}: C {win[0]:g} W {win[1]:g}", timeout=2)
+        self.set_status(f"Window {name}: C {win[0]:g} W {win[1]:g}")
 
     def action_window_set(self) -> None:
         def done(val: str | None) -> None:
