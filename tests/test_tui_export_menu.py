@@ -16,9 +16,10 @@ from ctui.screens.testing import choose, wait_workspace
 
 @pytest.fixture(autouse=True)
 def _halfblock(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 async def test_export_menu_and_default_names_on_a_nifti_ct(tmp_path):

@@ -24,6 +24,8 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
 #: ``ctui web`` sets ``CTUI_WEB=1`` for the TUI it serves to a browser: sixel images (xterm.js draws
@@ -79,12 +81,25 @@ def prepare_graphics(mode: str | None = None) -> str:
     return mode
 
 
-def use_graphics(mode: str, *, unless_chosen: bool = False) -> None:
+def use_graphics(mode: str | None, *, unless_chosen: bool = False) -> str | None:
     """Record ``mode`` as the graphics mode without probing the terminal (``unless_chosen``:
-    keep a mode :func:`prepare_graphics` already chose)."""
+    keep a mode :func:`prepare_graphics` already chose; None: none chosen). Returns the mode
+    chosen before, to give back (:func:`using_graphics` does)."""
     global _chosen
+    previous = _chosen
     if not (unless_chosen and _chosen is not None):
         _chosen = mode
+    return previous
+
+
+@contextmanager
+def using_graphics(mode: str | None) -> Iterator[None]:
+    """Use ``mode`` inside the block (a test's fixed renderer), the previous choice after it."""
+    previous = use_graphics(mode)
+    try:
+        yield
+    finally:
+        use_graphics(previous)
 
 
 def web_mode(env=None) -> bool:

@@ -215,19 +215,17 @@ def finished(ws, run: PropagationRun) -> None:
     ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
     rng = p.slices
     secs = time.perf_counter() - run.started
-    extra = "; ".join(p.warnings())
     where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
     rep = run.report
+    # warnings are advisory: notes in the side panel (and counted on the status line), never a toast
+    # over the image, the proposal line or the review strip
+    notes = list(rep.warnings) if rep is not None else list(p.warnings())
+    ws.pending.notes = notes
+    said = f" ({len(notes)} note{'s' if len(notes) != 1 else ''} in the panel)" if notes else ""
     if rep is not None:
-        extra = "; ".join(rep.warnings)
-        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s. a accepts, x rejects")
-        if rep.warnings:
-            ws.app.notify(extra, severity="warning", timeout=10)
-        ws.refresh_view()
-        return
-    ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
-    if p.warnings():
-        ws.app.notify(extra, severity="warning", timeout=8)
+        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s{said}. a accepts, x rejects")
+    else:
+        ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s{said}. a accepts, x rejects")
     ws.refresh_view()
 
 
