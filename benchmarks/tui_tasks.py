@@ -78,6 +78,8 @@ class Counter:
     def __init__(self, pilot) -> None:
         self.pilot = pilot
         self.n = 0
+        self.clicks = 0  # of n: clicks, wheel notches, drags
+        self.typed = 0  # of n: characters typed into prompts (the rest are keys)
 
     async def press(self, *keys: str) -> None:
         self.n += len(keys)
@@ -88,18 +90,21 @@ class Counter:
 
     async def click(self, widget: str, offset) -> None:
         self.n += 1
+        self.clicks += 1
         await self.pilot.click(widget, offset=offset)
 
     async def wheel(self, widget: str, up: bool) -> None:
         from ctui.screens.testing import wheel
 
         self.n += 1
+        self.clicks += 1
         await wheel(self.pilot, widget, up=up)
 
     async def wheel_at(self, widget: str, offset, *, control: bool = False) -> None:
         from ctui.screens.testing import wheel
 
         self.n += 1
+        self.clicks += 1
         await wheel(self.pilot, widget, offset, up=True, control=control)
 
 
@@ -140,6 +145,7 @@ async def _box(c: Counter, app, truth_mask: np.ndarray, z: int) -> None:
     b = (z, min(int(ys.max()) + 2, ny - 1), min(int(xs.max()) + 2, nx - 1))
     await c.press("y")
     c.n += 1  # one drag
+    c.clicks += 1
     await drag(c.pilot, "#main", [cell_of_voxel(app, a), cell_of_voxel(app, b)])
 
 
@@ -155,6 +161,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     if rng is not None:
         await c.press("T")
         c.n += len(f"{rng[0]:g}:{rng[1]:g}") + 1  # typed into the prompt, then Enter
+        c.typed += len(f"{rng[0]:g}:{rng[1]:g}")
         await answer_prompt(pilot, f"{rng[0]:g}:{rng[1]:g}")
     z, y, x = seed
     typed = f"{x},{y},{z}"
@@ -180,6 +187,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     else:
         await c.press("g")
         c.n += len(typed) + 1
+        c.typed += len(typed)
         await answer_prompt(pilot, typed)
         if box:  # the box drag leaves the cursor on the seed
             await _box(c, app, truth_mask, z)
@@ -256,6 +264,76 @@ async def session(size: tuple[int, int], image: Path, labels: Path, *, review: b
             "errors": errors}
 
 
+async def _choose_by_keys(c: Counter, option_id: str) -> None:
+    """A menu choice as a person makes it: Down to the option, then Enter (every key counted)."""
+    ol = c.pilot.app.screen.query_one("OptionList")
+    ids = [ol.get_option_at_index(i).id for i in range(ol.option_count)]
+    await c.press(*(["down"] * ids.index(option_id)), "enter")
+
+
+async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path) -> dict:
+    """Issue 37's whole workflow (the TUI's own task, apart from the organs'): the kidney as in
+    :func:`session`, a section through it at the seed (``M``, ``x``, the object's axis), the
+    kidney's surface as STL (``e``), the project saved and reopened with its set-up.
+    Events split by kind: keys, clicks (and wheel notches, drags), typed characters."""
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.measure_screen import MeasureScreen
+    from ctui.screens.testing import wait_for, wait_workspace
+
+    graphics.use_graphics("halfblock")
+    os.chdir(out_dir)
+    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
+    app = CtuiApp(str(image), autosave_s=1e9)
+    out: dict = {"size": size}
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        s, ws = app.session, app.workspace
+        truth, seeds = seeds_and_truth(labels, s.volume.spacing)
+        c = Counter(pilot)
+        keys0 = c.n
+        organ = await _organ(c, app, "kidney_left", seeds["kidney_left"], truth == 3, first=True, review=False,
+                             rng=None)
+        out["organ_events"] = organ["events"]
+        z, y, x = seeds["kidney_left"]
+        s.z, s.y, s.x = z, y, x  # (the cursor is on the seed already: the click put it there)
+        await c.press("M")
+        await wait_for(pilot, lambda: isinstance(app.screen, MeasureScreen) and app.screen.stats, timeout=120,
+                       what="the measures")
+        ms = app.screen
+        await c.press("x")
+        await pilot.pause()
+        await _choose_by_keys(c, "object")
+        await wait_for(pilot, lambda: "at x" in str(ms.query_one("#ms-status").render()), timeout=120,
+                       what="the section")
+        out["section"] = str(ms.query_one("#ms-status").render())
+        await c.press("escape")
+        await c.press("e")
+        await pilot.pause()
+        await _choose_by_keys(c, "stl")
+        await pilot.pause()
+        await c.press("enter")  # the default name
+        await wait_for(pilot, lambda: any(out_dir.glob("*.stl")), timeout=120, what="the STL")
+        await c.press("ctrl+s")
+        await pilot.pause()
+        await c.press("enter")
+        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
+                       what="the saved project")
+        out["events"] = c.n - keys0
+        out["clicks"] = c.clicks
+        out["typed"] = c.typed
+        out["errors"] = list(app.internal_errors)
+        proj = s.project_path
+    app2 = CtuiApp(project=proj, autosave_s=1e9)
+    async with app2.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app2)
+        got = app2.session.seg.labels == organ["object"]
+        out["reopened_dice"] = dice(got, truth == 3)
+    out["stl"] = sorted(p.name for p in out_dir.glob("*.stl"))
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", action="append", default=None, help="terminal WxH (repeatable; default 160x50 and 80x24)")
@@ -263,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
     ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
     ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
+    ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
+                    "save, reopen) instead of the organs")
     args = ap.parse_args(argv)
     data = Path(args.data)
     image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
@@ -270,6 +350,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"skipped: {image} is missing")
         return 0
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
+    if args.workflow:
+        return print_workflow(sizes, image, labels)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"
@@ -287,6 +369,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{'':>7} save: {res['save_events']} events; session wall time {res['wall_s']:.1f} s"
               f"{'; errors: ' + str(res['errors']) if res['errors'] else ''}")
     print("issue 22 baseline (keyboard only, by hand): one kidney 433 keys / 8.4 min; kidney + spleen 959 keys / 9.9 min")
+    return 0
+
+
+def print_workflow(sizes, image: Path, labels: Path) -> int:
+    print(f"ctui TUI workflow on {image.name}: left kidney, a section through it, its STL, save, reopen")
+    print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  section")
+    for size in sizes:
+        with tempfile.TemporaryDirectory() as tmp:
+            r = asyncio.run(workflow(size, image, labels, out_dir=Path(tmp)))
+        print(f"{size[0]:>3}x{size[1]:<3} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} {r['clicks']:>6} "
+              f"{r['typed']:>5} "
+              f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['section'][:90]}"
+              f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+    print("(DICOM-SEG needs a DICOM series: this input is NIfTI, so STL only; the 3D view needs EGL: left out)")
     return 0
 
 

@@ -18,17 +18,18 @@ import sys
 from ctui import __version__
 
 OPEN_OPTIONS = ("--graphics", "--series", "--downsample", "--crop")  # options of `open` accepted without the command name
-COMMANDS = ("open", "info", "demo", "segment", "edit", "drift", "mesh", "render", "measure", "export", "batch",
-            "vessel")
+COMMANDS = ("open", "info", "demo", "segment", "edit", "drift", "mesh", "render", "measure", "export", "batch", "auto",
+            "report", "web", "vessel")
 
 
 def _command_modules() -> tuple:
     """The subcommand modules, in COMMANDS order (each imports nothing heavy at top level)."""
-    from ctui.commands import batch, demo, drift, edit, export, info, measure, mesh, open, render, segment, vessel
+    from ctui.commands import auto, batch, demo, drift, edit, export, info, measure, mesh, open, render, segment
+    from ctui.commands import report, vessel, web
 
     mods = {"open": open, "info": info, "demo": demo, "segment": segment, "edit": edit, "drift": drift, "mesh": mesh,
-            "render": render, "measure": measure, "export": export, "batch": batch,
-            "vessel": vessel}
+            "render": render, "measure": measure, "export": export, "batch": batch, "auto": auto,
+            "report": report, "web": web, "vessel": vessel}
     return tuple(mods[name] for name in COMMANDS)
 
 

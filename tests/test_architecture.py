@@ -164,7 +164,8 @@ def test_engine_imports_inside_functions_say_why():
 # use so that `ctui --help` and the TUI's first paint do not wait for them (the reason, once).
 HEAVY_LIBRARIES = ("scipy", "skimage", "cv2", "numba", "pydicom", "highdicom", "nibabel", "nrrd", "trimesh", "PIL",
                    "matplotlib", "moderngl", "mapbox_earcut", "fast_simplification", "dask", "distributed",
-                   "psutil", "textual_image", "tifffile", "imageio", "meshio", "vtk", "pyvista", "SimpleITK")
+                   "psutil", "textual_image", "tifffile", "imageio", "meshio", "vtk", "pyvista", "SimpleITK",
+                   "nnInteractive", "httpx")  # the last two: ctui[ai], the nninteractive method only
 # Modules whose functions import for start-up time, with the reason (one for the whole module).
 STARTUP_MODULES = {
     "ctui/cli.py": "`ctui --help` and the argument errors load no engine (numpy): a command imports its work",

@@ -429,3 +429,45 @@ def test_stepped_rod_is_not_a_branch_but_a_side_branch_is():
     assert np.any((status == "branch") & (np.abs(s - 14.0) <= 1.5))
     assert not np.any((status == "branch") & (np.abs(s - 14.0) > 3.0))
     assert np.all(status[(s > 20) & (s < 30)] == "ok")  # the step at z = 25 is a step
+
+
+def _ellipsoid(a=30.0, b=20.0, c=15.0, n=80) -> np.ndarray:
+    """A kidney-sized ellipsoid (semi-axes a, b, c mm along x, y, z) on a 1 mm grid, centred at (40, 40, 40) mm."""
+    zz, yy, xx = np.mgrid[0:n, 0:n, 0:n].astype(float)
+    return ((xx - 40) / a) ** 2 + ((yy - 40) / b) ** 2 + ((zz - 40) / c) ** 2 <= 1.0
+
+
+def test_a_given_path_keeps_every_section_that_cuts_the_object():
+    """A straight path through a kidney-like ellipsoid (no tube: every plane was an 'end cap' and
+    8 of 15 sections were dropped without a word): every section inside is kept with its
+    ellipse's area, those outside are named with where they lie (s mm) and why."""
+    from ctui.engine.measure.summary import measure_object
+
+    mask = _ellipsoid()
+    out = measure_object(mask.astype(np.uint8), 1, path="0,40,40;80,40,40", step_mm=5.0, mesh=False)
+    rows = out["rows"]
+    assert len(rows) == 17
+    inside = [r for r in rows if abs(r["point_mm"][0] - 40) < 29]
+    assert all(r["status"] == "ok" for r in inside) and len(out["sections"]) >= len(inside) == 11
+    for r in inside:  # the ellipse of the plane x: pi * b' * c'
+        k = 1 - ((r["point_mm"][0] - 40) / 30.0) ** 2
+        assert r["area_mm2"] == pytest.approx(math.pi * 20 * 15 * k, rel=0.05, abs=15)
+    assert "cap" not in out["section_flags"]["counts"]
+    warned = [w for w in out["warnings"] if "outside the object" in w]
+    assert len(warned) == 1 and "(s 0-" in warned[0] and "80 mm" in warned[0]
+    # the automatic centreline still leaves its end caps out (a tube's ends are no cross-sections)
+    auto = measure_object(mask.astype(np.uint8), 1, path="auto", step_mm=5.0, mesh=False)
+    assert all(r.get("flag") is None for r in auto["rows"])
+
+
+def test_line_through_a_point_along_an_axis_or_the_objects_axis():
+    from ctui.engine.measure.paths import line_through, path_length
+
+    mask = _ellipsoid()
+    p = line_through((40, 40, 40), "object", half_mm=10.0, mask=mask)
+    d = (p[-1] - p[0]) / np.linalg.norm(p[-1] - p[0])
+    assert abs(d[0]) > 0.999 and path_length(p) == pytest.approx(20.0, abs=1e-6)  # the longest axis: x
+    z = line_through((40, 40, 40), "z", half_mm=2.0, spacing=(3.0, 1.0, 1.0))
+    assert np.allclose(z[0], (40, 40, 118)) and np.allclose(z[-1], (40, 40, 122))
+    with pytest.raises(Exception):
+        line_through((40, 40, 40), "object", half_mm=2.0)  # the object's axis needs its mask

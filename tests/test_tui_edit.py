@@ -18,9 +18,10 @@ from ctui.screens.testing import answer_prompt, wait_for, wait_workspace
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _cylinder(nz: int = 30, n: int = 48, spacing=(1.0, 1.0, 1.0), r: float = 10.0) -> Session:

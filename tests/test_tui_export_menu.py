@@ -16,9 +16,10 @@ from ctui.screens.testing import choose, wait_workspace
 
 @pytest.fixture(autouse=True)
 def _halfblock(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 async def test_export_menu_and_default_names_on_a_nifti_ct(tmp_path):
@@ -35,7 +36,7 @@ async def test_export_menu_and_default_names_on_a_nifti_ct(tmp_path):
         ol = app.screen.query_one(OptionList)
         ids = [ol.get_option_at_index(i).id for i in range(ol.option_count)]
         assert "dicom-seg" not in ids and "rtstruct" not in ids
-        assert [i for i in ids if i in FORMATS] == [f for f in FORMATS if f not in ("dicom-seg", "rtstruct")]
+        assert [i for i in ids if i in FORMATS] == [f for f in FORMATS if FORMATS[f].needs != "dicom"]
         note = " ".join(str(lab.render()) for lab in app.screen.query(Label))
         assert "Not offered: DICOM-SEG, RTSTRUCT" in note and "NIfTI" in note
         await choose(pilot, "nifti")

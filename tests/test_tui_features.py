@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
+from ctui.engine.io.project import autosave_path
 from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.imageview import ImageView
@@ -20,9 +21,10 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _obj(name):
@@ -251,9 +253,12 @@ async def test_autosave_is_offered_on_next_start(tmp_path):
         await pilot.press("enter")
         await pilot.pause()
         labels = app.session.seg.labels.copy()
-        app.autosave_worker()
-        auto = tmp_path / "autosave"
-        await wait_for(pilot, lambda: auto.exists() and any(auto.iterdir()), what="the autosave")
+        worker = app.autosave_worker()
+        final = autosave_path(app.session.project_path or app.session.source_path)
+        # the final file, once the writer has finished (its temporary file, or a write still deciding
+        # whether it is stale, is no autosave yet: waiting on any file raced the writer)
+        await wait_for(pilot, lambda: worker.is_finished and final.exists(), what="the autosave")
+        assert final.parent == tmp_path / "autosave"
         app.session.dirty = False  # as if the app was killed: no save, no question
     app2 = CtuiApp()
     async with app2.run_test(size=(120, 40)) as pilot:
@@ -318,6 +323,7 @@ async def test_rename_and_clear_object():
         n = int((s.seg.labels == 1).sum())
         assert n > 50
         await pilot.press("N")
+        await choose(pilot, "_type")  # not one of the common structures: typed
         await answer_prompt(pilot, "spine L1")
         assert s.seg.objects[1].name == "spine L1"
         await pilot.press("delete", "y")

@@ -19,9 +19,10 @@ from ctui.screens.testing import answer_prompt, cell_of_voxel, choose, drag, wai
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _cylinder(nz: int = 30, n: int = 48, r: float = 10.0) -> Session:
@@ -206,10 +207,13 @@ async def test_edit_tools_bad_input_keeps_labels_and_undo():
         await pilot.press("t")
         await choose(pilot, "scissors_in_box")
         assert np.array_equal(before, s.seg.labels) and list(s.seg.undo_labels()) == undo
-        # and a real cut: the box's slices, inside
+        # and a real cut: the box's slices, inside (half the object: asked first, y does it)
         s.roi_box = ((s.z, s.z), (0, 47), (0, 23))
         await pilot.press("t")
         await choose(pilot, "scissors_in_box")
+        assert np.array_equal(before, s.seg.labels)
+        await pilot.press("y")
+        await pilot.pause()
         assert s.seg.voxels(1) == int(before[s.z, :, 24:].astype(bool).sum())
         await pilot.press("u")
         assert np.array_equal(before, s.seg.labels)
@@ -298,6 +302,8 @@ async def test_polygon_scissors_by_clicks():
         assert len(app.workspace.edit_tools.polygon) == 3 and s.zyx[0] == z
         await pilot.press("t")
         await choose(pilot, "scissors_in_slice")
+        await pilot.press("y")  # half of a one-slice object: asked first
+        await pilot.pause()
         cut = polygon_mask(app.workspace.edit_tools.polygon, s.shape[1:]) & (before[z] == 1)
         assert cut.sum() > 50
         assert s.seg.voxels(1) == int((before == 1).sum()) - int(cut.sum())

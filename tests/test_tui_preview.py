@@ -19,10 +19,11 @@ from ctui.screens.testing import wait_for, wait_workspace
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(app_mod, "PREVIEW_MIN_VOXELS", 0)  # the real data set is small: preview it anyway
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _held_load(monkeypatch) -> tuple[threading.Event, list]:

@@ -19,9 +19,10 @@ from ctui.screens.testing import wait_workspace
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def test_strip_columns():
@@ -112,4 +113,52 @@ async def test_strip_reviews_an_accepted_object():
         await pilot.press("right_curly_bracket")
         assert s.z == 15  # the leak's slice, found on the accepted object
         assert "keep the island" in str(ws.query_one("#status").render())
+        assert not app.internal_errors
+
+
+async def test_cut_at_a_marked_slice_keeps_the_slice_before_it():
+    """The mark is the slice where it leaks (15: the area triples): C there keeps 11..14."""
+    data = np.zeros((30, 48, 48), np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=10)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        sq = np.zeros((48, 48), bool)
+        sq[10:20, 10:20] = True
+        s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
+        ws.pending.show(_leaky_proposal(s.shape))
+        ws.refresh_view()
+        await pilot.press("right_curly_bracket")
+        assert s.z == 15
+        await pilot.press("C")
+        assert ws.pending.proposal.slices == (11, 14) and ws.pending.proposal.voxels == 400
+        assert "before the marked slice 15" in str(ws.query_one("#status").render())
+        assert not app.internal_errors
+
+
+async def test_a_drag_along_the_strip_sets_the_slice_limits():
+    from ctui.screens.testing import drag
+
+    data = np.zeros((30, 48, 48), np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=10)
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        sq = np.zeros((48, 48), bool)
+        sq[10:20, 10:20] = True
+        s.seg.apply_mask(sq, 1, offset=(10, 0, 0))
+        ws.pending.show(_leaky_proposal(s.shape))
+        ws.refresh_view()
+        await pilot.pause()
+        strip = ws.query_one("#strip", ReviewStrip)
+        col = {z: next(c for c, (a, b) in enumerate(strip._cols()) if a <= z <= b) for z in (11, 14)}
+        await drag(pilot, "#strip", [(col[11], 0), (col[14], 0)])
+        assert s.limits.slices == (strip.slice_at(col[11]), strip.slice_at(col[14]))
+        assert s.limits.slices[0] <= 11 and s.limits.slices[1] >= 14
+        assert "Slice limits" in str(ws.query_one("#status").render())
+        # a click (no drag) still only goes to the slice
+        await pilot.click("#strip", offset=(col[11], 0))
+        assert s.z == strip.slice_at(col[11]) and s.limits.slices[1] >= 14
         assert not app.internal_errors

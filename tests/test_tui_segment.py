@@ -20,9 +20,10 @@ from conftest import shared
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 @pytest.mark.shared_data

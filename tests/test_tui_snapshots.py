@@ -19,7 +19,8 @@ SIZES = [(100, 30), (160, 50)]
 
 @pytest.fixture(autouse=True)
 def _halfblock(monkeypatch):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 @pytest.fixture(scope="module")

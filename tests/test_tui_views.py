@@ -17,9 +17,10 @@ from ctui.screens.testing import wait_for, wait_workspace
 
 @pytest.fixture(autouse=True)
 def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
     monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
+        yield
 
 
 def _ball_session(n: int = 40) -> Session:

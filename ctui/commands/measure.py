@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not os.path.exists(args.input):
         raise CtuiError(f"{args.input}: no such file")
+    if not args.labels and os.path.isfile(args.input) and _report(args):
+        return 0  # a DICOM SR measurement report: its measurements
     check_outputs({"--csv": args.csv, "--plot": args.plot, "--path-csv": args.path_csv},
                   inputs=[args.input, args.labels])
     between = _floats(args.between, 2, "--between") if args.between else None
@@ -104,6 +106,20 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print("\n".join(_lines(res, between, written)))
     return 0
+
+
+def _report(args: argparse.Namespace) -> bool:
+    """Print the measurements of a DICOM SR report (``ctui report``'s, or any TID 1500); False if not one."""
+    from ctui.engine.actions.report import is_report, read_report
+
+    if not is_report(args.input):
+        return False
+    from ctui.commands.report import report_lines
+    from ctui.engine.core.jsonio import dumps
+
+    contents = read_report(args.input)
+    print(dumps(contents, indent=1) if args.json else "\n".join(report_lines(contents)))
+    return True
 
 
 def _lines(res, between, written: list[str]) -> list[str]:

@@ -166,6 +166,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with a .ctui PATH and no --seed: the objects --interpolate/--keep-largest/--min-island "
                         "edit, e.g. 1,3 (default: all); write the result with --project NEW.ctui")
     p.add_argument("--json", action="store_true", help="print a JSON report")
+    p.add_argument("--server", metavar="URL", default="",
+                   help="--method nninteractive: the nnInteractive server (default: $CTUI_NNI_SERVER), e.g. "
+                        "http://127.0.0.1:8000 through `ssh -L 8000:127.0.0.1:8000 gpu-box`; never saved")
+    p.add_argument("--key", metavar="KEY", default=None,
+                   help="--method nninteractive: the server's API key (default: $CTUI_NNI_KEY); never saved")
+    p.add_argument("--refine", action="store_true",
+                   help="--method nninteractive with a .ctui PATH: send its object (--objects N, default the "
+                        "first) as the initial segmentation and refine it with the prompts")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -242,7 +250,8 @@ def _options(args: argparse.Namespace):
                           fill_holes=getattr(args, "fill_holes", True), box=parse_box(getattr(args, "box", None)),
                           slices=parse_slices(getattr(args, "slices", None)),
                           keep_largest=getattr(args, "keep_largest", False), min_island=getattr(args, "min_island", 0),
-                          interpolate=getattr(args, "interpolate", False), curvature=getattr(args, "curvature", 0.5))
+                          interpolate=getattr(args, "interpolate", False), curvature=getattr(args, "curvature", 0.5),
+                          server=getattr(args, "server", "") or "", api_key=getattr(args, "key", None) or "")
 
 
 def _thresholds(args: argparse.Namespace) -> list:
@@ -262,7 +271,8 @@ def _thresholds(args: argparse.Namespace) -> list:
     return out
 
 
-def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=None):
+def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=None, segmentation=None,
+                   object_ids=None):
     """Run the segment action for the parsed arguments; returns (Segmentation, pipeline, settings, results).
 
     ``results``: one dict per object (id, seed, range, stops, warnings, neck_cut_slices), as the
@@ -271,12 +281,14 @@ def segment_volume(volume, args: argparse.Namespace, *, pipeline=None, progress=
     from ctui.engine.actions.segment import segment
 
     seeds = [parse_seed(s) for s in args.seed]
-    if not seeds:
-        raise _err("give at least one --seed X,Y,Z")
+    prompted = getattr(args, "method", "fill") == "nninteractive"  # seeds, background seeds or a box are prompts
+    if not seeds and not (prompted and (args.background or args.box)):
+        raise _err("give a prompt: --seed X,Y,Z, --background X,Y,Z or --box" if prompted
+                   else "give at least one --seed X,Y,Z")
     background = [parse_seed(s) for s in getattr(args, "background", [])]
     pipeline = pipeline or build_pipeline(args)
     res = segment(volume, seeds, _thresholds(args), background=background, options=_options(args), pipeline=pipeline,
-                  progress=progress)
+                  progress=progress, segmentation=segmentation, object_ids=object_ids)
     results = [o.to_dict() | {"message": o.message()} for o in res.objects]
     return res.segmentation, res.pipeline, res.settings, results
 
@@ -342,13 +354,15 @@ def run(args: argparse.Namespace) -> int:
 
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
 
-    if args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
+    if getattr(args, "refine", False):
+        volume, start, ids = _refine_input(args)
+    elif args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
         return _edit_project(args)
-
-
-    volume = load_volume(args.path, **load_kwargs(args))
+    else:
+        volume, start, ids = load_volume(args.path, **load_kwargs(args)), None, None
     with progress_bar(args, "segmenting") as progress:
-        seg, pipeline, settings, results = segment_volume(volume, args, progress=progress)
+        seg, pipeline, settings, results = segment_volume(volume, args, progress=progress, segmentation=start,
+                                                          object_ids=ids)
     written = write_outputs(args, volume, seg, pipeline, settings)
     objs = objects_report(seg, volume, results)
     if args.json:
@@ -367,6 +381,28 @@ def run(args: argparse.Namespace) -> int:
         for w in written:
             print(f"wrote {w}")
     return 0
+
+
+def _refine_input(args: argparse.Namespace):
+    """--refine: (volume, Segmentation, [object id]) from the project PATH, whose source series is loaded;
+    ``args.path`` becomes the series' path (the new project's source)."""
+    from ctui.engine.actions.opened import open_input
+    from ctui.engine.actions.series import Segmentation
+
+    if args.method != "nninteractive" or not args.path.endswith((".ctui", ".ctui.autosave")):
+        raise _err("--refine refines an object of a .ctui project PATH with --method nninteractive")
+    opened = open_input(args.path, kind="project", require_labels=True, with_series=True)
+    proj = opened.project
+    seg = Segmentation(opened.labels.shape, labels=opened.labels.astype("uint8", copy=True), objects=proj.objects or [])
+    try:
+        ids = [int(v) for v in args.objects.split(",") if v.strip()] if args.objects else sorted(seg.objects)[:1]
+    except ValueError:
+        raise _err(f"--objects {args.objects!r}: expected an id like 2") from None
+    if not ids or ids[0] not in seg.objects:
+        raise _err(f"{args.path}: no object {ids[0] if ids else ''} to refine (objects: "
+                   f"{', '.join(map(str, sorted(seg.objects))) or 'none'})")
+    args.path = proj.source_path
+    return opened.volume, seg, ids[:1]
 
 
 def _edit_project(args: argparse.Namespace) -> int:

@@ -49,6 +49,8 @@ class CtuiApp(App):
     TITLE = "ctui"
     CSS = """
     Screen { background: $background; }
+    ModalScreen { background: $background 50%; }
+    ModalScreen.at-bottom { background: $background 10%; }
     """
     BINDINGS = [
         Binding("question_mark", "help", "Help"),
@@ -359,7 +361,7 @@ class CtuiApp(App):
         if s is None:
             return
         if s.project_path:
-            self._save_to(s.project_path, then_quit)
+            self._save_to(s.project_path, then_quit, asked=False)
             return
         from ctui.screens.dialogs import PromptScreen
 
@@ -374,7 +376,9 @@ class CtuiApp(App):
 
         self.push_screen(PromptScreen("Save project as", default), done)
 
-    def _save_to(self, path: str, then_quit: bool = False) -> None:
+    def _save_to(self, path: str, then_quit: bool = False, *, asked: bool = True) -> None:
+        """Save the project to ``path``; ``asked``: the path came from a dialog (False: a
+        second Ctrl+S, saved where the first one did)."""
         s = self.session
         try:
             p = Path(path).expanduser()
@@ -389,9 +393,11 @@ class CtuiApp(App):
         s.project_path = str(p)
         s.dirty = False
         self._remove_autosaves(old_key, s.project_path)
-        self.notify(f"Project saved: {p}", timeout=3)
-        if self.workspace is not None:
-            self.workspace.update_panel()
+        ws = self.workspace
+        if ws is not None and self.screen is ws:  # said on the status line, not in a toast over the image
+            ws.saved_to(str(p), asked=asked)
+        else:
+            self.notify(f"Project saved: {p}", timeout=3)
         if then_quit:
             self._exit_clean()
 
@@ -520,10 +526,27 @@ class CtuiApp(App):
                 seen.add(action)
                 keys = key.split(",")[0]
                 yield SystemCommand(f"{desc or action}", f"key {keys}", self._palette_callback(node, action))
+        yield from self._method_commands()
         yield SystemCommand("Save project", "Ctrl+S", self.action_save)
         yield SystemCommand("Help: all keys", "?", self.action_help)
         yield SystemCommand("Open series or project", "o", self.action_open)
         yield SystemCommand("Show last internal error", "traceback of the last reported internal error", self.action_last_error)
+
+    def _method_commands(self) -> Iterable[SystemCommand]:
+        """One command per segmentation method of the registry ("grow" finds "Segmentation
+        method: grow"): it becomes the method S and p use, as in the G panel."""
+        ws = self.workspace
+        if ws is None or self.session is None:
+            return
+        from ctui.engine.actions.segment import METHODS  # the registry loads the segmentation with the palette
+
+        for name, m in METHODS.items():
+            def pick(_name=name) -> None:
+                self.session.segment_options["method"] = _name
+                ws.set_status(f"Segmentation method {_name}: S segments from the cursor (G shows every option)")
+                ws.update_panel()
+
+            yield SystemCommand(f"Segmentation method: {name}", m.help, pick)
 
     def _palette_callback(self, node, action: str):
         async def run() -> None:

@@ -34,7 +34,9 @@ class PromptScreen(GuardMixin, ModalScreen[str | None]):
 
     DEFAULT_CSS = """
     PromptScreen { align: center middle; }
-    PromptScreen > Vertical { width: 60; height: auto; border: round $accent; background: $surface; padding: 0 1; }
+    PromptScreen > Vertical { width: 90%; max-width: 100; height: auto; border: round $accent; background: $surface;
+                              padding: 0 1; }
+    PromptScreen Label { width: 1fr; }
     """
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
@@ -98,17 +100,24 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
 
     DEFAULT_CSS = """
     ConfirmScreen { align: center middle; }
-    ConfirmScreen > Vertical { width: 64; height: auto; border: round $warning; background: $surface; padding: 0 1; }
+    ConfirmScreen > Vertical { width: 90%; max-width: 90; height: auto; border: round $warning; background: $surface;
+                               padding: 0 1; }
+    ConfirmScreen Label { width: 1fr; }
     ConfirmScreen Horizontal { height: auto; }
     ConfirmScreen Button { margin: 0 1; }
+    ConfirmScreen.at-bottom { align: center bottom; background: $background 10%; }
     """
     BINDINGS = [
         Binding("y", "answer(True)", "Yes"),
         Binding("n,escape", "answer(False)", "No"),
     ]
 
-    def __init__(self, question: str, yes: str = "Yes", no: str = "No") -> None:
-        super().__init__()
+    def __init__(self, question: str, yes: str = "Yes", no: str = "No", *, at_bottom: bool = False) -> None:
+        """``at_bottom``: at the foot of the screen over a light backdrop, so the image the
+        question is about stays in view; the focus starts on "no" there (a destructive
+        question: an Enter out of habit keeps the work)."""
+        super().__init__(classes="at-bottom" if at_bottom else None)
+        self.at_bottom = at_bottom
         self.question = question
         self.yes, self.no = yes, no
 
@@ -118,6 +127,10 @@ class ConfirmScreen(GuardMixin, ModalScreen[bool]):
             with Horizontal():
                 yield Button(f"{self.yes} (y)", id="yes", variant="primary")
                 yield Button(f"{self.no} (n)", id="no")
+
+    def on_mount(self) -> None:
+        if self.at_bottom:
+            self.query_one("#no", Button).focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id == "yes")
@@ -131,8 +144,11 @@ class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
 
     DEFAULT_CSS = """
     ChoiceScreen { align: center middle; }
-    ChoiceScreen > Vertical { width: 64; height: auto; max-height: 80%; border: round $accent; background: $surface; padding: 0 1; }
+    ChoiceScreen > Vertical { width: 90%; max-width: 90; height: auto; max-height: 100%; border: round $accent;
+                              background: $surface; padding: 0 1; }
+    ChoiceScreen Label { width: 1fr; }
     ChoiceScreen OptionList { height: auto; max-height: 20; }
+    ChoiceScreen.small OptionList { max-height: 10; }
     """
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
@@ -153,6 +169,7 @@ class ChoiceScreen(GuardMixin, ModalScreen[str | None]):
 
     def on_mount(self) -> None:
         self.query_one(OptionList).focus()
+        self.set_class(self.app.size.height < 30, "small")  # 80x24: the list scrolls, the note stays in view
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
         self.dismiss(event.option.id)

@@ -24,8 +24,16 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
+#: ``ctui web`` sets ``CTUI_WEB=1`` for the TUI it serves to a browser: sixel images (xterm.js draws
+#: them; the kitty protocol blanks the page and "auto" finds no tty), at most WEB_MAX_PIXELS
+#: (w, h) each (sixel bytes grow with the area), redrawn at most every WEB_DEBOUNCE_S seconds
+WEB_ENV = "CTUI_WEB"
+WEB_MAX_PIXELS = (1280, 960)
+WEB_DEBOUNCE_S = 0.04
 
 _chosen: str | None = None
 _cell_px: tuple[int, int] = (10, 20)
@@ -44,6 +52,8 @@ def prepare_graphics(mode: str | None = None) -> str:
     mode = aliases.get(mode, mode)
     if mode not in MODES:
         raise ValueError(f"unknown graphics mode {mode!r}; choose one of {', '.join(MODES)}")
+    if web_mode() and mode in ("auto", "kitty"):
+        mode = "sixel"  # in a browser: never kitty, and auto would fall back to half-blocks (no tty)
     if mode in ("halfblock", "ascii"):
         _chosen = mode
         return mode
@@ -71,12 +81,35 @@ def prepare_graphics(mode: str | None = None) -> str:
     return mode
 
 
-def use_graphics(mode: str, *, unless_chosen: bool = False) -> None:
+def use_graphics(mode: str | None, *, unless_chosen: bool = False) -> str | None:
     """Record ``mode`` as the graphics mode without probing the terminal (``unless_chosen``:
-    keep a mode :func:`prepare_graphics` already chose)."""
+    keep a mode :func:`prepare_graphics` already chose; None: none chosen). Returns the mode
+    chosen before, to give back (:func:`using_graphics` does)."""
     global _chosen
+    previous = _chosen
     if not (unless_chosen and _chosen is not None):
         _chosen = mode
+    return previous
+
+
+@contextmanager
+def using_graphics(mode: str | None) -> Iterator[None]:
+    """Use ``mode`` inside the block (a test's fixed renderer), the previous choice after it."""
+    previous = use_graphics(mode)
+    try:
+        yield
+    finally:
+        use_graphics(previous)
+
+
+def web_mode(env=None) -> bool:
+    """True in the TUI ``ctui web`` serves to a browser."""
+    return (os.environ if env is None else env).get(WEB_ENV) == "1"
+
+
+def pixel_cap() -> tuple[int, int] | None:
+    """The largest (w, h) of an image in pixels: :data:`WEB_MAX_PIXELS` in web mode, else None."""
+    return WEB_MAX_PIXELS if web_mode() else None
 
 
 def graphics_mode() -> str:

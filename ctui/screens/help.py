@@ -144,6 +144,20 @@ def _cell(keys: str, desc: str, key_w: int, width: int) -> str:
     return f"{bold_key(keys)}{' ' * max(key_w - len(keys), 0)} {_esc(desc)}{' ' * (room - len(desc))}"
 
 
+def _wrapped(keys: str, desc: str, room: int) -> list[tuple[str, str]]:
+    """One entry as rows of at most ``room`` characters of description: the words that do not
+    fit go on rows of their own under it (never cut off with "…")."""
+    rows, line = [], ""
+    for word in desc.split():
+        if line and len(line) + 1 + len(word) > room:
+            rows.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    rows.append(line)
+    return [(keys if i == 0 else "", r) for i, r in enumerate(rows)]
+
+
 def _balanced(blocks: list[list], ncol: int) -> list[list]:
     """The blocks in order split into at most ``ncol`` columns, the tallest as short as
     possible (every split tried: a handful of groups)."""
@@ -164,7 +178,7 @@ def task_help(nodes, *, width: int | None = None) -> str:
     each task first. With ``width`` (characters) the groups are laid out in as many
     columns of at least 44 characters as fit, in task order down each column, so a
     160x50 terminal shows every group without scrolling; descriptions too long for a
-    column end in "…"."""
+    column go on on the next row."""
     groups = _groups(nodes)
     ncol = max(1, min(4, (width or 0) // 44))
     if ncol == 1:
@@ -175,7 +189,9 @@ def task_help(nodes, *, width: int | None = None) -> str:
         return "\n".join(out)
     key_w = min(max((len(k) for _t, items in groups for k, _d in items), default=4), 12)
     col_w = (int(width or 0) - 2 * (ncol - 1)) // ncol
-    blocks = [[(task, None)] + list(items) + [("", None)] for task, items in groups]
+    room = col_w - key_w - 1
+    blocks = [[(task, None)] + [row for k, d in items for row in _wrapped(k, d, room)] + [("", None)]
+              for task, items in groups]
     cols = _balanced(blocks, ncol)
     lines = []
     for r in range(max(len(c) for c in cols)):

@@ -19,7 +19,7 @@ from textual.strip import Strip
 from textual.widget import Widget
 
 from ctui.screens import cells
-from ctui.screens.graphics import cell_pixels, graphics_mode
+from ctui.screens.graphics import WEB_DEBOUNCE_S, cell_pixels, graphics_mode, pixel_cap
 
 
 class ImageView(Widget):
@@ -51,6 +51,8 @@ class ImageView(Widget):
         self._strips_key: tuple | None = None
         self._tii = None  # textual-image child widget for sixel/kitty
         self._tii_key: tuple | None = None
+        self._tii_timer = None  # web mode: the pending (throttled) image update
+        self._tii_sent = 0.0  # when the last image update went out
 
     # ----------------------------------------------------------------- public
     def set_image(self, rgb: np.ndarray | None, *, token: object = None, spacing_yx=None, zoom=None, center=None, cursor=...) -> None:
@@ -76,6 +78,9 @@ class ImageView(Widget):
         w, h = self.size.width, self.size.height
         if self.mode in ("sixel", "kitty"):
             cw, ch = cell_pixels()
+            cap = pixel_cap()
+            if cap is not None:  # web mode: whole cells within the cap
+                w, h = min(w, max(cap[0] // cw, 1)), min(h, max(cap[1] // ch, 1))
             return max(w * cw, 1), max(h * ch, 1)
         return max(w, 1), max(2 * h, 1)
 
@@ -83,8 +88,17 @@ class ImageView(Widget):
     def _invalidate(self) -> None:
         self._strips = None
         if self.mode in ("sixel", "kitty"):
-            self._update_tii()
+            wait = WEB_DEBOUNCE_S - (time.perf_counter() - self._tii_sent)
+            if pixel_cap() is None or (wait <= 0 and self._tii_timer is None):
+                self._flush_tii()
+            elif self._tii_timer is None:  # web mode: at most one image per WEB_DEBOUNCE_S, the latest
+                self._tii_timer = self.set_timer(max(wait, 0.001), self._flush_tii)
         self.refresh()
+
+    def _flush_tii(self) -> None:
+        self._tii_timer = None
+        self._tii_sent = time.perf_counter()
+        self._update_tii()
 
     def _grid(self, out_size: tuple[int, int]) -> np.ndarray | None:
         if self.rgb is None:
@@ -121,7 +135,11 @@ class ImageView(Widget):
         if key == self._tii_key:
             return
         self._tii_key = key
-        grid = self._grid(self.target_pixels())
+        target = self.target_pixels()
+        if pixel_cap() is not None:  # the image widget is as large as the capped image
+            cw, ch = cell_pixels()
+            self._tii.styles.width, self._tii.styles.height = target[0] // cw, target[1] // ch
+        grid = self._grid(target)
         if grid is None:
             self._tii.image = None
             return

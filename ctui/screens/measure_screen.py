@@ -16,11 +16,12 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
 
+from ctui.engine.actions.defaults import SECTION_STEP_MM
 from ctui.engine.actions.formats import output_name
-from ctui.engine.actions.measure import find_steps, measure_object, save_sections
+from ctui.engine.actions.measure import LINE_AXES, find_steps, line_through, measure_object, save_sections
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
-from ctui.screens.dialogs import PromptScreen
+from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
@@ -45,7 +46,8 @@ def no_sections_reason(res, stats: dict | None = None) -> str:
     """Why an object got no cross-sections along its automatic centreline (``res`` a
     :class:`~ctui.engine.actions.measure.MeasureResult`), and what to do instead."""
     length = float(res.path_length_mm or 0.0)
-    hint = "give a path through it: ctui measure FILE --object N --path 'x,y,z;x,y,z' (mm)"
+    hint = ("x: a section through the cursor (normal to the object's axis or a plane's), l: sections along "
+            "a line (P at one end, click the other), or ctui measure FILE --object N --path 'x,y,z;x,y,z' (mm)")
     axes = sorted((float(a) for a in (res.principal_axes_mm or (stats or {}).get("principal_axes_mm") or [])),
                   reverse=True)
     shape = ""
@@ -76,10 +78,12 @@ class MeasureScreen(GuardMixin, Screen):
     MeasureScreen #ms-status { height: auto; max-height: 3; background: $boost; padding: 0 1; }
     """
     BINDINGS = keys("""
-    c         sections     Sections of selected
-    g         toggle_grey  Sections: mask / grey levels
-    s         save         Save CSV+PNG
-    escape,M  close        Back
+    c         sections      Sections of selected
+    x         section_here  Section at the cursor
+    l         section_line  Sections along a line (P, click)
+    g         toggle_grey   Sections: mask / grey levels
+    s         save          Save CSV+PNG
+    escape,M  close         Back
     """)
 
     def __init__(self, session) -> None:
@@ -209,6 +213,75 @@ class MeasureScreen(GuardMixin, Screen):
         except Exception:
             oid = min(self.stats)
         self.sections_worker(oid)
+
+    def _selected(self) -> int | None:
+        """The object of the table's selected row (else the workspace's current one)."""
+        t = self.query_one(DataTable)
+        try:
+            return int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value)
+        except Exception:
+            return self.s.current if self.s.seg is not None and self.s.current in self.s.seg.objects else None
+
+    def action_section_here(self) -> None:
+        """x: one section through the workspace's cursor, normal to the object's axis or an index axis."""
+        s, oid = self.s, self._selected()
+        if oid is None or s.seg is None or s.seg.labels[s.zyx] != oid:
+            self._status(f"Put the workspace's cursor on object {oid} first (Esc, click it, M): "
+                         f"the cursor {s.x},{s.y},{s.z} is not on it")
+            return
+        words = {"object": "the object's longest axis", "z": "the slices' axis (an axial section)",
+                 "y": "the y axis (a coronal section)", "x": "the x axis (a sagittal section)"}
+        self.app.push_screen(ChoiceScreen(f"Section of object {oid} through the cursor, normal to",
+                                          [(a, words.get(a, a)) for a in LINE_AXES]),
+                             lambda axis: axis and self.cursor_section_worker(oid, axis, s.zyx))
+
+    def action_section_line(self) -> None:
+        """l: sections along the line between the first two points of the workspace's polygon
+        (P, then a click) on its slice: a two-click line, no coordinates typed."""
+        ws = self.app.workspace
+        pts = list(ws.edit_tools.polygon)[:2] if ws is not None else []
+        oid = self._selected()
+        if len(pts) < 2 or oid is None:
+            self._status("A line: in the workspace press P at one end and click the other (or P twice), then M and l")
+            return
+        z = self.s.z
+        path = np.array([(z, y, x) for x, y in pts], dtype=np.float64)
+        self.path_sections_worker(oid, path)
+
+    @work(thread=True, exclusive=True, group="sections")
+    def cursor_section_worker(self, oid: int, axis: str, zyx: tuple[int, int, int]) -> None:
+        v = self.s.volume
+        half = 2 * SECTION_STEP_MM
+        self.sections_pending = oid
+        try:
+            mask = self.s.seg.labels == oid if axis == "object" else None
+            path = line_through(zyx, axis, half_mm=half, step_mm=SECTION_STEP_MM / 4, mask=mask, spacing=v.spacing,
+                                origin=v.origin, direction=v.direction)
+            res = measure_object(opened_of(self.s), object=oid, path=path, partial_volume=self.grey, mesh=False)
+        except Exception as exc:
+            self.post_message(SectionsFailed(oid, str(exc)))
+            return
+        mid = min(res.rows, key=lambda r: abs(r["s_mm"] - half)) if res.rows else None
+        self.post_message(SectionsReady(oid, res))
+        if mid is None or mid.get("status") != "ok":
+            why = "no section" if mid is None else mid.get("status")
+            self.post_message(Status(f"No section of object {oid} at the cursor normal to {axis}: {why}"))
+            return
+        self.post_message(Status(
+            f"Section of object {oid} at x {zyx[2]} y {zyx[1]} z {zyx[0]}, normal to {axis}: area "
+            f"{mid['area_mm2']:.1f} mm², diameter {mid['eq_diameter_mm']:.1f} mm (min {mid['min_diameter_mm']:.1f}, "
+            f"max {mid['max_diameter_mm']:.1f})"))
+
+    @work(thread=True, exclusive=True, group="sections")
+    def path_sections_worker(self, oid: int, path_zyx) -> None:
+        self.sections_pending = oid
+        try:
+            res = measure_object(opened_of(self.s), object=oid, path=path_zyx, path_voxels=True,
+                                 partial_volume=self.grey, mesh=False)
+        except Exception as exc:
+            self.post_message(SectionsFailed(oid, str(exc)))
+            return
+        self.post_message(SectionsReady(oid, res))
 
     def action_toggle_grey(self) -> None:
         self.grey = not self.grey

@@ -150,6 +150,10 @@ class LabelsChanged(Message):
     """The segmentation changed (posted by screens that edit it, to the workspace)."""
 
 
+class SeedRangeReady(Message):
+    """The side panel's seed range at the cursor is computed (``SeedRange`` holds it): repaint the panel."""
+
+
 class SessionReady(Message):
     """A series or project has loaded: the app opens a workspace on ``session``."""
 

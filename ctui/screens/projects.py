@@ -25,7 +25,8 @@ def _editing_from_meta(s: Session, meta: dict) -> None:
     if meta.get("edit_mode") in edittools.MODES:
         s.edit_mode = str(meta["edit_mode"])
     try:
-        s.brush = int(min(max(int(meta.get("brush", s.brush)), 0), 50))
+        if meta.get("brush") is not None:
+            s.brush = float(min(max(float(meta["brush"]), 0.1), 50.0))  # mm, as set (3.22266 stays 3.22266)
         sl, vl = meta.get("limit_slices"), meta.get("limit_values")
         nz = s.shape[0]
         if sl and 0 <= int(sl[0]) <= int(sl[1]) < nz:
@@ -34,6 +35,53 @@ def _editing_from_meta(s: Session, meta: dict) -> None:
             s.limits.values = (float(vl[0]), float(vl[1]))
     except (TypeError, ValueError, IndexError):
         pass
+
+
+#: The segmentation panel's options a project keeps (``Session.segment_options``) and the type of each.
+_OPTION_TYPES = {"method": str, "neck": (int, float), "fill_holes": bool, "keep_largest": bool,
+                 "min_island": int, "interpolate": bool}
+
+
+def _setup_meta(s: Session) -> dict:
+    """The set-up a project reopens with, beyond the labels: the G panel's options, background
+    seeds, the ROI box and the zoom (all optional in ``meta``; older projects open without them)."""
+    opts = {k: v for k, v in (s.segment_options or {}).items() if k in _OPTION_TYPES or k == "range"}
+    if isinstance(opts.get("range"), tuple):
+        opts["range"] = list(opts["range"])
+    return {"segment_options": opts, "background_seeds": [list(map(int, p)) for p in s.background_seeds],
+            "roi_box": [list(map(int, r)) for r in s.roi_box] if s.roi_box is not None else None,
+            "zoom": float(s.zoom)}
+
+
+def _setup_from_meta(s: Session, meta: dict) -> None:
+    """The set-up saved by :func:`_setup_meta`; each field checked (type, inside the volume) and
+    skipped when odd, so a hand-edited or older project still opens."""
+    opts = meta.get("segment_options")
+    if isinstance(opts, dict):
+        kept = {k: v for k, v in opts.items() if k in _OPTION_TYPES and isinstance(v, _OPTION_TYPES[k])
+                and (_OPTION_TYPES[k] is bool or not isinstance(v, bool))}
+        rng = opts.get("range")
+        if rng in ("auto", "given"):
+            kept["range"] = rng
+        elif isinstance(rng, list) and len(rng) == 2 and all(isinstance(v, (int, float)) for v in rng) and rng[0] <= rng[1]:
+            kept["range"] = (float(rng[0]), float(rng[1]))
+        s.segment_options = kept
+    shape = s.shape
+    seeds = meta.get("background_seeds")
+    if isinstance(seeds, list):
+        s.background_seeds = [(int(x), int(y), int(z)) for x, y, z in (p for p in seeds if _ints(p, 3))
+                              if 0 <= x < shape[2] and 0 <= y < shape[1] and 0 <= z < shape[0]]
+    box = meta.get("roi_box")
+    if isinstance(box, list) and len(box) == 3 and all(_ints(r, 2) for r in box) \
+            and all(0 <= r[0] <= r[1] < n for r, n in zip(box, shape)):
+        s.roi_box = tuple((int(r[0]), int(r[1])) for r in box)  # type: ignore[assignment]  # 3 pairs, checked
+    zoom = meta.get("zoom")
+    if isinstance(zoom, (int, float)) and 1.0 <= zoom <= 16.0:
+        s.zoom = float(zoom)
+
+
+def _ints(v, n: int) -> bool:
+    return isinstance(v, list) and len(v) == n and all(isinstance(u, int) and not isinstance(u, bool) for u in v)
 
 
 def project_from_session(s: Session):
@@ -49,7 +97,7 @@ def project_from_session(s: Session):
         drift=dict(s.drift_info or {}), window=tuple(s.window),
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view, "plane": s.plane, "edit_mode": s.edit_mode,
               "brush": s.brush, "limit_slices": list(s.limits.slices) if s.limits.slices else None,
-              "limit_values": list(s.limits.values) if s.limits.values else None},
+              "limit_values": list(s.limits.values) if s.limits.values else None, **_setup_meta(s)},
         data=getattr(s, "original_data", None),  # the voxels as loaded (before a drift correction)
         identity=s.source_identity)  # labels only: the missing series' identity, not the stand-in's
 
@@ -74,6 +122,7 @@ def session_from_project(proj, volume, path: str) -> Session:
     s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
     s.view = str(meta.get("view", s.view))
     _editing_from_meta(s, meta)
+    _setup_from_meta(s, meta)
     s.drift_info = dict(proj.drift or {})
     s.project_path = path
     if (volume.meta or {}).get("labels_only"):

@@ -13,7 +13,7 @@ import time
 
 from textual.worker import get_current_worker
 
-from ctui.engine.actions.segment import segment as segment_action
+from ctui.engine.actions.segment import METHODS, segment as segment_action
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.progress import Cancelled
 from ctui.engine.segment import propagate
@@ -135,7 +135,8 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
     try:
         with s._lock:
             labels = s.seg.labels.copy()
-            labels[labels == oid] = 0
+            if "prompts" not in METHODS[opts.method].options:  # a model's prompts refine the object as it is
+                labels[labels == oid] = 0
             scratch = Segmentation(s.seg.shape, labels=labels)
             res = segment_action(s.volume, [seed], th, background=list(getattr(s, "background_seeds", []) or []),
                                  options=opts, pipeline=s.pipeline, segmentation=scratch, progress=progress,
@@ -214,19 +215,17 @@ def finished(ws, run: PropagationRun) -> None:
     ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
     rng = p.slices
     secs = time.perf_counter() - run.started
-    extra = "; ".join(p.warnings())
     where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
     rep = run.report
+    # warnings are advisory: notes in the side panel (and counted on the status line), never a toast
+    # over the image, the proposal line or the review strip
+    notes = list(rep.warnings) if rep is not None else list(p.warnings())
+    ws.pending.notes = notes
+    said = f" ({len(notes)} note{'s' if len(notes) != 1 else ''} in the panel)" if notes else ""
     if rep is not None:
-        extra = "; ".join(rep.warnings)
-        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s. a accepts, x rejects")
-        if rep.warnings:
-            ws.app.notify(extra, severity="warning", timeout=10)
-        ws.refresh_view()
-        return
-    ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s. a accepts, x rejects. {extra}")
-    if p.warnings():
-        ws.app.notify(extra, severity="warning", timeout=8)
+        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s{said}. a accepts, x rejects")
+    else:
+        ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s{said}. a accepts, x rejects")
     ws.refresh_view()
 
 

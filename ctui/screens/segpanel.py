@@ -12,7 +12,8 @@ from __future__ import annotations
 from typing import Any
 
 from textual.app import ComposeResult
-from textual.containers import Horizontal, Vertical
+from textual import events
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Checkbox, Input, Label, Select
 
@@ -44,13 +45,23 @@ def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, 
     return opts, th
 
 
+class Tick(Checkbox):
+    """A checkbox whose unchecked box is empty (Textual draws a dim X there, read as "on")."""
+
+    @property
+    def BUTTON_INNER(self) -> str:  # type: ignore[override]  # Textual reads the class attribute per render
+        return "X" if self.value else " "
+
+
 class SegmentPanel(ModalScreen):
     """Method, mode, neck, range, holes and clean-ups; Enter or Apply keeps them, Escape cancels."""
 
     DEFAULT_CSS = """
     SegmentPanel { align: center middle; }
-    SegmentPanel > Vertical { width: 72; max-width: 100%; height: auto; border: round $accent; padding: 0 1;
-                              background: $panel; }
+    SegmentPanel > Vertical { width: 72; max-width: 100%; height: auto; max-height: 100%; border: round $accent;
+                              padding: 0 1; background: $panel; }
+    SegmentPanel #fields { height: auto; }
+    SegmentPanel #buttons { height: 3; }
     SegmentPanel Horizontal { height: auto; }
     SegmentPanel Label { width: 18; padding: 1 0 0 0; }
     SegmentPanel Input, SegmentPanel Select { width: 1fr; }
@@ -69,29 +80,41 @@ class SegmentPanel(ModalScreen):
         neck = o.get("neck")
         with Vertical():
             yield Label("Segmentation (S segments from the cursor, p from the object's seed)", classes="hint")
-            with Horizontal():
-                yield Label("Method")
-                yield Select([(m, m) for m in METHODS], value=o.get("method", "fill"), allow_blank=False, id="method")
-            with Horizontal():
-                yield Label("Mode")
-                yield Select([("slice by slice", "slice"), ("3D", "3d")], value=self.s.prop_mode, allow_blank=False,
-                             id="mode")
-            with Horizontal():
-                yield Label("Neck (mm|auto)")
-                yield Input("auto" if neck is None else f"{neck:g}", id="neck", placeholder="auto, 0 (off) or mm")
-            with Horizontal():
-                yield Label("Range")
-                yield Input(rtxt, id="range", placeholder="given (the range typed with T; else auto), auto, or LO:HI")
-            with Horizontal():
-                yield Label("Min island (vox)")
-                yield Input(str(int(o.get("min_island", 0))), id="min_island", placeholder="0 = keep all")
-            yield Checkbox("Fill holes inside the object", value=bool(o.get("fill_holes", True)), id="fill_holes")
-            yield Checkbox("Keep the largest 3D island", value=bool(o.get("keep_largest", False)), id="keep_largest")
-            yield Checkbox("Fill between key slices", value=bool(o.get("interpolate", False)), id="interpolate")
-            yield Label("Fields are pre-filled: Ctrl+U clears one. Enter applies, Escape cancels.", classes="hint")
-            with Horizontal():
+            with VerticalScroll(id="fields"):  # scrolls on a small terminal; the buttons stay in view
+                yield from self._fields(o, rtxt, neck)
+            with Horizontal(id="buttons"):
                 yield Button("Apply", id="apply", variant="primary")
                 yield Button("Cancel", id="cancel")
+
+    def _fields(self, o: dict, rtxt: str, neck) -> ComposeResult:
+        with Horizontal():
+            yield Label("Method")
+            yield Select([(m, m) for m in METHODS], value=o.get("method") if o.get("method") in METHODS else "fill",
+                   allow_blank=False, id="method")
+        with Horizontal():
+            yield Label("Mode")
+            yield Select([("slice by slice", "slice"), ("3D", "3d")], value=self.s.prop_mode, allow_blank=False,
+                         id="mode")
+        with Horizontal():
+            yield Label("Neck (mm|auto)")
+            yield Input("auto" if neck is None else f"{neck:g}", id="neck", placeholder="auto, 0 (off) or mm")
+        with Horizontal():
+            yield Label("Range")
+            yield Input(rtxt, id="range", placeholder="given (the range typed with T; else auto), auto, or LO:HI")
+        with Horizontal():
+            yield Label("Min island (vox)")
+            yield Input(str(int(o.get("min_island", 0))), id="min_island", placeholder="0 = keep all")
+        yield Tick("Fill holes inside the object", value=bool(o.get("fill_holes", True)), id="fill_holes")
+        yield Tick("Keep the largest 3D island", value=bool(o.get("keep_largest", False)), id="keep_largest")
+        yield Tick("Fill between key slices", value=bool(o.get("interpolate", False)), id="interpolate")
+        yield Label("Fields are pre-filled: Ctrl+U clears one. Enter applies, Escape cancels.", classes="hint")
+
+    def on_resize(self, event: events.Resize) -> None:
+        """The fields get what the screen leaves once the title line, the buttons and the border are in."""
+        self.query_one("#fields").styles.max_height = max(event.size.height - 6, 3)
+
+    def on_mount(self) -> None:
+        self.query_one("#fields").styles.max_height = max(self.app.size.height - 6, 3)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "apply":

@@ -76,6 +76,7 @@ class Session:
     segment_options: dict = field(default_factory=dict)
     # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
     roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
+    zoom: float = 1.0  # the slice view's zoom (1: the whole plane; the workspace's ViewState changes it)
     # a project opened without its series (labels only): the series' recorded identity,
     # kept when the project is saved (the stand-in zeros must not replace it)
     source_identity: dict | None = None

@@ -78,9 +78,12 @@ class ReviewStrip(Widget):
         w = self.size.width
         return columns(len(self.profile), w - 34 if w >= 64 else w)
 
-    def slice_at(self, col: int) -> int | None:
-        """The slice a click on column ``col`` goes to (a marked slice in it first)."""
+    def slice_at(self, col: int, *, clamp: bool = False) -> int | None:
+        """The slice a click on column ``col`` goes to (a marked slice in it first); ``clamp``:
+        a column beyond the bars gives the first or last bar's (a drag that ran past them)."""
         cols = self._cols()
+        if clamp and cols:
+            col = min(max(col, 0), len(cols) - 1)
         if not 0 <= col < len(cols):
             return None
         a, b = cols[col]

@@ -47,8 +47,14 @@ async def goto_voxel(pilot, app, z: int, y: int, x: int) -> None:
 
 
 async def answer_prompt(pilot, text: str) -> None:
-    """Replace the focused Input's value with ``text`` and press Enter."""
+    """Replace the focused Input's value with ``text`` and press Enter, once a text input has
+    the focus (the prompt may come after a slow step: a cold start's first fill took seconds
+    under load, and an Enter sent before the prompt was up filled the slice instead)."""
     await pilot.pause()
+    try:
+        await wait_for(pilot, lambda: hasattr(pilot.app.focused, "value"), timeout=30, what="a text prompt")
+    except TimeoutError:
+        pass  # reported below with the screen's name
     inp = pilot.app.focused
     if inp is None or not hasattr(inp, "value"):
         raise AssertionError(f"no text input focused (screen {type(pilot.app.screen).__name__})")

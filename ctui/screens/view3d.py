@@ -49,6 +49,7 @@ class View3DScreen(GuardMixin, Screen):
     DEFAULT_CSS = """
     View3DScreen #v3-body { height: 1fr; }
     View3DScreen #v3-info { width: 30; padding: 0 1; background: $panel; }
+    View3DScreen #v3-info.hidden { display: none; }
     View3DScreen #v3-status { height: 1; background: $boost; padding: 0 1; }
     """
     BINDINGS = keys("""
@@ -70,6 +71,7 @@ class View3DScreen(GuardMixin, Screen):
     t                 turntable     Turntable
     f                 fly           Fly through object
     F                 fly_save      Save fly-through GIF                    hidden
+    backslash         toggle_info   Info panel on/off                       hidden
     escape,r          close         Back
     """)
 
@@ -98,6 +100,8 @@ class View3DScreen(GuardMixin, Screen):
         yield KeyBar()  # wraps at 80 columns instead of cutting the last keys
 
     def on_mount(self) -> None:
+        # under 100 columns (80x24) the view takes the whole width; \ shows the info panel
+        self.query_one("#v3-info").set_class(self.app.size.width < 100, "hidden")
         if self.fixed_image is not None:
             self.query_one(ImageView).set_image(self.fixed_image, token="fixed")
             self._info()
@@ -105,6 +109,11 @@ class View3DScreen(GuardMixin, Screen):
         self._info()
         self.set_interval(0.5, self._tick)
         self.prepare_meshes()
+
+    def action_toggle_info(self) -> None:
+        info = self.query_one("#v3-info")
+        info.set_class(not info.has_class("hidden"), "hidden")
+        self.call_after_refresh(self.on_resize)
 
     def on_resize(self) -> None:
         if self.scene is not None:

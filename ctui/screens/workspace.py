@@ -20,7 +20,7 @@ from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import (CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
-                                   SegmentationFailed, StageViewsReady, Status)
+                                   SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
@@ -59,6 +59,7 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         super().__init__()
         self.s = session
         self.viewstate = ViewState()  # layout, pan, window preset, pipeline-views requests
+        self.viewstate.zoom = session.zoom  # as the project was saved
         self.edit_tools = EditTools()  # pen, click fills, box corner, scissors polygon
         self.jobs = Jobs()  # the running worker and segmentation
         self.pending = ProposalState()  # the proposal waiting for a (accept) or x (reject)
@@ -113,7 +114,11 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
             return gray
         lab2 = planes.take(s.seg.labels, pv, idx)
         pending = self.pending
-        return planes.compose(gray, lab2, pending.plane(pv, idx, s.shape), proposal_id=pending.object_id)
+        rgb = planes.compose(gray, lab2, pending.plane(pv, idx, s.shape), proposal_id=pending.object_id)
+        if self.edit_tools.doomed is not None:  # an edit waiting for its confirmation: what it removes, in red
+            gone = planes.take(self.edit_tools.doomed, pv, idx)
+            rgb[gone] = (rgb[gone] * 0.3 + np.array([255, 40, 40]) * 0.7).astype(np.uint8)
+        return rgb
 
     def caption(self, plane: str) -> str:
         s = self.s
@@ -122,6 +127,9 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         left, right, top, bottom = pv.letters
         idx, last = s.zyx[pv.normal], s.shape[pv.normal] - 1
         note = "  [yellow]≈ oblique[/]" if pv.note else ""
+        if self.query("#panel") and self.query_one("#panel").has_class("hidden"):  # the panel's readout, here
+            unit = " HU" if s.volume.modality == "CT" else ""
+            note += f"  x {s.x} y {s.y} = [b]{s.value():g}{unit}[/b]"
         return f"{plane} {axis} {idx}/{last}  [b]{left}[/b]◀▶[b]{right}[/b]  [b]{top}[/b]▲▼[b]{bottom}[/b]{note}"
 
     def _targets(self) -> list[tuple[str, str, ImageView]]:
@@ -215,6 +223,22 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         self._status_lines = lines
         self.query_one("#status", Static).update(msg, layout=relayout)
 
+    def saved_to(self, path: str, *, asked: bool) -> None:
+        """The project was saved to ``path``: say where. Saved with no dialog (a second Ctrl+S),
+        the next key, if it is Enter (the habit of confirming a save dialog), fills nothing."""
+        self.edit_tools.enter_guard = not asked
+        again = "; an Enter now fills nothing" if not asked else ""
+        self.set_status(f"Project saved to {path} (Ctrl+S saves there again{again})")
+        self.update_panel()
+
+    def on_key(self, event) -> None:
+        if self.edit_tools.enter_guard:
+            self.edit_tools.enter_guard = False
+            if event.key == "enter":
+                event.prevent_default()
+                event.stop()
+                self.set_status("Enter right after Ctrl+S: nothing filled (the project is saved); Enter again fills")
+
     def action_toggle_panel(self) -> None:
         """\\: hide or show the side panel (the views get its width: 80x24 terminals)."""
         panel = self.query_one("#panel", SidePanel)
@@ -243,8 +267,7 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
     def _job_finished(self, msg: JobFinished) -> None:
         self.jobs.worker_ended()
         self.show_progress(None)
-        self.app.notify(msg.text, timeout=5)
-        self.set_status(msg.text)
+        self.set_status(msg.text)  # the status line, not a toast over the image and the review strip
 
     @on(JobFailed)
     def _job_failed(self, msg: JobFailed) -> None:
@@ -270,6 +293,11 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
     @on(Status)
     def _status_msg(self, msg: Status) -> None:
         self.set_status(msg.text)
+
+    @on(SeedRangeReady)
+    def _seed_range_ready(self, _msg: SeedRangeReady) -> None:
+        if self.query("#panel"):  # composed (a message may arrive while the screen is taken down)
+            self.update_panel()
 
     @on(LabelsChanged)
     def _labels_msg(self, _msg: LabelsChanged) -> None:

@@ -9,9 +9,11 @@ from __future__ import annotations
 import numpy as np
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.actions import defaults
 from ctui.engine.actions import edit as et
 from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen, PromptScreen
 from ctui.screens.planes import plane_view
+from ctui.screens.ws_state import mm
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 
@@ -81,7 +83,7 @@ class EditMixin:
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
-        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {self.s.brush:g} mm); u undoes")
+        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {mm(self.s.brush)} mm); u undoes")
 
     def action_pen(self, tool: str) -> None:
         """b / E: put the brush (eraser) down, so moving the cursor paints (erases); again lifts it."""
@@ -91,7 +93,7 @@ class EditMixin:
             self.update_panel()
             return
         self.action_dab()
-        self.set_status(f"{tool.capitalize()} down ({s.brush:g} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to paint; "
+        self.set_status(f"{tool.capitalize()} down ({mm(s.brush)} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to paint; "
                         f"{'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
 
     def stroke(self, start: tuple[int, int, int], end: tuple[int, int, int]) -> None:
@@ -113,7 +115,7 @@ class EditMixin:
         s = self.s
         step = float(min(s.volume.spacing[1:]))
         s.brush = float(min(max(round((s.brush + d * step) / step) * step, 0.0), 100.0))
-        self.set_status(f"Brush radius {s.brush:g} mm ({s.brush_px(plane_view(s.volume, s.plane).normal):.1f} px)")
+        self.set_status(f"Brush radius {mm(s.brush)} mm ({s.brush_px(plane_view(s.volume, s.plane).normal):.1f} px)")
         self.refresh_view()
 
     def action_edit_mode(self) -> None:
@@ -287,7 +289,17 @@ class EditMixin:
                 s.dirty = True
                 self.update_panel()
 
-        self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+        def picked(choice: str | None) -> None:
+            if choice == "_type":
+                self.app.push_screen(PromptScreen(f"Name of object {s.current}", info.name), done)
+            elif choice:
+                done(choice)
+
+        # the common structures first (no typing); names other objects have are left out
+        taken = {o.name for i, o in s.seg.objects.items() if i != s.current}
+        names = [n for n in defaults.STRUCTURE_NAMES if n not in taken]
+        self.app.push_screen(ChoiceScreen(f"Name of object {s.current} (now {info.name})",
+                                          [("_type", "type a name ...")] + [(n, n) for n in names]), picked)
 
     def action_clear_object(self) -> None:
         s = self.s

@@ -11,8 +11,9 @@ from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
+from ctui.screens.messages import SeedRangeReady
 from ctui.screens.session import VIEWS
-from ctui.screens.ws_state import describe
+from ctui.screens.ws_state import describe, mm, value_unit
 
 BINDINGS = keys("""
 left,h                move(-1,0)             Cursor left                        hidden
@@ -108,6 +109,7 @@ class NavMixin:
         for plane, _view, iv in self._targets():
             pv = planes.plane_view(s.volume, plane)
             iv.set_view(zoom=self.viewstate.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+        self._captions()  # the value readout is in the caption while the panel is hidden
         self.update_panel()
 
     def action_pan(self, dx: int, dy: int) -> None:
@@ -153,8 +155,22 @@ class NavMixin:
 
         self.app.push_screen(PromptScreen(f"Go to slice (0..{last})", str(self.s.z)), done)
 
-    def action_zoom(self, d: int) -> None:
-        self.viewstate.zoom_by(d)
+    def action_zoom(self, d: int, at: tuple[float, float] | None = None) -> None:
+        """+/- (and Ctrl+wheel): zoom in or out keeping the image point ``at`` (x, y image
+        pixel: the pointer's) where it is on screen; with keys, the cursor's point."""
+        s, vs = self.s, self.viewstate
+        pv = planes.plane_view(s.volume, s.plane)
+        iv = next((v for p, _view, v in self._targets() if p == s.plane), None)
+        old = vs.zoom
+        point = at if at is not None else planes.cursor_in(pv, s.zyx, s.shape)
+        seen = None
+        if iv is not None and iv.view_map is not None:
+            w, h = iv.target_pixels()
+            seen = iv.view_map.to_image(w / 2.0, h / 2.0)  # the image point at the view's centre now
+        new = s.zoom = vs.zoom_by(d)  # the session keeps it for the project
+        if seen is not None and new > 1.0 and new != old:
+            k = old / new
+            vs.pan_to((point[0] - (point[0] - seen[0]) * k, point[1] - (point[1] - seen[1]) * k), cursor=s.zyx)
         self._repaint_cursor()
 
     # ------------------------------------------------------------------ windows and views
@@ -162,7 +178,7 @@ class NavMixin:
         name, win = self.viewstate.next_window(self.s.window_presets())
         self.s.window = win
         self.refresh_view()
-        self.app.notify(f"Window {name}: C {win[0]:g} W {win[1]:g}", timeout=2)
+        self.set_status(f"Window {name}: C {win[0]:g} W {win[1]:g}")
 
     def action_window_set(self) -> None:
         def done(val: str | None) -> None:
@@ -205,9 +221,9 @@ class NavMixin:
         self._layout(grid=not self.viewstate.grid_mode)
 
     def action_plane(self, plane: str) -> None:
-        """1/2/3: axial, sagittal or coronal (the active plane of the 2x2 layout)."""
+        """1/2/3: axial, sagittal or coronal alone (from a 2x2 layout too: a click picks a pane there)."""
         self.s.plane = plane
-        self._layout(ortho=self.viewstate.ortho_mode)
+        self._layout()
         self.set_status(f"{plane.capitalize()} view: arrows move in it, PageUp/PageDown step across it")
 
     def action_ortho(self) -> None:
@@ -333,8 +349,11 @@ def panel_text(ws) -> Text:
     slice_pos = float(v.slice_positions[s.z]) if v.slice_positions is not None and len(v.slice_positions) == nz else zmm
     t.append(f"Slice {s.z}/{nz - 1}", style="bold")
     t.append(f"  {slice_pos:.1f} mm\n")
+    size = getattr(ws, "size", None)
+    compact = size is not None and 0 < size.height < 30  # 80x24: the objects (their volumes) must show
     t.append(f"Cursor x {s.x}  y {s.y}\n")
-    t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
+    if not compact:
+        t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
     t.append("Value ", style="bold")
     t.append(f"{s.value():g} {'HU' if v.modality == 'CT' else ''}")
     try:
@@ -342,38 +361,52 @@ def panel_text(ws) -> Text:
     except Exception:  # a filter error is reported by the views; the readout stays
         fv = None
     t.append(f"  filtered {fv:.4g}\n" if fv is not None else "\n")
-    c, w = s.window
-    t.append(f"Window C {c:g} W {w:g}")
-    vs = ws.viewstate
-    if vs.window_name:
-        t.append(f" ({vs.window_name})", style="dim")
-    view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
-    t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
-    dom = "HU" if s.pipeline is None or s.pipeline.domain == "hu" else "0..255"
+    if not compact:
+        _window_text(ws, t)
+    dom = value_unit(s)
     t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
-    t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
+    if not compact:
+        t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
+    pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
+    if pending is not None and pending.proposal is not None and pending.notes:  # the proposal's warnings (not toasts)
+        t.append("Notes on the proposal\n", style="bold yellow")
+        for note in pending.notes:
+            t.append(f"• {note}\n", style="yellow")
     tools = ws.edit_tools
     pen = f" {tools.pen} down" if tools.pen else ""
-    t.append(f"Mode {s.edit_mode}  brush {s.brush:g} mm{pen}\n")
+    t.append(f"Mode {s.edit_mode}  brush {mm(s.brush)} mm{pen}\n")
     if tools.click_fills:
         t.append("Click fills (z)\n", style="yellow")
     if s.roi_box is not None:
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
-        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}\n", style="rgb(255,150,0)")
+        drawn = ws.edit_tools.box_drawn_on
+        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}{'' if drawn is None else f' (drawn {drawn})'}\n",
+                 style="rgb(255,150,0)")
     if s.background_seeds:
         t.append(f"Background seeds {len(s.background_seeds)}\n", style="cyan")
     if s.limits.slices is not None or s.limits.values is not None:
         t.append(f"Limits {s.limits.describe()}\n", style="yellow")
-    t.append("\nPipeline", style="bold underline")
     steps = s.pipeline_steps()
-    t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
-    for line in steps[:6]:
-        t.append(f" {line[:34]}\n")
-    _objects_text(ws, t)
+    if steps or not compact:
+        t.append("\nPipeline", style="bold underline")
+        t.append(f" ({len(steps)} steps)\n" if steps else "  (none: f adds)\n")
+        for line in steps[:3 if compact else 6]:
+            t.append(f" {line[:34]}\n")
+    _objects_text(ws, t, compact)
     if s.dirty:
         t.append("\n● unsaved changes", style="yellow")
     return t
+
+
+def _window_text(ws, t: Text) -> None:
+    s, vs = ws.s, ws.viewstate
+    c, w = s.window
+    t.append(f"Window C {c:g} W {w:g}")
+    if vs.window_name:
+        t.append(f" ({vs.window_name})", style="dim")
+    view = "2x2 pipeline" if vs.grid_mode else ("2x2 planes" if vs.ortho_mode else s.view)
+    t.append(f"\nView {s.plane} {view}  zoom {vs.zoom:g}x\n")
 
 
 _BARS = " ▁▂▃▄▅▆▇█"
@@ -403,8 +436,8 @@ def _seed_text(ws, t: Text) -> None:
                     rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
             except Exception:  # off the image, a filter error: the views report it
                 return
-            if ws.is_attached and ws.seed_range.store(key, rc):
-                ws.app.call_from_thread(ws.update_panel)
+            if ws.seed_range.store(key, rc):  # a message: dropped when the screen is gone (no widget touched here)
+                ws.post_message(SeedRangeReady())
 
         ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
         t.append("Seed range here ...\n", style="dim")
@@ -421,7 +454,7 @@ def _seed_text(ws, t: Text) -> None:
     t.append("\n")
 
 
-def _objects_text(ws, t: Text) -> None:
+def _objects_text(ws, t: Text, compact: bool = False) -> None:
     s = ws.s
     t.append("\nObjects", style="bold underline")
     t.append("  (n new, Tab next)\n")
@@ -438,7 +471,9 @@ def _objects_text(ws, t: Text) -> None:
         name = info.name if info is not None else f"object {i}"
         a = int(area[i]) if i < len(area) else 0
         stats = f"{a * px_mm2:7.0f}mm² {vols.get(i, 0.0):6.1f}ml"
-        if len(name) <= 10:
+        if compact:  # one line each (80x24): the name and the volume
+            t.append(f" {name if len(name) <= 20 else name[:19] + '…':<20} {vols.get(i, 0.0):6.1f}ml\n")
+        elif len(name) <= 10:
             t.append(f" {name:<10} {stats}\n")
         else:  # a long name gets a line of its own (the panel holds 36 columns), the figures under it
             t.append(f" {name if len(name) <= 32 else name[:31] + '…'}\n{'':15}{stats}\n")

@@ -35,6 +35,7 @@ from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_keys import panel_text
+from ctui.screens.ws_state import mm
 from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -50,14 +51,14 @@ POLY_COLOR = (255, 220, 60)
 
 MOUSE_BINDINGS = keys("""
 z                    click_fills      Click fills on/off                                                hidden
-B                    background_seed  Background seed at the cursor (again: remove)                     hidden
-y                    box_corner       ROI box: a corner at the cursor (or drag)                         hidden
+B                    background_seed  Background seed here on/off                                       hidden
+y                    box_corner       ROI box corner here (or drag)                                     hidden
 Y                    box_clear        ROI box off                                                       hidden
-right_curly_bracket  mark(1)          Next marked slice of the proposal                                 hidden
-left_curly_bracket   mark(-1)         Previous marked slice of the proposal                             hidden
+right_curly_bracket  mark(1)          Next marked slice                                                 hidden
+left_curly_bracket   mark(-1)         Previous marked slice                                             hidden
 C                    cut_here         Cut the proposal at this slice                                    hidden
-A                    accept_to_here   Accept the proposal from the seed to here                         hidden
-P                    scissors_point   Scissors polygon: a point at the cursor (then clicks add points)  hidden
+A                    accept_to_here   Accept from the seed to here                                      hidden
+P                    scissors_point   Polygon point here (then clicks)                                  hidden
 """)
 
 
@@ -167,6 +168,8 @@ class MouseMixin(ToolsMixin):
             z = w.slice_at(int(event.screen_x - w.content_region.x))
             if z is not None:
                 self._go_slice(z)
+                self._drag = ("strip", w, z)  # a drag along the strip picks the slice limits
+                w.capture_mouse()
             return
         iv = self._image_view(event)
         if iv is None:
@@ -244,6 +247,8 @@ class MouseMixin(ToolsMixin):
         if drag[0] == "pan":
             self._pan_drag(event)
             return
+        if drag[0] == "strip":
+            return  # the limits are taken where the button comes up
         got = self._voxel_at(drag[1], event, inside=False)
         if got is None:
             return
@@ -286,13 +291,26 @@ class MouseMixin(ToolsMixin):
         if drag is None:
             return
         drag[1].release_mouse()
-        if drag[0] == "box":
+        if drag[0] == "strip":
+            self._strip_limits(drag[1], drag[2], int(event.screen_x - drag[1].content_region.x))
+        elif drag[0] == "box":
             self._finish_box(drag[2], drag[3], self._box_end, previous=drag[4])
         elif drag[0] == "paint":
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
             box = "; inside the ROI box" if self.s.roi_box is not None else ""
-            self.set_status(f"Painted along the drag (brush {self.s.brush:g} mm{within}{box}); u undoes step by step")
+            self.set_status(f"Painted along the drag (brush {mm(self.s.brush)} mm{within}{box}); u undoes step by step")
+
+    def _strip_limits(self, strip: ReviewStrip, z0: int, col: int) -> None:
+        """A drag along the review strip from slice ``z0``: the slice limits (edits and propagation
+        stay inside them; ``i`` changes or clears them), no slice numbers typed."""
+        z1 = strip.slice_at(col, clamp=True)
+        if z1 is None or z1 == z0:
+            return
+        lo, hi = sorted((z0, z1))
+        self.s.limits.slices = (lo, hi)
+        self.set_status(f"Slice limits {lo}..{hi} from the strip: edits and propagation stay inside (i changes them)")
+        self.update_panel()
 
     def on_click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
@@ -301,10 +319,26 @@ class MouseMixin(ToolsMixin):
             return
         w = self._under(event)
         if w is not None and w.id == "panel":
-            self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y))
+            self._panel_click(w, int(event.screen_y - w.content_region.y + w.scroll_offset.y),
+                              int(event.screen_x - w.content_region.x))
 
-    def _panel_click(self, panel, row: int) -> None:
+    def _pick_range(self, line: str, col: int) -> None:
+        """A click on the seed range's line: its text takes the range, two bars of its histogram
+        give the two ends (no numbers typed)."""
+        start = line.index(" ", len("Seed range here ")) + 1  # the bars follow "Seed range here LO..HI "
+        got = self.seed_range.pick(col - start if col >= start else None)
+        if got is None:
+            self.set_status("One end of the range picked: click the bar of the other end")
+            return
+        self.s.range_ = got
+        self.set_status(f"Range {got[0]:g}..{got[1]:g} picked on the histogram (S and Enter use it; T edits it)")
+        self.update_panel()
+
+    def _panel_click(self, panel, row: int, col: int = 0) -> None:
         lines = panel_text(self).plain.split("\n")
+        if 0 <= row < len(lines) and lines[row].startswith("Seed range here ") and ".." in lines[row]:
+            self._pick_range(lines[row], col)
+            return
         if 0 < row < len(lines) and "██" not in lines[row] and lines[row].startswith(" " * 8) and "██" in lines[row - 1]:
             row -= 1  # the figures' line under an object with a long name
         if not 0 <= row < len(lines) or "██" not in lines[row]:
@@ -332,13 +366,14 @@ class MouseMixin(ToolsMixin):
         iv = self._image_view(event)
         if iv is None:
             return
-        if event.ctrl:  # zoom in on the pointer: the cursor goes there and the view centres on it
+        if event.ctrl:  # zoom on the pointer: the cursor goes there, the point under it stays put
             got = self._voxel_at(iv, event) if d > 0 else None
+            region = iv.content_region
+            at = iv.display_to_image(int(event.screen_x - region.x), int(event.screen_y - region.y))
             if got is not None:
                 self.s.plane = got[0]
                 self.s.z, self.s.y, self.s.x = got[1]
-                self.viewstate.pan_to(None)
-            self.action_zoom(d)
+            self.action_zoom(d, at=at if _plane_of(self, iv) == self.s.plane else None)
             return
         plane = _plane_of(self, iv)
         if plane != self.s.plane:
@@ -408,8 +443,11 @@ class MouseMixin(ToolsMixin):
             return
         s.roi_box = _corner_box(a, b, pv.normal, s.shape, s.limits.slices)
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
-        self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}: fills, painting and edits stay "
-                        "inside (Y removes it)")
+        one = a[0] == b[0] and z0 != z1  # drawn on one axial slice, spanning more: scissors ask which
+        self.edit_tools.box_drawn_on = int(a[0]) if one else None
+        drawn = f" (drawn on slice {a[0]}: scissors ask which slices)" if one else ""
+        self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}{drawn}: fills, painting and edits "
+                        "stay inside (Y removes it)")
         self.refresh_view()
 
     def action_box_clear(self) -> None:
@@ -516,10 +554,15 @@ class MouseMixin(ToolsMixin):
         p = self._proposal_to_review("No proposal to cut: p propagates")
         if p is None:
             return
-        cut = review.cut_at(p, self.s.z, seed_mask=self._seed_mask(p))
+        z, start = self.s.z, int(p.start_slice)
+        marked = z != start and z in {m.z for m in self.review_marks()}
+        if marked:  # a mark is where it leaks (the area jumps, the centre moves): keep the slice before it
+            z += -1 if z > start else 1
+        cut = review.cut_at(p, z, seed_mask=self._seed_mask(p))
         self.pending.replace(cut)
         rng = cut.slices
-        self.set_status(f"Cut at slice {self.s.z}: {cut.voxels} voxels (was {p.voxels}), "
+        where = f"before the marked slice {self.s.z}, kept to {z}" if marked else f"at slice {z}"
+        self.set_status(f"Cut {where}: {cut.voxels} voxels (was {p.voxels}), "
                         f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
         self.refresh_view()
 

@@ -35,6 +35,7 @@ class ViewState:
         self.window_index = -1  # the preset ``w`` chose last (index in Session.window_presets())
         self.window_name: str | None = None  # its name, or "custom" (W)
         self.painted = False  # the workspace has been painted once (work that can wait for it waits)
+        self.zoomed_at: tuple[int, int, int] | None = None  # the cursor a zoom about a point kept in view
 
     def set_layout(self, *, grid: bool = False, ortho: bool = False) -> None:
         """One plane (both False), the pipeline's 2x2 (``grid``) or the planes' 2x2 (``ortho``); the pan resets."""
@@ -67,7 +68,8 @@ class ViewState:
         ny, nx = s.shape[pv.rows], s.shape[pv.cols]
         half_w, half_h = nx / self.zoom / 2.0, ny / self.zoom / 2.0
         cx, cy = self.pan_center
-        if abs(cx0 - cx) > half_w * 0.9 or abs(cy0 - cy) > half_h * 0.9:  # keep the cursor visible
+        moved = self.zoomed_at != s.zyx  # a zoom on the pointer put the cursor in view: leave the pan be
+        if moved and (abs(cx0 - cx) > half_w * 0.9 or abs(cy0 - cy) > half_h * 0.9):  # keep the cursor visible
             cx, cy = float(cx0), float(cy0)
         self.pan_center = (min(max(cx, half_w), nx - half_w), min(max(cy, half_h), ny - half_h))
         return self.pan_center
@@ -83,9 +85,11 @@ class ViewState:
         self.pan_center = (cx + dx * step_x, cy + dy * step_y)
         return int(round(dx * step_x)), int(round(dy * step_y))
 
-    def pan_to(self, center: tuple[float, float] | None) -> None:
-        """The pan centre (x, y) image pixel, or None: centred on the cursor."""
+    def pan_to(self, center: tuple[float, float] | None, *, cursor: tuple[int, int, int] | None = None) -> None:
+        """The pan centre (x, y) image pixel, or None: centred on the cursor. ``cursor``: the
+        cursor (z, y, x) this pan keeps in view (a zoom about it): not re-centred while it stays there."""
         self.pan_center = center
+        self.zoomed_at = cursor
 
     def next_window(self, presets: list) -> tuple[str, tuple[float, float]]:
         """The preset after the last one chosen: (name, (centre, width))."""
@@ -106,6 +110,9 @@ class EditTools:
         self.box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
         self.polygon: list[tuple[int, int]] = []  # scissors polygon, (x, y) voxels on the file's slices
         self.polygon_mode = False  # clicks add polygon points (P starts it; Y clears box and polygon)
+        self.box_drawn_on: int | None = None  # the one slice the ROI box was drawn on (it spans more: asked)
+        self.enter_guard = False  # a save with no dialog just happened: the next key, if Enter, fills nothing
+        self.doomed = None  # (z, y, x) bool: what an edit waiting for its confirmation would remove (drawn red)
 
     def toggle_pen(self, tool: str) -> bool:
         """``tool`` ("brush"/"eraser") down, or lifted when it was down; True when down."""
@@ -135,7 +142,7 @@ class EditTools:
 
     def clear_shapes(self) -> None:
         """No box corner, no polygon."""
-        self.box_corner = None
+        self.box_corner = self.box_drawn_on = None
         self.polygon, self.polygon_mode = [], False
 
 
@@ -188,6 +195,7 @@ class ProposalState:
 
     def __init__(self) -> None:
         self.proposal = None
+        self.notes: list[str] = []
         self.seed: tuple[int, int, int] | None = None
         self.object_settings: dict = {}
         self._full: tuple[int, np.ndarray] | None = None  # (id of the proposal, its (z, y, x) mask)
@@ -198,6 +206,7 @@ class ProposalState:
         self.proposal = proposal
         self.seed = seed
         self.object_settings = dict(object_settings or {})
+        self.notes: list[str] = []  # the run's warnings: shown in the side panel while it waits
 
     def replace(self, proposal) -> None:
         """A cut or shortened version of the pending proposal takes its place (same seed and settings)."""
@@ -206,7 +215,7 @@ class ProposalState:
     def clear(self):
         """No pending proposal; returns the one there was (or None)."""
         p, self.proposal = self.proposal, None
-        self.seed, self.object_settings = None, {}
+        self.seed, self.object_settings, self.notes = None, {}, []
         self._full = None
         return p
 
@@ -269,6 +278,24 @@ class SeedRange:
         self.key = None
         self.result = None
         self.painted = False  # the workspace has been painted once (the engine may load now)
+        self.first_end: float | None = None  # a histogram bar clicked: one end of the range being picked
+
+    def pick(self, bar: int | None) -> tuple[float, float] | None:
+        """A click on the panel's histogram: ``bar`` None (the text) takes the seed range; a bar
+        gives one end of the range, a second bar the other (returned then, ordered; None
+        while waiting for it)."""
+        rc = self.result
+        if rc is None:
+            return None
+        if bar is None or not 0 <= bar < len(rc.hist):
+            self.first_end = None
+            return (float(rc.low), float(rc.high))
+        lo, hi = float(rc.edges[bar]), float(rc.edges[bar + 1])
+        if self.first_end is None:
+            self.first_end = lo
+            return None
+        first, self.first_end = self.first_end, None
+        return (min(first, lo), max(first + (hi - lo), hi))
 
     def wants(self, key) -> bool:
         """True when ``key`` is new (its range is to be computed; the old one is forgotten)."""
@@ -304,3 +331,16 @@ class ObjectVolumes:
         vols = {i: float(counts[i]) * vox_ml for i in range(1, len(counts)) if counts[i]}
         self._cache = (self.version, vols)
         return vols
+
+
+def mm(v: float) -> str:
+    """A length for people: one decimal, none when whole (3.22266 -> "3.2", 3.0 -> "3")."""
+    return f"{float(v):.1f}".removesuffix(".0")
+
+
+def value_unit(s) -> str:
+    """The unit of the values a range or tolerance is in: HU on CT, the signal on MR and
+    other modalities, 0..255 after a pipeline that leaves the HU domain."""
+    if s.pipeline is not None and s.pipeline.domain != "hu":
+        return "(0..255)"
+    return "HU" if s.volume.modality == "CT" else "(signal)"

@@ -45,3 +45,16 @@ PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
 LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
 MRIC_SUFFIXES = (".mric",)
+#: ``ctui report --format``: a DICOM SR (TID 1500) over a DICOM-SEG, the measurements as JSON, one CSV row per object
+REPORT_FORMATS = ("sr", "json", "csv")
+#: ``ctui report --sections``: the path's sections in a report: the extreme ones (the first: default) or all
+REPORT_SECTIONS = ("extremes", "all")
+
+#: A 3D edit (island, scissors, smoothing) that would remove more than this share of the object is
+#: shown (the voxels drawn in red, voxels and mL) and asked about before it is done (the TUI).
+EDIT_CONFIRM_SHARE = 0.25
+#: Names offered for an object (the TUI's N): common structures under their TotalSegmentator names, so
+#: exports and reports read alike; any other name can still be typed.
+STRUCTURE_NAMES = ("liver", "spleen", "kidney_left", "kidney_right", "pancreas", "gallbladder", "stomach",
+                   "aorta", "inferior_vena_cava", "portal_vein_and_splenic_vein", "urinary_bladder",
+                   "lung_left", "lung_right", "heart", "brain", "lateral_ventricles", "tumor")

@@ -240,6 +240,13 @@ def _rounded(v: float | None, ndigits: int) -> float | None:
     return None if v is None else round(v, ndigits)
 
 
+def write_sr(job: ExportJob) -> list[dict]:
+    """A DICOM SR measurement report (TID 1500) over a DICOM-SEG written beside it (``<name>-seg.dcm``)."""
+    from ctui.engine.actions.report import write_export  # the measure stack and highdicom
+
+    return write_export(job)
+
+
 CSV_KEYS = ("id", "name", "voxels", "volume_voxels_ml", "volume_mesh_ml", "volume_difference_percent", "area_mm2",
             "centroid_x_mm", "centroid_y_mm", "centroid_z_mm")
 
@@ -258,5 +265,7 @@ for _row in (
                  strict_suffix=False),
     ExportFormat("csv", "CSV: measurements of all objects", (".csv",), write_csv, tag="measurements",
                  strict_suffix=False),
+    ExportFormat("sr", "DICOM SR: measurement report (TID 1500) and a DICOM-SEG beside it", (".dcm",), write_sr,
+                 tag="sr", needs="dicom"),
 ):
     register(_row)

@@ -18,6 +18,11 @@ carry warnings; an empty result raises. Each object is one or a few undo steps o
 :class:`Segmentation`. Slices are numbered from 0 (the lowest along the slice normal), in
 the CLI and the TUI alike. Coordinates: seeds are (x, y, z) = (column, row, slice).
 
+A method whose registry ``options`` hold ``"prompts"`` (``nninteractive``: a model on a server)
+takes another path: no range and no seed fill; every seed is a positive point, every background
+seed a negative one, the box a box prompt, for one object, refined from what the segmentation
+already holds (:mod:`ctui.engine.segment.nninteractive`).
+
 Memory: the fill works on crops and the sweep on a box of at most 300 mm; 3D mode and
 ``grow`` without the guard hold one bool in-range volume (1 byte a voxel) plus crop-sized
 work arrays, checked against the memory available before they are allocated.
@@ -38,6 +43,7 @@ from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
+from ctui.engine.segment import nninteractive
 from ctui.engine.segment.necks import disc
 from ctui.engine.segment.methods import METHODS, Job
 from ctui.engine.segment.propagate import PropagationSettings
@@ -78,6 +84,8 @@ class SegmentOptions:
     interpolate: bool = False
     curvature: float = 0.5  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
     overwrite: bool = False
+    server: str = ""  # nninteractive: the server's URL (else CTUI_NNI_SERVER); never saved
+    api_key: str = field(default="", repr=False)  # nninteractive: the server's key (else CTUI_NNI_KEY); never saved
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -136,6 +144,20 @@ class ObjectResult:
             where = f", cut at slice{'s' if len(zs) > 1 else ''} " + ",".join(map(str, zs[:6])) + ("..." if len(zs) > 6 else "")
         noise = f", filled on a {self.denoise} (noise)" if self.denoise else ""
         return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, range {rng}{noise}, {guard}{where}"
+
+
+@dataclass
+class PromptedResult(ObjectResult):
+    """An object a model made from prompts (``nninteractive``): no range or leak guard; ``stops`` says what
+    was sent and how the server answered."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return super().to_dict() | {"range": None, "range_source": "model"}
+
+    def message(self) -> str:
+        sl = "" if self.slices is None else f", slices {self.slices[0]}..{self.slices[1]}"
+        lic = f"; the server's model licence: {self.stops['licence']}" if self.stops.get("licence") else ""
+        return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, {self.stops.get('nninteractive', '')}{lic}"
 
 
 @dataclass
@@ -338,6 +360,8 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     opts = options or SegmentOptions()
     pipe = pipeline or Pipeline()
     shape = tuple(volume.data.shape)
+    if "prompts" in METHODS[opts.method].options:  # a model answers the prompts: no range, no seed fill
+        return _prompted(volume, seeds, background, opts, pipe, segmentation, names, progress, object_ids)
     if not seeds:
         raise CtuiError("give at least one seed X,Y,Z")
     fg = [_check_seed(s, shape, "seed") for s in seeds]
@@ -387,6 +411,41 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
                         f"({'; '.join(empty[0].warnings) or 'nothing in range joins the seed'})")
     report(progress, 1, 1, "")
     return SegmentResult(segmentation=seg, pipeline=pipe, settings=settings, objects=results, method=opts.method)
+
+
+def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[Sequence[int]],
+              opts: SegmentOptions, pipe: Pipeline, segmentation: Segmentation | None, names: Sequence[str] | None,
+              progress: Progress | None, object_ids: Sequence[int] | None) -> SegmentResult:
+    """One object from prompts (``nninteractive``): every seed a positive point, every background seed a
+    negative one, the box a box prompt; the object already in ``segmentation`` is refined."""
+    shape = tuple(volume.data.shape)
+    fg = [_check_seed(s, shape, "seed") for s in seeds]
+    bg = [_check_seed(s, shape, "background seed") for s in background]
+    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    oid = int(object_ids[0]) if object_ids else next((i for i in range(1, 11) if i not in seg.objects), 0)
+    if not oid:
+        raise CtuiError("at most 10 objects: no free object id")
+    seg.add_object(names[0] if names else f"object {oid}", object_id=oid)
+    roi = None if opts.box is None else tuple((max(a, 0), min(b, n - 1)) for (a, b), n in zip(opts.box, shape))
+    if roi is not None and any(a > b for a, b in roi):
+        raise CtuiError(f"the box {_box_text(opts.box)} lies outside the volume", option="box")
+    rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, roi), server=opts.server,
+                                    api_key=opts.api_key or None, progress=progress)
+    box = seg.object_bbox(oid)
+    res = PromptedResult(id=oid, seed=fg[0] if fg else bg[0] if bg else (0, 0, 0), range=(float("nan"),) * 2,
+                       stops={"nninteractive": rep.summary()}, neck={"mode": "off"})
+    res.voxels = 0 if box is None else int(np.count_nonzero(seg.labels[box] == oid))
+    res.volume_ml = res.voxels * float(np.prod(volume.spacing)) / 1000.0
+    res.slices = None if box is None else (box[0].start, box[0].stop - 1)
+    if rep.licence_new:  # once a session: the message says it
+        res.stops["licence"] = rep.licence
+    settings = {"method": opts.method, "prompts": rep.to_dict(), "box": roi,
+                "seeds": [list(s) for s in fg], "background": [list(b) for b in bg]}
+    info = seg.objects[oid]
+    info.seeds.extend(s for s in fg if s not in info.seeds)
+    info.settings.update({"method": opts.method, "prompts": len(fg) + len(bg) + (opts.box is not None)})
+    report(progress, 1, 1, "")
+    return SegmentResult(segmentation=seg, pipeline=pipe, settings=[settings], objects=[res], method=opts.method)
 
 
 def _scaled(progress: Progress | None, i: int, n: int) -> Progress | None:

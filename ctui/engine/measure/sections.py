@@ -35,7 +35,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
 from ctui.engine.measure.fields import ObjectField, object_field
-from ctui.engine.measure.flags import OK, classify_sections
+from ctui.engine.measure.flags import BRANCH, CAP, OK, classify_sections
 from ctui.engine.measure.paths import (
     path_points,
     path_spline,
@@ -177,28 +177,23 @@ def sections_along_path(
     timings: dict | None = None,
     average_mm: float = 0.0,
     flags: bool = True,
+    cuts: bool = False,
 ) -> list[dict[str, Any]]:
     """Cross-sections of an object in planes normal to a path.
 
     Parameters
     ----------
-    mask : ndarray (z, y, x) or None
-        The object (ignored when ``field`` is given).
+    mask, spacing, origin, direction : the object (z, y, x; ignored when ``field`` is given), its geometry.
     path_mm : ndarray (n, 3)
-        The path, patient mm (x, y, z); a dense polyline (e.g. from
-        :func:`~ctui.engine.measure.centreline.centreline`).
-    spacing, origin, direction
-        Geometry of ``mask``.
+        The path, patient mm (x, y, z); a dense polyline (e.g. :func:`~ctui.engine.measure.centreline.centreline`).
     step_mm : float
         Distance along the path between sections (from s = 0).
     field : ObjectField, optional
-        Precomputed :func:`~ctui.engine.measure.fields.object_field` (reuse it for
-        several calls).
+        Precomputed :func:`~ctui.engine.measure.fields.object_field` (reuse it for several calls).
     at_s : sequence of float, optional
         Explicit arc lengths (mm) instead of a regular step.
     half_size_mm : float, optional
-        Initial half side of the square grid (grown automatically when the
-        section does not fit).
+        Initial half side of the square grid (grown when the section does not fit).
     grid_step_mm : float, optional
         Grid spacing; default a quarter of the smallest voxel size, coarsened so the
         grid has at most ``max_grid`` points a side.
@@ -215,6 +210,8 @@ def sections_along_path(
     flags : bool
         Classify the sections (``status``, see the module docstring); False leaves
         every measured section "ok".
+    cuts : bool
+        Keep every section that cuts the object (a path the user gave): see :func:`keep_cuts`.
 
     Returns
     -------
@@ -232,9 +229,9 @@ def sections_along_path(
         field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
     timings["field"] = timings.get("field", 0.0) + time.perf_counter() - t0
     if average_mm and average_mm > 0:
-        return _averaged(path_mm, field, step_mm=step_mm, at_s=at_s, average_mm=average_mm, flags=flags,
-                         half_size_mm=half_size_mm, grid_step_mm=grid_step_mm, max_grid=max_grid, area=area,
-                         batch=batch, timings=timings)
+        return keep_cuts(_averaged(path_mm, field, step_mm=step_mm, at_s=at_s, average_mm=average_mm, flags=flags,
+                                   half_size_mm=half_size_mm, grid_step_mm=grid_step_mm, max_grid=max_grid,
+                                   area=area, batch=batch, timings=timings), cuts)
     _, total = path_spline(path_mm)
     if at_s is None:
         if not step_mm > 0:
@@ -258,6 +255,17 @@ def sections_along_path(
         tf = time.perf_counter()
         classify_sections(rows, field)
         timings["flags"] = timings.get("flags", 0.0) + time.perf_counter() - tf
+    return keep_cuts(rows, cuts)
+
+
+def keep_cuts(rows: list[dict[str, Any]], cuts: bool = True) -> list[dict[str, Any]]:
+    """With ``cuts``: every row that is a section of the object ("cap", "branch") made "ok",
+    its old status kept in ``flag`` (a path the user gave, not a centreline, may meet the
+    object's ends or a branch by intent); rows with no section ("outside", "open") unchanged."""
+    if cuts:
+        for r in rows:
+            if r.get("status") in (CAP, BRANCH):
+                r["flag"], r["status"] = r["status"], OK
     return rows
 
 

@@ -34,9 +34,15 @@ _FLAG_WORDS = {
 }
 
 
-def _flag_warnings(counts: dict[str, int], n: int, object_id: int) -> list[str]:
-    """One warning per kind of section left out of the numbers."""
-    return [f"{counts[k]} of {n} sections of object {object_id} {words}: not reported as numbers"
+def _flag_warnings(flags: dict[str, Any], n: int, object_id: int) -> list[str]:
+    """One warning per kind of section left out of the numbers, with where along the path (s mm)."""
+    counts = flags["counts"]
+
+    def where(k: str) -> str:
+        spans = [(r["from_s_mm"], r["to_s_mm"]) for r in flags.get("ranges", []) if r["status"] == k]
+        return ", ".join(f"{a:g}" if a == b else f"{a:g}-{b:g}" for a, b in spans)
+
+    return [f"{counts[k]} of {n} sections of object {object_id} {words} (s {where(k)} mm): not reported as numbers"
             for k, words in _FLAG_WORDS.items() if counts.get(k) and k != "cap"]
 
 
@@ -52,15 +58,18 @@ def _path_of(path, mask, *, step_mm, path_voxels, spacing, origin, direction) ->
     return np.asarray(path, dtype=np.float64)
 
 
-def _sections_part(out: dict[str, Any], path: np.ndarray, field, *, step_mm, area, average_mm, between) -> None:
-    """Fill ``out``'s path, section and between-planes keys (see :func:`measure_object`)."""
-    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm)
+def _sections_part(out: dict[str, Any], path: np.ndarray, field, *, step_mm, area, average_mm, between,
+                   cuts: bool = False) -> None:
+    """Fill ``out``'s path, section and between-planes keys (see :func:`measure_object`);
+    ``cuts``: a given path keeps every section that cuts the object (``sections_along_path``)."""
+    rows = sections_along_path(None, path, field=field, step_mm=step_mm, area=area, average_mm=average_mm,
+                               cuts=cuts)
     out["path_mm"] = path
     out["path_length_mm"] = path_length(path)
     out["rows"] = rows
     out["sections"] = sections_table(rows)
     out["section_flags"] = flag_summary(rows)
-    out["warnings"] += _flag_warnings(out["section_flags"]["counts"], len(rows), out["object"])
+    out["warnings"] += _flag_warnings(out["section_flags"], len(rows), out["object"])
     if between is not None:
         s1, s2 = between
         vb = volume_between(None, path, s1, s2, field=field)
@@ -150,11 +159,13 @@ def measure_object(
         if between is not None:
             raise CtuiError("a volume between planes needs a path")
         return out
+    given = not (isinstance(path, str) and path.strip().lower() == "auto")  # the user's path, not a centreline
     path = _path_of(path, mask, step_mm=step_mm, path_voxels=path_voxels, spacing=spacing, origin=origin,
                     direction=direction)
     if image is not None:
         field = partial_volume_field(out["partial_volume"], spacing=spacing, origin=origin, direction=direction)
     else:
         field = object_field(mask, spacing=spacing, origin=origin, direction=direction)
-    _sections_part(out, path, field, step_mm=step_mm, area=area, average_mm=average_mm, between=between)
+    _sections_part(out, path, field, step_mm=step_mm, area=area, average_mm=average_mm, between=between,
+                   cuts=given)
     return out

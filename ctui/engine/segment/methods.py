@@ -33,6 +33,7 @@ from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.progress import Cancelled, Progress, report
 from ctui.engine.segment import grow as _grow
 from ctui.engine.segment.fill3d import fill3d_seeds
+from ctui.engine.segment import nninteractive as _nninteractive
 from ctui.engine.segment.propagate import PropagationSettings, propagate_object
 from ctui.engine.segment.selection import Segmentation, in_range
 
@@ -136,6 +137,9 @@ register("grow", grow, "the guarded fill shared with the background seeds along 
          options=("background",))
 register("levelset", levelset, "the fill refined by a threshold level set with a curvature term",
          options=("curvature",))
+register("nninteractive", _nninteractive.run_job, "nnInteractive on a server (pip install 'ctui[ai]'): seeds are "
+         "positive points, background seeds negative, the box a box prompt; refines the current object",
+         options=("prompts", "server"))
 
 
 def _propagate(job: Job, *, share: float) -> None:
