@@ -96,6 +96,7 @@ def test_cli_json_and_mask(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.shared_data
 def test_aorta_from_root_to_distal_end():
     """The shared dissected aorta: from just above the annulus, through the arch, to the last slice."""
     import SimpleITK as sitk
