@@ -128,10 +128,10 @@ def brain_mr(folder: Path) -> tuple[Volume, np.ndarray]:
             sitk.GetArrayFromImage(seg).astype(np.int32))
 
 
-def run_ctui(vol, seed, mode: str) -> tuple[np.ndarray | None, list[str], str]:
+def run_ctui(vol, seed, mode: str, background=(), method: str = "fill") -> tuple[np.ndarray | None, list[str], str]:
     """ctui's defaults from one seed: (mask or None when refused, warnings, the refusal or range note)."""
     try:
-        res = segment(vol, [seed], [], options=SegmentOptions(mode=mode))
+        res = segment(vol, [seed], [], background=list(background), options=SegmentOptions(mode=mode, method=method))
     except CtuiError as e:
         return None, [str(e)], "refused"
     o = res.objects[0]
@@ -174,6 +174,30 @@ def peer_rw(vol, seed) -> np.ndarray:
     return full
 
 
+def click(got: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int] | None:
+    """A user's background click in a leak: the deepest point (x, y, z) of the result's largest piece outside the
+    reference (dilated by one voxel)."""
+    fp = got & ~ndimage.binary_dilation(ref)
+    parts, n = ndimage.label(fp)
+    if not n:
+        return None
+    big = np.argmax(np.bincount(parts.ravel())[1:]) + 1
+    return deepest(parts == big, spacing)
+
+
+def clicks(vol, ref, seed, got, mode: str) -> str:
+    """One background click in the leak, under each method: Dice before -> after, or the refusal."""
+    b = click(got, ref, vol.spacing)
+    if b is None:
+        return "no leak piece to click"
+    out = [f"bg {b[0]},{b[1]},{b[2]}"]
+    for method in ("fill", "grow", "levelset"):
+        m, warns, note = run_ctui(vol, seed, mode, background=[b], method=method)
+        out.append(f"{method} " + ("refused" if m is None else f"{dice(got, ref):.2f}->{dice(m, ref):.2f}"
+                                   f"{' (warned)' if warns and m.sum() == got.sum() else ''}"))
+    return ", ".join(out)
+
+
 def pairwise_min(masks: list[np.ndarray]) -> float:
     got = [m for m in masks if m is not None]
     if len(got) < 2:
@@ -188,6 +212,8 @@ def main() -> int:
     ap.add_argument("--patients", type=int, default=20, metavar="K", help="head-and-neck patients (first K)")
     ap.add_argument("--modes", default="slice,3d")
     ap.add_argument("--no-peers", action="store_true")
+    ap.add_argument("--clicks", action="store_true",
+                    help="for each leak (> 2x) one background click in it, under fill, grow and levelset")
     args = ap.parse_args()
     which = set(args.set.split(","))
     if not SHARED.is_dir():
@@ -219,6 +245,8 @@ def main() -> int:
                 if not 0.5 <= ratio <= 2.0:
                     out += 1
                     warned += bool(warns)
+                if ratio > 2.0 and args.clicks and i == 0:
+                    print(f"{'':8s} {name:22s} {mode:5s} leak {ratio:.1f}x, one click: {clicks(vol, ref, s, got, mode)}")
                 if i == 0:
                     first = note
                     head = (dice(got, ref), ratio, hd95(got, ref, vol.spacing))

@@ -32,7 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ctui.engine.actions.segment_checks import check_background, sanity, tissue_check, wrap_check
+from ctui.engine.actions.segment_checks import body_check, check_background, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -375,6 +375,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         r.warnings.extend(sanity(r, start, spacing, opts))
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
+        r.warnings.extend(body_check(volume, seg, r))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]
