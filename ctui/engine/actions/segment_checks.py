@@ -155,6 +155,7 @@ def wrap_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slic
         return []
     sd = max(1.4826 * float(np.median(np.abs(above - med))),
              start.auto_range.noise if start.auto_range is not None else 0.0)
+    r.shell_range = (float(lo), float(med + 2 * sd))  # what the segment action may try once (a range holding both)
     return [f"the object is wrapped in brighter tissue: {above.size / v.size:.0%} of its surface borders values "
             f"above the range (median {med:.0f}); if that shell is part of the same organ (a kidney's cortex "
             f"around its medulla in an arterial phase), give a range that holds both, about {lo:.0f}:{med + 2 * sd:.0f}"]
