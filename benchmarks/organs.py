@@ -30,6 +30,9 @@ cava; ``phantoms.contrast_abdomen``), with and without 120:400: automatic width,
 ``--seeds N`` adds N seeds at random >= 6 mm inside each organ (a user's click rather than the deepest point).
 ``--aorta`` prints what bounds the aorta from one seed: the best Dice a fill within the automatic range could
 reach, what ctui's result lacks, and the widths at which a 3D neck cut parts the aorta from the left ventricle.
+``--set abdomen,contrast,spleen,hn,brain [--seeds N] [--clicks]`` runs benchmarks/organs_sets.py instead: every
+shared labelled set, ctui's defaults from the deepest point and N random interior seeds, the spread between seeds,
+the warned failures, one background click per leak, beside SimpleITK ConfidenceConnected and the random walker.
 Run: python3 benchmarks/organs.py [--speed] [--no-peers] [--grid F [--noise SD]] [--seeds N] [--aorta]
 """
 
@@ -191,6 +194,10 @@ def timed(f, *a, **k):
 
 
 def main() -> int:
+    if "--set" in sys.argv[1:]:  # every shared labelled set: benchmarks/organs_sets.py (--set NAME --seeds N ...)
+        from benchmarks.organs_sets import main as sets_main
+
+        return sets_main()
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--no-peers", action="store_true", help="ctui rows only")
     ap.add_argument("--speed", action="store_true", help="also time a slice-mode kidney on 300 x 512 x 512")

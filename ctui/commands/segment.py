@@ -374,6 +374,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl} (numbered from 0)")
             if o.get("message"):
                 print(f"  {o['message']}")
+            if (o.get("auto_range") or {}).get("why"):
+                print(f"  range: {o['auto_range']['why']}")
             if o.get("neck", {}).get("reason"):
                 print(f"  leak guard: {o['neck']['reason']}")
             for w in o["warnings"]:

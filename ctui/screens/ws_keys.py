@@ -452,6 +452,9 @@ def _seed_text(ws, t: Text) -> None:
         inside = rc.low <= 0.5 * (a + b) <= rc.high
         t.append(_BARS[min(8, round(8 * h / top))], style="green" if inside else "dim")
     t.append("\n")
+    stops = getattr(getattr(rc, "steps", None), "stops", None)
+    if stops:  # why the range ends there: a neighbour joins the seed's region past that bound
+        t.append(f"  {' and '.join(f'{k} {v:.0f}' for k, v in stops.items())}: a neighbour joins past it\n", style="dim")
 
 
 def _objects_text(ws, t: Text, compact: bool = False) -> None:

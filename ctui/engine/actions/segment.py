@@ -37,7 +37,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ctui.engine.actions.segment_checks import check_background, sanity, tissue_check, wrap_check
+from ctui.engine.actions.segment_checks import body_check, check_background, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -123,6 +123,7 @@ class ObjectResult:
     auto_range: dict[str, Any] | None = None  # the seed's neighbourhood statistics when the range was automatic
     cuts: list[dict[str, Any]] = field(default_factory=list)  # {"slice", "voxels", "mm": [x, y, z] patient LPS}
     denoise: str = ""  # what the fill ran on besides the pipeline: "median 3x3" on a noisy series
+    shell_range: tuple[float, float] | None = None  # wrap_check's range holding the object and its brighter shell
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "voxels": self.voxels, "volume_ml": round(self.volume_ml, 4),
@@ -334,12 +335,66 @@ def _box_text(box: Box | None) -> str:
     return f"x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}"
 
 
+SHELL_GROWTH = 3.0  # the object with its shell may be at most this many times the object alone
+
+
 def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Threshold], *,
             background: Sequence[Sequence[int]] = (), options: SegmentOptions | None = None,
             pipeline: Pipeline | None = None, segmentation: Segmentation | None = None,
             names: Sequence[str] | None = None, progress: Progress | None = None,
             object_ids: Sequence[int] | None = None) -> SegmentResult:
-    """Segment one object per seed; see the module docstring.
+    """Segment one object per seed; see the module docstring and :func:`_segment`.
+
+    One seed with the automatic range whose object is wrapped in a brighter shell (``wrap_check``: a kidney's
+    medulla in its cortex, an arterial phase) is tried once more with the range that holds both; that result is
+    kept when it carries no warning of its own (but the values' shift, which the shell makes) and is at most ``SHELL_GROWTH`` times the first (the shell was
+    the rest of the organ, not a neighbour), else the first stays with its warning."""
+    seg = segmentation if segmentation is not None else Segmentation(tuple(volume.data.shape))  # type: ignore[arg-type]
+    before = len(seg.undo_labels())
+    known = set(seg.objects)
+    res = _segment(volume, seeds, thresholds, background=background, options=options, pipeline=pipeline,
+                   segmentation=seg, names=names, progress=progress, object_ids=object_ids)
+    r = res.objects[0]
+    if len(res.objects) != 1 or r.auto_range is None or r.shell_range is None:
+        return res
+    trial = Segmentation(seg.labels.shape)  # type: ignore[arg-type]
+    trial.labels[:] = np.where(seg.labels == r.id, 0, seg.labels)
+    try:
+        got = _segment(volume, [r.seed], [r.shell_range], background=background, options=options, pipeline=pipeline,
+                       segmentation=trial, object_ids=[r.id]).objects[0]
+    except CtuiError:
+        return res
+    # its values centre above the seed's by design (the shell is brighter): that check alone does not count
+    warned = [w for w in got.warnings if not w.startswith("the object's values")]
+    if warned or got.voxels > SHELL_GROWTH * r.voxels:
+        k = next(i for i, w in enumerate(r.warnings) if w.startswith("the object is wrapped"))
+        r.warnings[k] += (f" (tried: {got.volume_ml:.0f} mL, {got.voxels / max(r.voxels, 1):.1f}x the object, "
+                          f"{'with warnings' if warned else 'too large'}: kept the first)")
+        return res
+    while len(seg.undo_labels()) > before:
+        seg.undo()
+    for oid in set(seg.objects) - known:
+        seg.objects.pop(oid, None)
+    out = _segment(volume, [r.seed], [r.shell_range], background=background, options=options, pipeline=pipeline,
+                   segmentation=seg, names=names, progress=progress, object_ids=[r.id])
+    o = out.objects[0]
+    o.warnings = [w for w in o.warnings if not w.startswith("the object's values")]  # the shell's, by design
+    o.auto_range = dict(r.auto_range)
+    o.auto_range["why"] = (f"{r.auto_range.get('why', '')}; the object ({r.volume_ml:.0f} mL) was wrapped in brighter "
+                           f"tissue of the same organ, so the range was widened to {o.range[0]:.0f}:{o.range[1]:.0f} "
+                           f"to hold both ({o.volume_ml:.0f} mL, no leak)")
+    o.auto_range["low"], o.auto_range["high"] = round(o.range[0], 3), round(o.range[1], 3)
+    if o.id in seg.objects:
+        seg.objects[o.id].settings["range_source"] = "auto"
+    return out
+
+
+def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Threshold], *,
+             background: Sequence[Sequence[int]] = (), options: SegmentOptions | None = None,
+             pipeline: Pipeline | None = None, segmentation: Segmentation | None = None,
+             names: Sequence[str] | None = None, progress: Progress | None = None,
+             object_ids: Sequence[int] | None = None) -> SegmentResult:
+    """Segment one object per seed, one pass.
 
     Parameters
     ----------
@@ -399,6 +454,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
         r.warnings.extend(sanity(r, start, spacing, opts))
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
+        r.warnings.extend(body_check(volume, seg, r))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]

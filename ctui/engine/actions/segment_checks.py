@@ -155,6 +155,35 @@ def wrap_check(volume: Any, seg: Any, r: Any, start: Any, box: tuple[slice, slic
         return []
     sd = max(1.4826 * float(np.median(np.abs(above - med))),
              start.auto_range.noise if start.auto_range is not None else 0.0)
+    r.shell_range = (float(lo), float(med + 2 * sd))  # what the segment action may try once (a range holding both)
     return [f"the object is wrapped in brighter tissue: {above.size / v.size:.0%} of its surface borders values "
             f"above the range (median {med:.0f}); if that shell is part of the same organ (a kidney's cortex "
             f"around its medulla in an arterial phase), give a range that holds both, about {lo:.0f}:{med + 2 * sd:.0f}"]
+
+
+# an object holding more than this share of the body (voxels above BODY_HU) on its slices ran into the tissue around
+# it (measured: the abdomen's kidneys, spleen, liver and the contrast spleen 0.02-0.18; leaks of a spinal cord, a
+# parotid, a brainstem or a mandible seed into the neck and head 0.2-0.9 on the openkbp head-and-neck CTs)
+BODY_SHARE = 0.3
+BODY_HU = -400.0
+BODY_SLICES = 16
+
+
+def body_check(volume: Any, seg: Any, r: Any) -> list[str]:
+    """A warning when the object fills much of the body on its slices (CT in HU only: the body is what lies above
+    BODY_HU): a structure without an edge at this range (a spinal cord, a parotid or the brainstem in the tissue
+    around it) whose result is the surrounding tissue, many times the structure."""
+    if r.slices is None or r.voxels == 0:
+        return []
+    zs = np.unique(np.linspace(r.slices[0], r.slices[1], BODY_SLICES).round().astype(int))
+    data = volume.data[zs]
+    if getattr(volume, "modality", "") != "CT" and not float(data.min()) < -500:
+        return []
+    body = int(np.count_nonzero(data > BODY_HU))
+    obj = int(np.count_nonzero(seg.labels[zs] == r.id))
+    if not body or obj <= BODY_SHARE * body:
+        return []
+    return [f"the object fills {obj / body:.0%} of the body on its slices: the structure probably has no edge at "
+            f"the range {r.range[0]:.0f}:{r.range[1]:.0f} (its values overlap the tissue around it), so the result is "
+            "that tissue; draw a box around the structure, add background seeds in what it ran into, or give a "
+            "narrower range"]

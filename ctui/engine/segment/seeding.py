@@ -39,6 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.core.limits import check_allocation
+from ctui.engine.segment.autorange import plateau_range
 from ctui.engine.segment.autoneck import NeckChoice, choose_width, coarse, local_depth, resample_factors, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import fill_holes_2d
@@ -47,6 +48,10 @@ from ctui.engine.segment.selection import in_range
 
 RANGE_BALL_MM = 10.0
 RANGE_K = 2.0
+# a neighbourhood whose spread is more than this many times the image noise mixes tissues (real CT: the unenhanced
+# kidneys, spleen and liver 1.0-1.2x; a contrast kidney's cortex and medulla 1.8x, the aorta beside its thrombus
+# 3.8x): its median +- 2 sd spans them, so the range is widened from the seed's own value instead (autorange)
+MIXED = 1.5
 HIST_BINS = 16
 SPECKLE = 0.025  # share of the in-range pixels near the seed in specks above which the fill runs on a median
 SPECKLE_MM = 20.0
@@ -65,11 +70,15 @@ class RangeChoice:
     hist: list[int] = field(default_factory=list)
     edges: list[float] = field(default_factory=list)
     noise: float = 0.0  # the image noise sd near the seed (neighbour differences), same units
+    rule: str = "ball"  # "plateau": widened from the seed's value until the joined volume jumps; "ball": median +- k sd
+    why: str = ""  # one line: how the range was chosen
+    steps: Any = None  # autorange.RangeSteps when rule == "plateau"
 
     def to_dict(self) -> dict[str, Any]:
         return {"low": round(self.low, 3), "high": round(self.high, 3), "median": round(self.median, 3),
                 "sd": round(self.sd, 3), "noise": round(self.noise, 3), "voxels": self.voxels, "hist": list(self.hist),
-                "edges": [round(e, 3) for e in self.edges]}
+                "edges": [round(e, 3) for e in self.edges], "rule": self.rule, "why": self.why,
+                "steps": None if self.steps is None else self.steps.to_dict()}
 
 
 def _ball_values(volume: Any, pipe: Any, seed: tuple[int, int, int]) -> tuple[np.ndarray, float]:
@@ -89,23 +98,69 @@ def _ball_values(volume: Any, pipe: Any, seed: tuple[int, int, int]) -> tuple[np
     ball = ((zz - z) * sp[0]) ** 2 + ((yy - y) * sp[1]) ** 2 + ((xx - x) * sp[2]) ** 2 <= max(RANGE_BALL_MM, max(sp)) ** 2
     diffs = np.diff(sub, axis=2).ravel() if sub.shape[2] > 1 else np.zeros(1, np.float32)
     noise = 1.4826 * float(np.median(np.abs(diffs - np.median(diffs)))) / math.sqrt(2.0)
-    return sub[ball], noise
+    return sub[ball], min(noise, _slice_noise(volume, pipe, seed, window))
 
 
-def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float = RANGE_K) -> RangeChoice:
-    """The range of the seed's neighbourhood (see the module docstring); always holds the seed's own value."""
+NOISE_MM = 40.0  # the noise is also measured on the seed's slice this far around it ...
+
+
+def _slice_noise(volume: Any, pipe: Any, seed: tuple[int, int, int], window: Any) -> float:
+    """The noise sd from neighbour differences (rows and columns) on the seed's slice within NOISE_MM: on a coarse
+    grid (3.9 mm pixels of a head-and-neck CT) the ball's few differences are mostly edges (143 HU for a spinal
+    cord's ball; 20-40 HU here)."""
+    x, y, z = seed
+    _dz, dy, dx = (float(v) for v in volume.spacing)
+    ny, nx = volume.data.shape[1:]
+    ry, rx = max(2, int(NOISE_MM / dy)), max(2, int(NOISE_MM / dx))
+    img = np.asarray(pipe.final_region(volume, z, max(y - ry, 0), min(y + ry + 1, ny), max(x - rx, 0),
+                                       min(x + rx + 1, nx), window=window), np.float32)
+    d = np.concatenate([np.diff(img, axis=1).ravel(), np.diff(img, axis=0).ravel()])
+    if not d.size:
+        return float("inf")
+    return 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+
+
+def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float = RANGE_K,
+               rule: str = "plateau") -> RangeChoice:
+    """The automatic range for a seed (x, y, z): ``rule="plateau"`` (default) widened from the seed's own value
+    until the joined volume jumps (:mod:`ctui.engine.segment.autorange`); ``"ball"`` the neighbourhood's
+    median +- k sd (see the module docstring). Always holds the seed's own value."""
     vals, noise = _ball_values(volume, pipe, seed)
     med = float(np.median(vals))
     mad = 1.4826 * float(np.median(np.abs(vals - med)))
     sd = max(mad, noise, 1e-6)
     lo, hi = med - k * sd, med + k * sd
     x, y, z = seed
-    own = float(pipe.final_region(volume, z, y, y + 1, x, x + 1, window=pipe.window_for(volume))[0, 0])
+    window = pipe.window_for(volume)
+    own = float(pipe.final_region(volume, z, y, y + 1, x, x + 1, window=window)[0, 0])
+    steps, why = None, f"the seed's {RANGE_BALL_MM:g} mm neighbourhood: median {med:.0f} +- {k:g} x {sd:.0f}"
+    if rule == "plateau":  # the ball's range, but never past a value where a neighbour joins
+        centre = _own_value(volume, pipe, seed, window)
+        _a, _b, steps = plateau_range(volume, pipe, seed, max(noise, 1e-6), centre, own)
+        cut = []
+        if "low" in steps.stops and steps.stops["low"] > lo:
+            cut.append(f"low {lo:.0f} -> {steps.stops['low']:.0f} ({steps.closed['low']})")
+            lo = steps.stops["low"]
+        if "high" in steps.stops and steps.stops["high"] < hi:
+            cut.append(f"high {hi:.0f} -> {steps.stops['high']:.0f} ({steps.closed['high']})")
+            hi = steps.stops["high"]
+        why += "; " + ("narrowed where a neighbour joins the seed's region: " + ", ".join(cut) if cut
+                       else "no neighbour joins within it")
     lo, hi = min(lo, own), max(hi, own)
-    edges = np.linspace(med - 4 * sd, med + 4 * sd, HIST_BINS + 1)
+    edges = np.linspace(min(med - 4 * sd, lo), max(med + 4 * sd, hi), HIST_BINS + 1)
     hist = np.histogram(np.clip(vals, edges[0], edges[-1]), bins=edges)[0]
     return RangeChoice(low=lo, high=hi, median=med, sd=sd, voxels=int(vals.size), hist=[int(h) for h in hist],
-                       edges=[float(e) for e in edges], noise=float(noise))
+                       edges=[float(e) for e in edges], noise=float(noise), rule=rule, why=why, steps=steps)
+
+
+def _own_value(volume: Any, pipe: Any, seed: tuple[int, int, int], window: Any) -> float:
+    """The median of the seed's 3 x 3 x 3 neighbourhood: its own tissue, not the 10 mm ball's mix."""
+    x, y, z = seed
+    nz, ny, nx = volume.data.shape
+    y0, y1, x0, x1 = max(y - 1, 0), min(y + 2, ny), max(x - 1, 0), min(x + 2, nx)
+    vals = [np.asarray(pipe.final_region(volume, zz, y0, y1, x0, x1, window=window), np.float32)
+            for zz in range(max(z - 1, 0), min(z + 2, nz))]
+    return float(np.median(np.concatenate([v.ravel() for v in vals])))
 
 
 def denoised(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, high: float) -> Any | None:
