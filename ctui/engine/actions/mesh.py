@@ -200,7 +200,7 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
     else:
         raise CtuiError(f"cannot mesh a {kind} file", path=opened.path)
     parts = [res.meshes[k] for k in sorted(res.meshes)]
-    for part in parts:  # e.g. "greedy tiling: the minimum-area kernel is being compiled (first use)"
+    for part in parts:  # a mesh-level note
         note = (part.meta or {}).get("note")
         if note and note not in res.notes:
             res.notes.append(str(note))
