@@ -138,11 +138,14 @@ def _refuse(path: Any, src: Geometry, dst: Geometry, why: str) -> CtuiError:
                      "series it was drawn on", path=path, option="series")
 
 
-def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02) -> np.ndarray:
+def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02,
+                  same_shape: bool = False) -> np.ndarray:
     """Put ``arr`` ((..., z, y, x) on ``src``) onto the grid ``dst``: returns (..., *dst.shape).
 
     Accepted: same voxel size and axes up to order and flips, whole-voxel offsets, and
-    nothing non-zero outside ``dst``. Raises CtuiError (with :func:`describe_mismatch`) otherwise.
+    nothing non-zero outside ``dst``; ``same_shape`` (a whole label map, not a SEG's
+    frames): the grid's size must be the series' too (axes reordered). Raises CtuiError
+    (with :func:`describe_mismatch`) otherwise.
     """
     m = np.linalg.inv(dst.affine) @ src.affine  # src (x, y, z, 1) -> dst (x, y, z, 1)
     r = np.round(m[:3, :3])
@@ -165,6 +168,9 @@ def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = 
             starts.append(int(tz[i]) - (n - 1))
         else:
             starts.append(int(tz[i]))
+    if same_shape and tuple(out_arr.shape[lead:]) != tuple(dst.shape):
+        raise _refuse(path, src, dst, f"its shape {tuple(out_arr.shape[lead:])} (z, y, x) is not the series' "
+                      f"{tuple(dst.shape)}")
     out = np.zeros(arr.shape[:lead] + tuple(dst.shape), dtype=arr.dtype)
     src_sl, dst_sl = [], []
     for i in range(3):
@@ -303,7 +309,7 @@ def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
     lab, vol = load_labels(p)
     geom = Geometry.of(vol)
     if grid is not None:
-        lab = place_on_grid(lab, geom, grid, path=p)
+        lab = place_on_grid(lab, geom, grid, path=p, same_shape=True)
         geom = grid
     ids = [int(i) for i in np.flatnonzero(np.bincount(lab.ravel(), minlength=256)) if i != 0]
     names = _nrrd_names(p) if kind == "nrrd" else {}

@@ -55,6 +55,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption, dropped_share_error
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window
@@ -191,12 +192,13 @@ def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     warnings = list(geo["warnings"])
     odd = sorted({f.ignored_scaling for f in sorted_frames if f.ignored_scaling})
     if odd:
-        warnings.append(f"implausible header values: {odd[0]}" + (f" (and {len(odd) - 1} other kinds)" if len(odd) > 1 else ""))
+        text = f"implausible header values: {odd[0]}" + (f" (and {len(odd) - 1} other kinds)" if len(odd) > 1 else "")
+        warnings.append(Assumption(text, "spacing" if "PixelSpacing" in text else "values"))
     dy, dx = f0.pixel_spacing or (None, None)
     if dy is None:
         dy = dx = 1.0
         if not any("PixelSpacing" in w for w in warnings):
-            warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
+            warnings.append(Assumption("no PixelSpacing: default spacing 1 mm in-plane", "spacing"))
     zs, ys, xs = plan.steps()
     dz_user = None
     if spacing is not None:
@@ -314,8 +316,12 @@ def load_series(
         zs, ys, xs = plan.steps()
         grid = plan_grid(prep.geo, zsel, dy=dy * ys, dx=dx * xs, ny=out.shape[1], nx=out.shape[2],
                          dz_user=prep.dz_user, resample=resample)
-        warnings.append(f"{len(bad)} slices could not be decoded and are missing"
-                        + (": the gaps are interpolated" if grid.positions is not None else " from the volume"))
+        refusal = dropped_share_error(len(bad), len(zsel) + len(bad))
+        if refusal:
+            raise LoadError(refusal + f" ({failures[0][1]})", path=path)
+        warnings.append(Assumption(f"{len(bad)} of {len(zsel) + len(bad)} slices could not be decoded and are missing"
+                                   + (": the gaps are interpolated" if grid.positions is not None else " from the volume"),
+                                   "slices", len(bad), len(zsel) + len(bad)))
 
     def check(nbytes: int, what: str) -> None:
         check_memory(nbytes, shape=(1, 1, 1), path=path, limit=memory_limit, what=what)
