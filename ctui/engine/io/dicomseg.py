@@ -42,6 +42,7 @@ from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.io.dicomrefs import require_references
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
 RTSTRUCT_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.481.3"
@@ -83,7 +84,7 @@ def _read_headers(path: Path) -> list[Any]:
         if f.suffix.lower() in (".json", ".txt", ".md", ".png", ".jpg", ".nrrd", ".nii", ".gz", ".csv"):
             continue
         try:
-            ds = pydicom.dcmread(f, stop_before_pixels=True)
+            ds = bounded_dcmread(f, stop_before_pixels=True)  # a deflated file inflated within a bound
         except (InvalidDicomError, OSError, ValueError, EOFError, TypeError, AttributeError, KeyError):
             continue
         if "SOPInstanceUID" not in ds or str(ds.get("SOPClassUID", "")) in _NOT_IMAGES:
@@ -426,10 +427,8 @@ def _check_frames(p: Path) -> None:
     """Refuse a SEG whose NumberOfFrames its pixel data or per-frame groups contradict,
     before highdicom builds per-frame tables for it (NumberOfFrames 2**31-1 in a 130 KB
     file: > 6 GB), and check one frame stack against the memory available."""
-    import pydicom
-
     try:
-        ds = pydicom.dcmread(str(p), defer_size=1024, force=True)
+        ds = bounded_dcmread(str(p), defer_size=1024, force=True)
         nf = int(ds.get("NumberOfFrames", 1) or 1)
         rows, cols = int(ds.get("Rows", 0) or 0), int(ds.get("Columns", 0) or 0)
         bits = int(ds.get("BitsAllocated", 1) or 1)

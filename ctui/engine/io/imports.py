@@ -37,6 +37,7 @@ from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.io.labels import load_labels
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd")
@@ -86,10 +87,9 @@ def label_kind(path: str | os.PathLike) -> str:
         return "nrrd"
     if p.is_dir():
         raise FormatError("is a folder: give the label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)", path=p)
-    import pydicom
 
     try:
-        ds = pydicom.dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
+        ds = bounded_dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
     except Exception as exc:  # noqa: BLE001 - pydicom raises many types (struct.error...) on foreign/broken files
         raise FormatError(f"not a label file: expected DICOM-SEG, RTSTRUCT, .nii, .nii.gz or .nrrd "
                           f"({' '.join(str(exc).split())[:120]})", path=p) from None

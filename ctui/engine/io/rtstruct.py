@@ -55,6 +55,7 @@ from ctui.engine.io.dicomseg import (
     _objects_in,
     blank_identifiers,
 )
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 STUDY_COMPONENT_MANAGEMENT = "1.2.840.10008.3.1.2.3.1"
 _COPIED = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyInstanceUID", "StudyDate",
@@ -366,11 +367,10 @@ def _contour_points(item: Any) -> np.ndarray:
 
 def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
     """ROIs and their contours (patient mm) of an RTSTRUCT file; FormatError when it is not one."""
-    import pydicom
 
     p = Path(path)
     try:
-        ds = pydicom.dcmread(str(p))
+        ds = bounded_dcmread(str(p))
     except Exception as exc:  # noqa: BLE001 - foreign files raise many types
         raise FormatError(f"not a readable DICOM file ({' '.join(str(exc).split())[:160]})", path=p) from None
     if str(ds.get("SOPClassUID", "")) != RTSTRUCT_SOP_CLASS and ds.get("Modality") != "RTSTRUCT":

@@ -350,8 +350,10 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
     loader = dicom.inspect_series if headers_only else dicom.load_series
     vol = loader(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
                  spacing=spacing, all_series=summaries, **common)
-    _lost_slices(vol, [d for d in skip2 if d.get("series") == chosen.uid], len(chosen.frames), path_label,
-                 refuse=not headers_only)
+    unnamed = [d for d in skip2 if not d.get("series") and not d.get("object") and "not a DICOM" not in d["reason"]
+               and "empty file" not in d["reason"]] if len(ordered) == 1 else []  # broken files of the one series
+    _lost_slices(vol, [d for d in skip2 if d.get("series") == chosen.uid] + unnamed, len(chosen.frames),
+                 path_label, refuse=not headers_only)
     if len(ordered) > 1:
         idx = ordered.index(chosen)
         vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "

@@ -24,6 +24,7 @@ import numpy as np
 from ctui.engine.core.limits import available_memory, fmt_bytes
 from ctui.engine.io.series._common import rel
 from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
+from ctui.engine.io.series.dicom_deflate import header_frames, is_deflated
 from ctui.engine.io.series.dicom_sop import _check_image, _NotImage, _Skip, series_uid_of
 from ctui.engine.io.series.dicom_values import (  # noqa: F401 - re-exported for the loaders
     _implausible,
@@ -275,7 +276,7 @@ def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
-            frames, ids = _read_header(path)
+            frames, ids = _read_header(path, memory)
     if memory is not None:
         f0 = frames[0]
         need = f0.frame_bytes * len(frames)
@@ -285,7 +286,7 @@ def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[
     return frames, ids
 
 
-def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
+def _read_header(path: str | os.PathLike, memory: int | None = None) -> tuple[list[Frame], list[str]]:
     path = str(path)
     try:
         size = os.path.getsize(path)
@@ -302,6 +303,8 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
         # reads and tells on a file cost more than the parsing: 300 CT headers 2x faster);
         # a header longer than that is parsed from the file itself
         head = fh.read(_HEAD_BYTES)
+        if is_deflated(head):  # inflated within a bound, never by pydicom in one call
+            return header_frames(path, memory, _parse, _Skip)
         quick = quick_parse(head)
         if quick is not None:
             try:

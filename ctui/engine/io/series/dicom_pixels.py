@@ -3,10 +3,12 @@ slice, or pydicom's decoders for compressed transfer syntaxes)."""
 
 from __future__ import annotations
 
+import warnings
 from typing import Sequence
 
 import numpy as np
 
+from ctui.engine.io.series.dicom_deflate import DEFLATED, inflate_for_pixels
 from ctui.engine.io.series.dicom_headers import Frame, _quiet_pydicom, _Skip
 
 
@@ -123,13 +125,16 @@ def _decode_pydicom(f: Frame) -> np.ndarray:
 
     _quiet_pydicom()
     try:
-        ds = pydicom.dcmread(f.file, force=True)
+        src = inflate_for_pixels(f.file, f.frame_bytes * f.nframes) if f.syntax == DEFLATED else f.file
+        ds = pydicom.dcmread(src, force=True)
         if not hasattr(ds, "file_meta") or "TransferSyntaxUID" not in ds.file_meta:
             from pydicom.dataset import FileMetaDataset
 
             ds.file_meta = getattr(ds, "file_meta", None) or FileMetaDataset()
             ds.file_meta.TransferSyntaxUID = f.syntax
-        arr = pixel_array(ds, index=f.frame if f.nframes > 1 else None)
+        with warnings.catch_warnings():  # pydicom's excess-frames notice: judged by the caller's size check
+            warnings.simplefilter("ignore")
+            arr = pixel_array(ds, index=f.frame if f.nframes > 1 else None)
     except Exception as exc:
         msg = str(exc)
         if _codec_missing(f.syntax) or "plugin" in msg.lower() and "missing" in msg.lower():
