@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import os
+import stat
 import zlib
 from typing import Any
 
@@ -77,7 +78,7 @@ def inflate(path: str, limit: int) -> tuple[bytes, bool]:
 
 def _claimed_bytes(data: bytes) -> int:
     """Pixel bytes the (partly inflated) header claims; 0 when it cannot tell."""
-    import pydicom
+    import pydicom  # with the DICOM readers
 
     try:
         ds = pydicom.dcmread(io.BytesIO(data), stop_before_pixels=True, force=True)
@@ -128,9 +129,7 @@ def dcmread(path: Any, **kw: Any) -> Any:
     """``pydicom.dcmread(path, **kw)``, but a deflated file is inflated within a bound first
     (headers only with ``stop_before_pixels``: the first MiB and the claimed pixel bytes;
     else at most :data:`MAX_WHOLE`, more raising ValueError)."""
-    import stat
-
-    import pydicom
+    import pydicom  # with the DICOM readers
 
     if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block the read
         raise ValueError("not a regular file (FIFO, device or socket)")
