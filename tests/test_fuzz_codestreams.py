@@ -75,3 +75,41 @@ def test_corrupt_deflate_stream_is_one_skip_reason(series, tmp_path):
     f.write_bytes(bytes(raw))
     vol = load(d)
     assert vol.shape[0] == 16 and any(a.kind == "slices" for a in vol.assumptions)
+
+
+def _jpeg_ls_copy(series: Path, out: Path, cut=None) -> Path:
+    pytest.importorskip("jpeg_ls", reason="JPEG-LS needs pyjpegls (ctui[codecs])")
+    from pydicom.encaps import encapsulate, generate_frames
+    from pydicom.uid import JPEGLSLossless
+
+    out.mkdir()
+    for k, f in enumerate(sorted(series.glob("*.dcm"))):
+        ds = pydicom.dcmread(f)
+        ds.compress(JPEGLSLossless)
+        if cut is not None and k in cut:
+            fr = next(generate_frames(ds.PixelData, number_of_frames=1))
+            ds.PixelData = encapsulate([cut[k](fr)])
+        ds.save_as(out / f.name, enforce_file_format=True)
+    return out
+
+
+def test_jpeg_ls_truncated_frames_are_refused_before_charls(series, tmp_path):
+    """Truncated JPEG-LS frames cost CharLS 5-13 s each to fail (2 frames: 10.1 s); they are
+    refused by their markers (no EOI, another size in SOF-55) before decoding; the intact
+    frames decode to the uncompressed twin's voxels."""
+    from ctui.engine.io.series import load
+
+    ok = load(_jpeg_ls_copy(series, tmp_path / "ok"))
+    np.testing.assert_array_equal(ok.data, load(series).data)
+
+    def other_size(fr: bytes) -> bytes:
+        i = fr.find(b"\xff\xf7")
+        return fr[:i + 5] + (47).to_bytes(2, "big") + fr[i + 7:]
+
+    cut = {3: lambda fr: fr[: len(fr) // 2], 4: lambda fr: fr[:-40], 9: other_size}
+    vol = load(_jpeg_ls_copy(series, tmp_path / "cut", cut))
+    reasons = {d["file"]: d["reason"] for d in vol.skipped}
+    assert "no end-of-image marker" in reasons["slice003.dcm"] and "no end-of-image marker" in reasons["slice004.dcm"]
+    assert "47x48 under a 48x48 header" in reasons["slice009.dcm"]
+    a = next(a for a in vol.assumptions if a.kind == "slices")
+    assert (a.count, a.total) == (3, 16)
