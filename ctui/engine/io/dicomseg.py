@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import os
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +42,7 @@ from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.dicomrefs import require_references
+from ctui.engine.io.dicomrefs import require_planes, require_references, write_fault
 from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
@@ -256,6 +257,7 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     source image: with highdicom.
     """
     require_references(sources, what="DICOM-SEG", path=path)  # never invents the UIDs it points at
+    require_planes(sources, path)  # nor writes geometry no reader accepts
     lab = np.asarray(labels)
     masks = masks or {}
     objs = _objects_in(lab, objects, masks)
@@ -303,8 +305,11 @@ def _save(seg: Any, path: str | os.PathLike, keep_identifiers: bool, progress: P
     blank_identifiers(seg, keep=keep_identifiers)
     report(progress, 0.9, 1.0, "DICOM-SEG: writing")
     p = Path(path)
-    with atomic_path(p) as tmp:
-        seg.save_as(str(tmp), enforce_file_format=True)
+    try:
+        with atomic_path(p) as tmp:
+            seg.save_as(str(tmp), enforce_file_format=True)
+    except (ValueError, TypeError, OverflowError, KeyError, struct.error) as exc:  # a source value pydicom cannot encode
+        raise CtuiError(f"cannot write the DICOM-SEG: {write_fault(exc)}", path=p) from None
     report(progress, 1.0, 1.0, "DICOM-SEG written")
     return p
 

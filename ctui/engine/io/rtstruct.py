@@ -48,7 +48,7 @@ from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.dicomrefs import require_references
+from ctui.engine.io.dicomrefs import require_planes, require_references, write_fault
 from ctui.engine.io.dicomseg import (
     RTSTRUCT_SOP_CLASS,
     TYPE2_IDENTIFIERS,
@@ -260,6 +260,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
         raise CtuiError(f"RTSTRUCT needs one source image per slice ({len(sources)} images, {lab.shape[0]} slices); "
                         "a multi-frame source is not supported for RTSTRUCT: export DICOM-SEG")
     require_references(sources, what="RTSTRUCT")  # never invents a UID for the images it points at
+    require_planes(sources, None)  # nor writes geometry no reader accepts
     src = sources[0]
     ds = pydicom.Dataset()
     ds.file_meta = FileMetaDataset()
@@ -319,8 +320,11 @@ def write_rtstruct(path: str | os.PathLike, labels: np.ndarray, geometry: Geomet
     ds = build_rtstruct(labels, geometry, sources, objects=objects, keep_identifiers=keep_identifiers, masks=masks,
                         progress=progress)
     p = Path(path)
-    with atomic_write(p, "wb") as fh:
-        pydicom.dcmwrite(fh, ds, enforce_file_format=True)
+    try:
+        with atomic_write(p, "wb") as fh:
+            pydicom.dcmwrite(fh, ds, enforce_file_format=True)
+    except (ValueError, TypeError, OverflowError, KeyError, struct.error) as exc:  # a source value pydicom cannot encode
+        raise CtuiError(f"cannot write the RTSTRUCT: {write_fault(exc)}", path=p) from None
     report(progress, 1.0, 1.0, "RTSTRUCT written")
     return p
 

@@ -344,17 +344,21 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     picks = sorted({zsel[0], zsel[len(zsel) // 2], zsel[-1]})
     check_memory(len(picks) * ny * nx * prep.dtype.itemsize, shape=(len(picks), ny, nx), path=path,
                  what=f"{len(picks)} sample slices of {ny}x{nx}")
-    sample = np.empty((len(picks), ny, nx), prep.dtype)
+    # int16 is the optimistic guess (load_series decodes again into int32 when a value does not
+    # fit): the sample is decoded into int32 so that unsigned CT above 33791 HU is not wrapped
+    sdtype = np.dtype(np.int32) if prep.optimistic and prep.dtype.itemsize < 4 else prep.dtype
+    sample = np.empty((len(picks), ny, nx), sdtype)
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
     # the same error mapping as load_series (run_parallel's _safe): undecodable pixels skip the sample
     why = [_safe(lambda k_, zi_: _decode_frame(prep.frames[zi_], sample[k_], plan.y, plan.x, full_plane, False, [], k_),
                  k, zi) for k, zi in enumerate(picks)]
     ok = [k for k, r in enumerate(why) if r is None]
     sampled = [picks[k] for k in ok]
-    sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)  # for the window only; no value range
+    sample = sample[ok] if ok else np.zeros((1, ny, nx), sdtype)  # for the window only; no value range
     grid = prep.grid
     shape = grid.out_shape(len(zsel))
-    placeholder = np.broadcast_to(np.zeros((), prep.dtype), shape)
+    fits = sdtype == prep.dtype or (sample.min() >= np.iinfo(prep.dtype).min and sample.max() <= np.iinfo(prep.dtype).max)
+    placeholder = np.broadcast_to(np.zeros((), prep.dtype if fits else sdtype), shape)
     vol = _volume(placeholder, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series,
                   sample=sample)
     vol.meta["headers_only"] = True

@@ -54,6 +54,9 @@ def _orientation(frames: list[Frame], warnings: list[str]) -> tuple[np.ndarray, 
                                        "assumed", "orientation"))
             iop = None
         else:
+            if abs(nr - 1) > 1e-3 or abs(nc - 1) > 1e-3:
+                warnings.append(Assumption(f"ImageOrientationPatient vectors are not unit length ({nr:.4g}, {nc:.4g}): "
+                                           "normalised", "orientation"))
             row, col = row / nr, col / nc
             if abs(float(row @ col)) > 1e-3:
                 col = col - (col @ row) * row
