@@ -279,8 +279,8 @@ def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "")
             notes.append(f"contours reach beyond the image on {info.outside_slices} slices: {lost} outside the "
                          f"series were cut off (the object measures {int(m.sum()) * voxel_ml:.1f} mL inside)")
         for why, n in sorted(roi.left_out.items()):
-            notes.append(f"{n} contours with {why} were left out" if why.startswith("non-finite") else
-                         f"{n} {why} contours (points or lines, not areas) were left out")
+            notes.append(f"{n} {why} contours (points or lines, not areas) were left out" if why.isupper() else
+                         f"{n} contours with {why} were left out")
         if notes:
             warnings.append(f"ROI {roi.name}: " + "; ".join(notes))
         return m

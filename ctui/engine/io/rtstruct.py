@@ -355,18 +355,38 @@ class RtStructContents:
     referenced_instances: list[str] = field(default_factory=list)
 
 
-def _contour_points(item: Any) -> np.ndarray:
-    """ContourData as float64 (3n,), parsed from the raw text when pydicom has not converted it yet."""
+def _contour_points(item: Any) -> np.ndarray | None:
+    """ContourData as float64 (3n,), parsed from the raw text when pydicom has not converted it
+    yet; None when a coordinate is not a number (a text coordinate: the contour is left out, said)."""
     elem = item.get_item(0x30060050) if 0x30060050 in item else None
     if elem is None:
         return np.zeros(0)
     raw = elem.value
-    if isinstance(raw, bytes):
-        try:
+    try:
+        if isinstance(raw, bytes):
             return np.array(raw.decode("ascii").replace("\\", " ").split(), dtype=np.float64)
-        except (UnicodeDecodeError, ValueError):
-            return np.zeros(0)
-    return np.asarray([float(v) for v in np.atleast_1d(item.ContourData)], dtype=np.float64)
+        return np.asarray([float(v) for v in np.atleast_1d(item.ContourData)], dtype=np.float64)
+    except (UnicodeDecodeError, ValueError, TypeError):
+        return None
+
+
+#: a contour point farther than this from the origin (mm) is not in any patient
+MAX_COORDINATE_MM = 1e6
+
+
+def _left_out_why(kind: str, data: np.ndarray | None) -> str:
+    """Why a contour is left out ("" when it is used): each reason is counted and said."""
+    if kind in ("POINT", "OPEN_PLANAR", "OPEN_NONPLANAR"):
+        return kind
+    if data is None:
+        return "coordinates that are not numbers"
+    if data.size and not np.all(np.isfinite(data)):
+        return "non-finite points"
+    if data.size and np.abs(data).max() > MAX_COORDINATE_MM:
+        return f"points beyond {MAX_COORDINATE_MM:g} mm"
+    if data.size < 3 or data.size % 3:
+        return "coordinates not in x, y, z triples"
+    return ""
 
 
 def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
@@ -399,12 +419,9 @@ def _rtstruct_contents(ds: Any) -> RtStructContents:
         for c in rc.get("ContourSequence", []):
             data = _contour_points(c)
             kind = str(c.get("ContourGeometricType", "CLOSED_PLANAR") or "CLOSED_PLANAR").strip().upper()
-            why = kind if kind in ("POINT", "OPEN_PLANAR", "OPEN_NONPLANAR") else \
-                "non-finite points" if data.size and not np.all(np.isfinite(data)) else ""
+            why = _left_out_why(kind, data)
             if why:
                 roi.left_out[why] = roi.left_out.get(why, 0) + 1
-                continue
-            if data.size < 3 or data.size % 3:
                 continue
             roi.contours.append(data.reshape(-1, 3))
             imgs = c.get("ContourImageSequence", [])
