@@ -68,10 +68,13 @@ def inflate(path: str, limit: int) -> tuple[bytes, bool]:
         raise InflateError(f"deflated data cannot be inflated ({type(exc).__name__}: {exc})"[:160]) from None
     except Exception as exc:  # noqa: BLE001 - pydicom's meta reader: any fault is a broken header
         raise InflateError(f"broken DICOM file meta ({type(exc).__name__})") from None
-    meta.TransferSyntaxUID = EXPLICIT_LE
     buf = io.BytesIO()
     buf.write(b"\0" * 128 + b"DICM")
-    write_file_meta_info(buf, meta, enforce_standard=False)
+    try:
+        meta.TransferSyntaxUID = EXPLICIT_LE
+        write_file_meta_info(buf, meta, enforce_standard=False)
+    except Exception as exc:  # noqa: BLE001 - a mutated file meta pydicom cannot write back
+        raise InflateError(f"broken DICOM file meta ({type(exc).__name__})") from None
     buf.write(out)
     return buf.getvalue(), more
 
