@@ -201,3 +201,19 @@ def test_undecodable_file_name_bytes_are_escaped():
 
     name = b"ser\x9b2J\x1b]0;x\x07".decode("utf-8", "surrogateescape")
     assert printable(name) == "ser\\x9b2J\\x1b]0;x\\x07"
+
+
+def test_seg_frame_pointing_at_a_missing_segment_is_said(tmp_path):
+    """A frame of the dcmqi liver SEG re-pointed at segment 9 (absent) was left out without a word."""
+    import pydicom
+
+    from conftest import shared
+    from ctui.engine.io.imports import read_label_file
+
+    src = shared("dcmqi_seg") / "liver.dcm"
+    ds = pydicom.dcmread(src)
+    ds.PerFrameFunctionalGroupsSequence[1].SegmentIdentificationSequence[0].ReferencedSegmentNumber = 9
+    ds.save_as(tmp_path / "liver9.dcm")
+    whole, cut = read_label_file(src), read_label_file(tmp_path / "liver9.dcm")
+    assert whole.warnings == [] and cut.labels.sum() < whole.labels.sum()
+    assert cut.warnings == ["1 frames point at a segment the file does not describe: left out"]

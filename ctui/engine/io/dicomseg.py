@@ -375,6 +375,7 @@ class SegContents:
     referenced_series: list[str] = field(default_factory=list)
     referenced_instances: list[str] = field(default_factory=list)
     number_of_frames: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     def mask(self, k: int) -> np.ndarray:
         """Segment ``k`` (index into ``segments``) as bool (z, y, x) on ``geometry``."""
@@ -426,6 +427,17 @@ def _crop(mask: np.ndarray) -> tuple[tuple[slice, slice, slice] | None, np.ndarr
                 (np.flatnonzero(mask.any(axis=(1, 2))), np.flatnonzero(mask.any(axis=(0, 2))),
                  np.flatnonzero(mask.any(axis=(0, 1)))))
     return box, mask[box].copy()  # type: ignore[return-value]
+
+
+def _orphan_frames(seg: Any, numbers: set[int]) -> list[str]:
+    """A warning when frames point at a segment the SEG does not describe: they are left out
+    (they were, without a word)."""
+    bad = 0
+    for fg in seg.get("PerFrameFunctionalGroupsSequence", None) or []:
+        sis = fg.get("SegmentIdentificationSequence")
+        if sis and int(sis[0].get("ReferencedSegmentNumber", 0) or 0) not in numbers:
+            bad += 1
+    return [f"{bad} frames point at a segment the file does not describe: left out"] if bad else []
 
 
 def _check_frames(p: Path) -> None:
@@ -497,6 +509,7 @@ def read_seg(path: str | os.PathLike) -> SegContents:
             out.segments.append(SegSegment(number=n, label=str(d.get("SegmentLabel", "")), color=_rgb(d),
                                            algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
         refs = seg.get_source_image_uids()
+        out.warnings += _orphan_frames(seg, set(numbers))
     except CtuiError:
         raise
     except MemoryError:

@@ -248,7 +248,7 @@ def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
 
     labels, objects, overlap, warnings = assemble(mask_of, [s.number for s in c.segments],
                                                   [s.label for s in c.segments], [s.color for s in c.segments])
-    return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, warnings, str(p))
+    return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, c.warnings + warnings, str(p))
 
 
 def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "") -> ImportedLabels:
