@@ -36,10 +36,12 @@ def main() -> int:
     ap.add_argument("--out", default="/tmp/ctui-fuzz")
     ap.add_argument("--seed", type=int, default=1, help="random seed of the mutations (CI uses 0)")
     ap.add_argument("--report-every", type=int, default=250)
-    ap.add_argument("--families", choices=("all", "only", "none"), default="all",
-                    help="issue 26's hostile families (tests/fuzz_cli_families.py): with the other seeds, alone, or not")
+    ap.add_argument("--families", choices=("all", "only", "none", "four"), default="all",
+                    help="issue 26's and 41's hostile families (tests/fuzz_cli_families*.py): with the other seeds, "
+                    "alone, or not; four: issue 41's alone (deflate, JPEG-LS, enhanced geometry, FIFO sources, "
+                    "C1 names, resource limits, temp races)")
     a = ap.parse_args()
-    os.environ["CTUI_FUZZ_FAMILIES"] = {"all": "1", "only": "only", "none": "0"}[a.families]
+    os.environ["CTUI_FUZZ_FAMILIES"] = {"all": "1", "only": "only", "none": "0", "four": "four"}[a.families]
     from fuzz_cli import FINDINGS, campaign
 
     res = campaign(a.cases, Path(a.out), seed_value=a.seed, report_every=a.report_every,

@@ -119,6 +119,9 @@ def error_line(exc: BaseException) -> tuple[str, int] | None:
         return "interrupted", 130
     if isinstance(exc, MemoryError):
         return "not enough memory for this input (MemoryError); try --crop or --downsample", 2
+    if isinstance(exc, ImportError) and ".so" in str(exc):  # a library that cannot be mapped (ulimit -v, -n)
+        return (f"cannot load a library ({' '.join(str(exc).split())[:120]}): the address-space or open-file "
+                "limit (ulimit -v / -n) is too low for this command"), 2
     if isinstance(exc, OSError):  # an input or output the command did not wrap: still one line naming the file
         where = f"{exc.filename}: " if exc.filename else ""
         return " ".join(f"{where}{exc.strerror or exc}".split()), 2

@@ -335,6 +335,14 @@ def layout_specials(case_dir: Path, specials: dict[str, str]) -> None:
             p.symlink_to(case_dir / f"target-{name}")
         elif what == "dangling-link":
             p.symlink_to(case_dir / "nowhere" / "x")
+        elif what == "user-file":  # a user's file named like a temp: must survive (issue 41)
+            p.write_bytes(b"mine")
+        elif what == "user-link":
+            (case_dir / "victim").write_bytes(b"precious")
+            p.symlink_to(case_dir / "victim")
+        elif what == "dead-temp":
+            p.write_bytes(b"left by a killed writer")
+            os.utime(p, (1, 1))
 
 
 def specials_intact(case_dir: Path, specials: dict[str, str]) -> str | None:
@@ -345,10 +353,18 @@ def specials_intact(case_dir: Path, specials: dict[str, str]) -> str | None:
         return "/dev/null is no longer a character device"
     for name, what in specials.items():
         p = case_dir / name
+        if what == "dead-temp":  # ctui's own dead temp: removing it is right
+            continue
         try:
             st = os.lstat(p)
         except OSError:
             return f"{name} ({what}) was removed"
+        if what == "user-file":
+            if p.read_bytes() != b"mine":
+                return f"{name}: the user's file was changed"
+            continue
+        if what == "user-link" and (case_dir / "victim").read_bytes() != b"precious":
+            return f"{name}: the symlink's target was overwritten"
         if what == "fifo" and not stat.S_ISFIFO(st.st_mode):
             return f"{name}: the FIFO was replaced by a regular file"
         if what != "fifo" and not stat.S_ISLNK(st.st_mode):
@@ -356,7 +372,7 @@ def specials_intact(case_dir: Path, specials: dict[str, str]) -> str | None:
     return None
 
 
-_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\udc80-\udc9f]")  # + raw C1 bytes
 
 
 def control_chars(text: str) -> str | None:

@@ -37,6 +37,21 @@ def test_fuzz_commands(tmp_path):
     assert summary["counts"]["ok"] + summary["counts"]["error"] == n, summary["findings"][:8]
 
 
+def test_fuzz_round_four_families(tmp_path):
+    """Issue 41's families alone (deflate bombs, JPEG-LS frames, enhanced geometry, FIFO sources,
+    C1 folder names, resource limits, closed streams, temp races): every seed once unmutated,
+    then mutated cases; no finding."""
+    n = int(os.environ.get("CTUI_FUZZ_FOUR_CASES", "60"))
+    r = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / "fuzz_cli.py"), "--cases", str(n),
+                        "--out", str(tmp_path), "--seed", "3"],
+                       capture_output=True, text=True, cwd=ROOT, env={**_script_env(), "CTUI_FUZZ_FAMILIES": "four",
+                                                                       "CTUI_FUZZ_WALL_S": "60"}, timeout=1800)
+    assert r.returncode == 0, r.stderr[-3000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["cases"] == n and len(summary["seeds"]) >= 15
+    assert summary["counts"]["ok"] + summary["counts"]["error"] == n, summary["findings"][:8]
+
+
 def test_oracle_catches_wrong_results(tmp_path):
     """The oracle itself: a shape that contradicts the header, NaN spacing, negative volume."""
     seed = Seed("nrrd", "nrrd", "m.nrrd", {}, ["info", "{dir}/m.nrrd", "--json"])

@@ -112,3 +112,23 @@ def test_frame_of_reference_mismatch_is_said(base):
     assert any("Frame of Reference mismatch" in n and "1.2.3.4.5" in n for n in opened.notes), opened.notes
     same = open_input(base["series"], labels=base["rt"])
     assert not any("Frame of Reference" in n for n in same.notes)
+
+
+@pytest.mark.parametrize("value, said", [("abc", "coordinates that are not numbers"),
+                                         ("1e308", "points beyond 1e+06 mm")])
+def test_text_or_huge_coordinate_drops_the_contour_with_a_warning(base, value, said):
+    """A text coordinate and a 1e308 point were dropped (or clipped) without a word (issue 41).
+    The coordinate is written into the file's bytes (pydicom refuses to build such a DS)."""
+    ds = pydicom.dcmread(base["rt"])
+    text = "\\".join(str(v) for v in _box_contours(ds)[0].ContourData).encode()
+    vals = text.split(b"\\")
+    k = next(i for i, v in enumerate(vals) if len(v) >= len(value))  # same element length: the file stays valid
+    vals[k] = value.encode().ljust(len(vals[k]))
+    new = b"\\".join(vals)
+    raw = base["rt"].read_bytes()
+    assert raw.count(text) == 1 and len(new) == len(text)
+    path = base["root"] / f"bad-{value}.dcm"
+    path.write_bytes(raw.replace(text, new))
+    imp = read_label_file(path, grid=base["volume"])
+    assert any("ROI box" in w and said in w for w in imp.warnings), imp.warnings
+    assert not imp.mask(1)[1].any() and imp.mask(1)[2].sum() == 144

@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         res = mesh_objects(src, objects=args.object, method=args.method, iso=args.iso, terraced=args.terraced,
                            tiling=args.tiling, smooth=args.smooth, decimate=args.decimate, spacing=spacing,
                            progress=progress, **load)
+    check_output(out, inputs=[res.source_series], label="--out")  # not into a project's series folder (as export)
     save_mesh(out, res.mesh, ascii=args.ascii)
     rep = res.to_dict()
     if args.json:

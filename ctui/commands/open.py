@@ -33,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if sys.__stdin__ is None or sys.stdin is None or sys.__stdout__ is None:  # Textual reads keys from stdin
+        raise CtuiError("the TUI needs a terminal: standard input or output is closed (run it from a terminal, "
+                        "or use the commands: ctui info/segment/mesh/measure/render/export)")
     if sys.stderr is not None and sys.stderr.isatty():  # on screen at once, before the heavy imports
         sys.stderr.write(f"ctui: opening {args.path or 'the bundled sample series'} ...\n")
         sys.stderr.flush()

@@ -367,8 +367,10 @@ def run(args: argparse.Namespace) -> int:
     objs = objects_report(seg, volume, results)
     if args.json:
         print(json.dumps({"path": args.path, "shape_zyx": list(volume.shape), "spacing_zyx_mm": list(volume.spacing),
-                          "pipeline": pipeline.to_dict(), "objects": objs, "written": written}, indent=1))
+                          "pipeline": pipeline.to_dict(), "objects": objs, "written": written,
+                          "assumptions": [a.to_dict() for a in volume.assumptions]}, indent=1))
     else:
+        print(*(f"note: assumed ({a.kind}): {a}" for a in volume.assumptions), sep="\n", end="\n" * bool(volume.assumptions))
         for o in objs:
             sl = "-" if o["slices"] is None else f"{o['slices'][0]}..{o['slices'][1]}"
             print(f"object {o['id']}: {o['voxels']} voxels, {o['volume_ml']:.3f} ml, slices {sl} (numbered from 0)")

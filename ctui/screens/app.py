@@ -247,7 +247,7 @@ class CtuiApp(App):
         from ctui.screens.workspace import WorkspaceScreen
 
         self.session = session
-        for w in session.volume.warnings[:3] if recovery else []:
+        for w in sorted(session.volume.warnings, key=lambda w: w not in session.volume.assumptions)[:3] if recovery else []:
             self.notify(w, title="Series", severity="warning", timeout=6)
         # sidecar files (the sample's truth.json, notes, tables) are not images anyone expected
         # to load: listed by `ctui info`, not announced

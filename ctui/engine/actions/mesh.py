@@ -44,6 +44,7 @@ class MeshResult:
     objects: list[int] = field(default_factory=list)
     iso: float | None = None
     notes: list[str] = field(default_factory=list)
+    source_series: str = ""  # a project's series folder: never an output's home
 
     @property
     def report(self) -> dict:
@@ -171,7 +172,8 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
     if method not in defaults.MESH_METHODS:
         raise CtuiError(f"unknown surface method {method!r} ({' or '.join(defaults.MESH_METHODS)})", option="method")
     res = MeshResult({}, Mesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)), kind, method,
-                     notes=list(opened.notes))
+                     notes=list(opened.notes),
+                     source_series=str(opened.project.source_path or "") if opened.project is not None else "")
     if kind == "mric":
         if method != "contours":
             raise CtuiError("an MRIC file holds contours only: mesh it with the contours method", path=opened.path,
@@ -200,7 +202,7 @@ def mesh_objects(source: str | os.PathLike | Opened, *, objects: int | Sequence[
     else:
         raise CtuiError(f"cannot mesh a {kind} file", path=opened.path)
     parts = [res.meshes[k] for k in sorted(res.meshes)]
-    for part in parts:  # e.g. "greedy tiling: the minimum-area kernel is being compiled (first use)"
+    for part in parts:  # a mesh-level note
         note = (part.meta or {}).get("note")
         if note and note not in res.notes:
             res.notes.append(str(note))

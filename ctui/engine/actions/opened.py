@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions import defaults
+from ctui.engine.core.assumptions import note_of
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
@@ -159,7 +160,14 @@ def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series:
         raise ValueError(f"unknown input kind {kind!r}")
     if spacing is not None:
         load_options["spacing"] = spacing
-    return Opened("series", p, volume=load(p, **load_options))
+    volume = load(p, **load_options)
+    return Opened("series", p, volume=volume, notes=assumed(volume))
+
+
+def assumed(volume: Volume | None) -> list[str]:
+    """One note per thing the loader assumed in place of the file (spacing, slices,
+    orientation, values: ``Volume.assumptions``), for every command's report."""
+    return [note_of(a) for a in volume.assumptions] if volume is not None else []
 
 
 def series_available(project: Project) -> bool:
@@ -199,6 +207,7 @@ def open_project(path: str, *, with_series: bool | None = None, require_labels: 
     need = with_series or (with_series is None and project.geometry is None)
     if need and series_available(project):
         out.volume = load_source(project, path)
+        out.notes += assumed(out.volume)
         if out.geometry is None:
             out.geometry = Geometry.of(out.volume)
     elif with_series:
@@ -215,6 +224,9 @@ def open_project(path: str, *, with_series: bool | None = None, require_labels: 
                             path=path, option="spacing")
     elif not series_available(project):
         out.notes.append(f"source series {project.source_path or '(none)'} not found: geometry from the project")
+    if out.volume is None:  # what the loader assumed when the project was made, as recorded
+        out.notes += [f"assumed ({a.get('kind')}): {a.get('text')}" for a in (project.meta or {}).get("assumptions") or []
+                      if isinstance(a, dict)]
     return out
 
 
@@ -244,7 +256,7 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
                       objects=imp.objects, window=tuple(volume.window) if volume.window else None)
     project.set_source(volume)
     return Opened("project", lp, volume=volume, labels=imp.labels, geometry=Geometry.of(volume), project=project,
-                  notes=list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)
+                  notes=assumed(volume) + list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)
 
 
 def _frame_of_reference(series: str, volume: Volume, labels: str) -> str:

@@ -162,6 +162,10 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
         except ValueError:
             raise CtuiError(f"slice plane {slice_plane}: the index must be a whole number",
                             option="slice_plane") from None
+        n = volume.shape[{"z": 0, "axial": 0, "y": 1, "coronal": 1}.get(ax.lower(), 2)]
+        if index is not None and not 0 <= index < n:  # was clamped to the last slice in silence
+            raise CtuiError(f"slice plane {slice_plane}: the index is outside the series (0..{n - 1} along {ax})",
+                            option="slice_plane")
         o.slice_plane = SlicePlane(axis=ax.lower(), index=index)
         if kind == "series" and mode in VOLUME_MODES:
             o.slice_plane = None

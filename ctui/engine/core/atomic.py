@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import stat
 import tempfile
 import time
@@ -82,16 +83,18 @@ def _lock(fd: int) -> bool:
 def clean_stale_temps(path: str | os.PathLike, *, min_age_s: float = 0.2) -> int:
     """Remove temporary files left beside ``path`` by writers that died mid-save.
 
-    A temp file ``.NAME.*.tmp*`` is stale when no process holds its lock (the lock
-    dies with its process) and it is older than ``min_age_s`` (which covers the instant
-    between another writer creating and locking it). Returns how many were removed.
+    A temp file is one of :func:`atomic_path`'s own names, exactly: ``.NAME.`` + mkstemp's 8
+    random characters + ``.tmp`` + an extension (a user's ``.out.stl.keep.tmp`` is not one:
+    it was deleted when ``out.stl`` was written). It is stale when no process holds its lock
+    (the lock dies with its process) and it is older than ``min_age_s`` (which covers the
+    instant between another writer creating and locking it). Returns how many were removed.
     """
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
-    prefix = f".{target.name}."
+    own = re.compile(re.escape(f".{target.name}.") + r"[a-z0-9_]{8}\.tmp(\.[A-Za-z0-9]{1,8}){0,3}")
     removed = 0
     try:
-        names = [n for n in os.listdir(folder) if n.startswith(prefix) and ".tmp" in n[len(prefix):]]
+        names = [n for n in os.listdir(folder) if own.fullmatch(n)]
     except OSError:
         return 0
     now = time.time()
@@ -174,8 +177,8 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     """
     target = regular_target(path)
     folder = target.parent if str(target.parent) else Path(".")
-    if suffix is None:
-        suffix = "".join(target.suffixes) or ""
+    if suffix is None:  # (".nii.gz" alone: Path takes ".nii" for a stem; "x.nii.gz"'s suffixes are meant)
+        suffix = "".join(Path("x" + target.name).suffixes) or ""
     clean_stale_temps(target)
     mode = target_mode(target)
     try:

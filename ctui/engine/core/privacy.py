@@ -26,6 +26,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from ctui.engine.core.assumptions import Assumption
+
 #: DICOM keywords (PS3.15 basic profile subset) that identify a patient, an
 #: operator or an institution. Compared case-insensitively, ignoring '_' and ' '.
 IDENTIFYING_KEYWORDS: frozenset[str] = frozenset(
@@ -118,7 +120,10 @@ def scrub_text_obj(obj: Any, identifiers: Iterable[Any]) -> Any:
 
     def walk(o: Any) -> Any:
         if isinstance(o, str):
-            return pat.sub(_REPLACEMENT, o)
+            new = pat.sub(_REPLACEMENT, o)
+            if new != o and isinstance(o, Assumption):  # the typed warning stays typed
+                return Assumption(new, o.kind, o.count, o.total)
+            return new
         if isinstance(o, list):
             return [walk(v) for v in o]
         if isinstance(o, tuple):

@@ -16,13 +16,17 @@ import re
 from typing import Any
 
 # C0 (but tab/newline when allowed), DEL, C1, bidi embeddings/overrides/isolates, line/paragraph separators
-_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
-_CONTROL_KEEP_LINES = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+# + lone surrogates \udc80-\udcff: the bytes of a file name that are not UTF-8 (os.fsdecode's
+# surrogateescape), written back raw by a surrogateescape stream: a 0x9b byte is C1 CSI
+_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\udc80-\udcff]")
+_CONTROL_KEEP_LINES = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\udc80-\udcff]")
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 
 def _escape(m: re.Match) -> str:
     c = ord(m.group(0))
+    if 0xDC80 <= c <= 0xDCFF:  # an undecodable byte of a file name: shown as that byte
+        c -= 0xDC00
     return f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}"
 
 

@@ -124,6 +124,14 @@ class Volume:
         """Patient mm (..., 3) in (x, y, z) -> fractional voxel indices (..., 3) in (z, y, x)."""
         return self.geometry.mm_to_index(xyz)
 
+    @property
+    def assumptions(self) -> list:
+        """What the loader assumed in place of the file (typed
+        :class:`~ctui.engine.core.assumptions.Assumption` items of ``warnings``)."""
+        from ctui.engine.core.assumptions import assumptions  # local: a small module, kept off the import graph
+
+        return assumptions(self.warnings)
+
     def voxel_volume_mm3(self) -> float:
         """Volume of one voxel in mm^3."""
         return float(np.prod(self.spacing))
@@ -156,4 +164,5 @@ class Volume:
             "series": self.series,
             "skipped": self.skipped,
             "warnings": self.warnings,
+            "assumptions": [a.to_dict() for a in self.assumptions],
         }

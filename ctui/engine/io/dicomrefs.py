@@ -5,6 +5,7 @@ names no image a PACS or a planning system holds: the file would be orphaned).""
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -45,3 +46,79 @@ def require_references(sources: Sequence[Any], *, what: str, path: str | os.Path
 
 
 __all__ = ["missing_references", "require_references"]
+
+
+def _vector(value: Any, n: int) -> list[float] | None:
+    try:
+        vals = [float(v) for v in value]
+    except (TypeError, ValueError):
+        return None
+    return vals if len(vals) == n and all(math.isfinite(v) and abs(v) < 1e7 for v in vals) else None
+
+
+def orientation_fault(iop: Any) -> str | None:
+    """Why an ImageOrientationPatient value cannot be written into a SEG/RTSTRUCT (None: fine):
+    six finite numbers, two unit vectors (within 1e-3) at right angles (within 1e-3)."""
+    v = _vector(iop, 6)
+    if v is None:
+        return "not six finite numbers"
+    row, col = v[:3], v[3:]
+    nr, nc = math.sqrt(sum(a * a for a in row)), math.sqrt(sum(a * a for a in col))
+    if abs(nr - 1) > 1e-3 or abs(nc - 1) > 1e-3:
+        return f"its vectors are not unit length ({nr:.4g}, {nc:.4g})"
+    if abs(sum(a * b for a, b in zip(row, col))) > 1e-3:
+        return "its row and column vectors are not at right angles"
+    return None
+
+
+def plane_faults(sources: Sequence[Any]) -> list[str]:
+    """Plane geometry a SEG/RTSTRUCT copies from ``sources`` that a reader would refuse:
+    an invalid ImageOrientationPatient (zero, non-unit, non-orthogonal) or a position that is
+    not three finite numbers, per image or per frame of an enhanced multi-frame image."""
+    out: list[str] = []
+    for ds in sources:
+        name = os.path.basename(str(getattr(ds, "filename", "") or "")) or "an image"
+        planes = [(ds.get("ImageOrientationPatient"), ds.get("ImagePositionPatient"), name)]
+        if int(ds.get("NumberOfFrames", 1) or 1) > 1 and "PerFrameFunctionalGroupsSequence" in ds:
+            shared = (ds.get("SharedFunctionalGroupsSequence") or [None])[0]
+            planes = []
+            for k, fg in enumerate(ds.PerFrameFunctionalGroupsSequence):
+                po = _item(fg, "PlaneOrientationSequence") or _item(shared, "PlaneOrientationSequence")
+                pp = _item(fg, "PlanePositionSequence") or _item(shared, "PlanePositionSequence")
+                planes.append((po.get("ImageOrientationPatient") if po is not None else None,
+                               pp.get("ImagePositionPatient") if pp is not None else None, f"{name} frame {k + 1}"))
+        for iop, ipp, where in planes:
+            fault = orientation_fault(iop) if iop is not None else None
+            if fault:
+                out.append(f"{where}: ImageOrientationPatient: {fault}")
+            elif ipp is not None and _vector(ipp, 3) is None:
+                out.append(f"{where}: ImagePositionPatient is not three finite numbers")
+            if out:
+                return out
+    return out
+
+
+def _item(fg: Any, key: str) -> Any:
+    try:
+        seq = fg.get(key) if fg is not None else None
+        return seq[0] if seq else None
+    except (AttributeError, IndexError, TypeError):
+        return None
+
+
+def require_planes(sources: Sequence[Any], path: Any) -> None:
+    """CtuiError (one line) when :func:`plane_faults` finds one: the file would be written with
+    geometry no reader accepts (it was, exit 0, and could not be read back)."""
+    faults = plane_faults(sources)
+    if faults:
+        raise CtuiError(f"the series' plane geometry cannot be written into a DICOM-SEG/RTSTRUCT ({faults[0]}); "
+                        "export a label map (nifti, nrrd) instead", path=path)
+
+
+def write_fault(exc: BaseException) -> str:
+    """pydicom's write error in one line: it appends the inner traceback's text to its message
+    ("With tag (0010,0010) got exception: ...\nTraceback (most recent call last): ..."),
+    which reached the CLI's one-line message."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    first = lines[0] if lines else type(exc).__name__
+    return " ".join(first.split())[:200]

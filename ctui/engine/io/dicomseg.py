@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import os
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +42,8 @@ from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.dicomrefs import require_references
+from ctui.engine.io.dicomrefs import require_planes, require_references, write_fault
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
 RTSTRUCT_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.481.3"
@@ -83,7 +85,7 @@ def _read_headers(path: Path) -> list[Any]:
         if f.suffix.lower() in (".json", ".txt", ".md", ".png", ".jpg", ".nrrd", ".nii", ".gz", ".csv"):
             continue
         try:
-            ds = pydicom.dcmread(f, stop_before_pixels=True)
+            ds = bounded_dcmread(f, stop_before_pixels=True)  # a deflated file inflated within a bound
         except (InvalidDicomError, OSError, ValueError, EOFError, TypeError, AttributeError, KeyError):
             continue
         if "SOPInstanceUID" not in ds or str(ds.get("SOPClassUID", "")) in _NOT_IMAGES:
@@ -255,6 +257,7 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
     source image: with highdicom.
     """
     require_references(sources, what="DICOM-SEG", path=path)  # never invents the UIDs it points at
+    require_planes(sources, path)  # nor writes geometry no reader accepts
     lab = np.asarray(labels)
     masks = masks or {}
     objs = _objects_in(lab, objects, masks)
@@ -302,8 +305,11 @@ def _save(seg: Any, path: str | os.PathLike, keep_identifiers: bool, progress: P
     blank_identifiers(seg, keep=keep_identifiers)
     report(progress, 0.9, 1.0, "DICOM-SEG: writing")
     p = Path(path)
-    with atomic_path(p) as tmp:
-        seg.save_as(str(tmp), enforce_file_format=True)
+    try:
+        with atomic_path(p) as tmp:
+            seg.save_as(str(tmp), enforce_file_format=True)
+    except (ValueError, TypeError, OverflowError, KeyError, struct.error) as exc:  # a source value pydicom cannot encode
+        raise CtuiError(f"cannot write the DICOM-SEG: {write_fault(exc)}", path=p) from None
     report(progress, 1.0, 1.0, "DICOM-SEG written")
     return p
 
@@ -369,6 +375,7 @@ class SegContents:
     referenced_series: list[str] = field(default_factory=list)
     referenced_instances: list[str] = field(default_factory=list)
     number_of_frames: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     def mask(self, k: int) -> np.ndarray:
         """Segment ``k`` (index into ``segments``) as bool (z, y, x) on ``geometry``."""
@@ -422,14 +429,23 @@ def _crop(mask: np.ndarray) -> tuple[tuple[slice, slice, slice] | None, np.ndarr
     return box, mask[box].copy()  # type: ignore[return-value]
 
 
+def _orphan_frames(seg: Any, numbers: set[int]) -> list[str]:
+    """A warning when frames point at a segment the SEG does not describe: they are left out
+    (they were, without a word)."""
+    bad = 0
+    for fg in seg.get("PerFrameFunctionalGroupsSequence", None) or []:
+        sis = fg.get("SegmentIdentificationSequence")
+        if sis and int(sis[0].get("ReferencedSegmentNumber", 0) or 0) not in numbers:
+            bad += 1
+    return [f"{bad} frames point at a segment the file does not describe: left out"] if bad else []
+
+
 def _check_frames(p: Path) -> None:
     """Refuse a SEG whose NumberOfFrames its pixel data or per-frame groups contradict,
     before highdicom builds per-frame tables for it (NumberOfFrames 2**31-1 in a 130 KB
     file: > 6 GB), and check one frame stack against the memory available."""
-    import pydicom
-
     try:
-        ds = pydicom.dcmread(str(p), defer_size=1024, force=True)
+        ds = bounded_dcmread(str(p), defer_size=1024, force=True)
         nf = int(ds.get("NumberOfFrames", 1) or 1)
         rows, cols = int(ds.get("Rows", 0) or 0), int(ds.get("Columns", 0) or 0)
         bits = int(ds.get("BitsAllocated", 1) or 1)
@@ -493,6 +509,7 @@ def read_seg(path: str | os.PathLike) -> SegContents:
             out.segments.append(SegSegment(number=n, label=str(d.get("SegmentLabel", "")), color=_rgb(d),
                                            algorithm_type=str(d.get("SegmentAlgorithmType", ""))))
         refs = seg.get_source_image_uids()
+        out.warnings += _orphan_frames(seg, set(numbers))
     except CtuiError:
         raise
     except MemoryError:

@@ -37,6 +37,7 @@ from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.io.labels import load_labels
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd")
@@ -86,10 +87,9 @@ def label_kind(path: str | os.PathLike) -> str:
         return "nrrd"
     if p.is_dir():
         raise FormatError("is a folder: give the label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)", path=p)
-    import pydicom
 
     try:
-        ds = pydicom.dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
+        ds = bounded_dcmread(str(p), stop_before_pixels=True, specific_tags=["SOPClassUID", "Modality"])
     except Exception as exc:  # noqa: BLE001 - pydicom raises many types (struct.error...) on foreign/broken files
         raise FormatError(f"not a label file: expected DICOM-SEG, RTSTRUCT, .nii, .nii.gz or .nrrd "
                           f"({' '.join(str(exc).split())[:120]})", path=p) from None
@@ -138,11 +138,14 @@ def _refuse(path: Any, src: Geometry, dst: Geometry, why: str) -> CtuiError:
                      "series it was drawn on", path=path, option="series")
 
 
-def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02) -> np.ndarray:
+def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = None, tol: float = 0.02,
+                  same_shape: bool = False) -> np.ndarray:
     """Put ``arr`` ((..., z, y, x) on ``src``) onto the grid ``dst``: returns (..., *dst.shape).
 
     Accepted: same voxel size and axes up to order and flips, whole-voxel offsets, and
-    nothing non-zero outside ``dst``. Raises CtuiError (with :func:`describe_mismatch`) otherwise.
+    nothing non-zero outside ``dst``; ``same_shape`` (a whole label map, not a SEG's
+    frames): the grid's size must be the series' too (axes reordered). Raises CtuiError
+    (with :func:`describe_mismatch`) otherwise.
     """
     m = np.linalg.inv(dst.affine) @ src.affine  # src (x, y, z, 1) -> dst (x, y, z, 1)
     r = np.round(m[:3, :3])
@@ -165,6 +168,9 @@ def place_on_grid(arr: np.ndarray, src: Geometry, dst: Geometry, *, path: Any = 
             starts.append(int(tz[i]) - (n - 1))
         else:
             starts.append(int(tz[i]))
+    if same_shape and tuple(out_arr.shape[lead:]) != tuple(dst.shape):
+        raise _refuse(path, src, dst, f"its shape {tuple(out_arr.shape[lead:])} (z, y, x) is not the series' "
+                      f"{tuple(dst.shape)}")
     out = np.zeros(arr.shape[:lead] + tuple(dst.shape), dtype=arr.dtype)
     src_sl, dst_sl = [], []
     for i in range(3):
@@ -242,7 +248,7 @@ def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
 
     labels, objects, overlap, warnings = assemble(mask_of, [s.number for s in c.segments],
                                                   [s.label for s in c.segments], [s.color for s in c.segments])
-    return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, warnings, str(p))
+    return ImportedLabels(labels, objects, geom, "dicom-seg", overlap, c.warnings + warnings, str(p))
 
 
 def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "") -> ImportedLabels:
@@ -273,8 +279,8 @@ def _from_rtstruct(p: Path, grid: Geometry | None, frame_of_reference: str = "")
             notes.append(f"contours reach beyond the image on {info.outside_slices} slices: {lost} outside the "
                          f"series were cut off (the object measures {int(m.sum()) * voxel_ml:.1f} mL inside)")
         for why, n in sorted(roi.left_out.items()):
-            notes.append(f"{n} contours with {why} were left out" if why.startswith("non-finite") else
-                         f"{n} {why} contours (points or lines, not areas) were left out")
+            notes.append(f"{n} {why} contours (points or lines, not areas) were left out" if why.isupper() else
+                         f"{n} contours with {why} were left out")
         if notes:
             warnings.append(f"ROI {roi.name}: " + "; ".join(notes))
         return m
@@ -303,7 +309,7 @@ def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
     lab, vol = load_labels(p)
     geom = Geometry.of(vol)
     if grid is not None:
-        lab = place_on_grid(lab, geom, grid, path=p)
+        lab = place_on_grid(lab, geom, grid, path=p, same_shape=True)
         geom = grid
     ids = [int(i) for i in np.flatnonzero(np.bincount(lab.ravel(), minlength=256)) if i != 0]
     names = _nrrd_names(p) if kind == "nrrd" else {}

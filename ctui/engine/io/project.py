@@ -140,6 +140,9 @@ class Project:
         when given: the voxels as loaded, before a drift correction); returns self."""
         for key, value in source_identity(volume, data=data).items():
             setattr(self, key, value)
+        said = [a.to_dict() for a in getattr(volume, "assumptions", [])]
+        self.meta = {**{k: v for k, v in (self.meta or {}).items() if k != "assumptions"},
+                     **({"assumptions": said} if said else {})}  # what the loader assumed, kept with the labels
         return self
 
     def __eq__(self, other: object) -> bool:

@@ -48,13 +48,14 @@ from ctui.engine.core.atomic import atomic_write
 from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.dicomrefs import require_references
+from ctui.engine.io.dicomrefs import require_planes, require_references, write_fault
 from ctui.engine.io.dicomseg import (
     RTSTRUCT_SOP_CLASS,
     TYPE2_IDENTIFIERS,
     _objects_in,
     blank_identifiers,
 )
+from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 STUDY_COMPONENT_MANAGEMENT = "1.2.840.10008.3.1.2.3.1"
 _COPIED = ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyInstanceUID", "StudyDate",
@@ -259,6 +260,7 @@ def build_rtstruct(labels: np.ndarray, geometry: Geometry, sources: Sequence[Any
         raise CtuiError(f"RTSTRUCT needs one source image per slice ({len(sources)} images, {lab.shape[0]} slices); "
                         "a multi-frame source is not supported for RTSTRUCT: export DICOM-SEG")
     require_references(sources, what="RTSTRUCT")  # never invents a UID for the images it points at
+    require_planes(sources, None)  # nor writes geometry no reader accepts
     src = sources[0]
     ds = pydicom.Dataset()
     ds.file_meta = FileMetaDataset()
@@ -318,8 +320,11 @@ def write_rtstruct(path: str | os.PathLike, labels: np.ndarray, geometry: Geomet
     ds = build_rtstruct(labels, geometry, sources, objects=objects, keep_identifiers=keep_identifiers, masks=masks,
                         progress=progress)
     p = Path(path)
-    with atomic_write(p, "wb") as fh:
-        pydicom.dcmwrite(fh, ds, enforce_file_format=True)
+    try:
+        with atomic_write(p, "wb") as fh:
+            pydicom.dcmwrite(fh, ds, enforce_file_format=True)
+    except (ValueError, TypeError, OverflowError, KeyError, struct.error) as exc:  # a source value pydicom cannot encode
+        raise CtuiError(f"cannot write the RTSTRUCT: {write_fault(exc)}", path=p) from None
     report(progress, 1.0, 1.0, "RTSTRUCT written")
     return p
 
@@ -350,27 +355,46 @@ class RtStructContents:
     referenced_instances: list[str] = field(default_factory=list)
 
 
-def _contour_points(item: Any) -> np.ndarray:
-    """ContourData as float64 (3n,), parsed from the raw text when pydicom has not converted it yet."""
+def _contour_points(item: Any) -> np.ndarray | None:
+    """ContourData as float64 (3n,), parsed from the raw text when pydicom has not converted it
+    yet; None when a coordinate is not a number (a text coordinate: the contour is left out, said)."""
     elem = item.get_item(0x30060050) if 0x30060050 in item else None
     if elem is None:
         return np.zeros(0)
     raw = elem.value
-    if isinstance(raw, bytes):
-        try:
+    try:
+        if isinstance(raw, bytes):
             return np.array(raw.decode("ascii").replace("\\", " ").split(), dtype=np.float64)
-        except (UnicodeDecodeError, ValueError):
-            return np.zeros(0)
-    return np.asarray([float(v) for v in np.atleast_1d(item.ContourData)], dtype=np.float64)
+        return np.asarray([float(v) for v in np.atleast_1d(item.ContourData)], dtype=np.float64)
+    except (UnicodeDecodeError, ValueError, TypeError):
+        return None
+
+
+#: a contour point farther than this from the origin (mm) is not in any patient
+MAX_COORDINATE_MM = 1e6
+
+
+def _left_out_why(kind: str, data: np.ndarray | None) -> str:
+    """Why a contour is left out ("" when it is used): each reason is counted and said."""
+    if kind in ("POINT", "OPEN_PLANAR", "OPEN_NONPLANAR"):
+        return kind
+    if data is None:
+        return "coordinates that are not numbers"
+    if data.size and not np.all(np.isfinite(data)):
+        return "non-finite points"
+    if data.size and np.abs(data).max() > MAX_COORDINATE_MM:
+        return f"points beyond {MAX_COORDINATE_MM:g} mm"
+    if data.size < 3 or data.size % 3:
+        return "coordinates not in x, y, z triples"
+    return ""
 
 
 def read_rtstruct(path: str | os.PathLike) -> RtStructContents:
     """ROIs and their contours (patient mm) of an RTSTRUCT file; FormatError when it is not one."""
-    import pydicom
 
     p = Path(path)
     try:
-        ds = pydicom.dcmread(str(p))
+        ds = bounded_dcmread(str(p))
     except Exception as exc:  # noqa: BLE001 - foreign files raise many types
         raise FormatError(f"not a readable DICOM file ({' '.join(str(exc).split())[:160]})", path=p) from None
     if str(ds.get("SOPClassUID", "")) != RTSTRUCT_SOP_CLASS and ds.get("Modality") != "RTSTRUCT":
@@ -395,12 +419,9 @@ def _rtstruct_contents(ds: Any) -> RtStructContents:
         for c in rc.get("ContourSequence", []):
             data = _contour_points(c)
             kind = str(c.get("ContourGeometricType", "CLOSED_PLANAR") or "CLOSED_PLANAR").strip().upper()
-            why = kind if kind in ("POINT", "OPEN_PLANAR", "OPEN_NONPLANAR") else \
-                "non-finite points" if data.size and not np.all(np.isfinite(data)) else ""
+            why = _left_out_why(kind, data)
             if why:
                 roi.left_out[why] = roi.left_out.get(why, 0) + 1
-                continue
-            if data.size < 3 or data.size % 3:
                 continue
             roi.contours.append(data.reshape(-1, 3))
             imgs = c.get("ContourImageSequence", [])

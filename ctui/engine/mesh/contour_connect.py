@@ -61,7 +61,6 @@ import numpy as np
 
 from ctui.engine.core.borders import object_borders
 from ctui.engine.core.meshdata import Mesh
-from ctui.engine.mesh import contour_tiling
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
 from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
 from ctui.engine.mesh.surface import _fix_handedness, affine_from
@@ -465,8 +464,6 @@ def connect_contours(
         _end_cap(builder, loop_group, up, half_slice_ends)
 
     _walk_slice_pairs(slices, tile, end)
-    n_points = sum(len(j[1]) + len(j[3]) for j in jobs)
-    compiled = n_points > contour_tiling.PY_TILING_MAX_POINTS or contour_tiling.kernels_ready()
     _run_tiling(jobs, builder, band=band, method=method)
     v_idx = builder.all_verts()
     v_mm = (v_idx @ aff[:3, :3].T + aff[:3, 3]) if len(v_idx) else np.zeros((0, 3))
@@ -477,9 +474,7 @@ def connect_contours(
         nonmanifold = _has_nonmanifold_edge(faces, len(v_idx))
     faces = _fix_handedness(faces, aff)
     mesh = Mesh(vertices=v_mm.astype(np.float32), faces=faces,
-                meta={"method": f"contours-{method if compiled else 'greedy'}"})
-    if not compiled and method == "dp":
-        mesh.meta["note"] = "greedy tiling: the minimum-area kernel is being compiled (first use)"
+                meta={"method": f"contours-{method}"})
     if nonmanifold:
         # a tile that reaches both sides of a bridge (a branching's zero-width seam) from
         # one vertex leaves fins (opposite twin faces: dropped, no volume) and edges

@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from ctui.engine.mesh import jit
+from ctui.engine.mesh.contour_tiling_py import tile_range_py
 
 jit.configure_cache()  # the numba cache folder, before the kernels are defined
 
@@ -224,12 +225,10 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
     npair = poff.shape[0] - 1
     ok = np.ones(npair, np.int64)
     if int(poff[-1] + qoff[-1]) <= PY_TILING_MAX_POINTS and not kernels_ready():
-        # a fresh install: greedy tiling in plain Python now (no compilation; the DP
+        # a fresh install: the same tiling in plain Python now (no compilation; the DP
         # kernel takes 5-60 s to compile), the kernels compiled in the background
         jit.compile_in_background()
-        for k in range(npair):
-            a0, a1, b0, b1 = poff[k], poff[k + 1], qoff[k], qoff[k + 1]
-            out[toff[k]:toff[k + 1]] = tile_greedy_py(P[a0:a1], Q[b0:b1], pid[a0:a1], qid[b0:b1])
+        tile_range_py(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, ok)
         return ok
     n = max(1, min(int(threads or os.cpu_count() or 1), npair // 4))
     if n == 1:
@@ -245,43 +244,12 @@ def tile_many(P, poff, pid, Q, qoff, qid, bands, use_dp, toff, out, *, threads: 
     return ok
 
 
-#: contour points up to which a fresh install tiles in plain Python rather than waiting
-#: for the compiler (plain Python: ~20 us a point; compiling: 5-60 s)
+#: contour points up to which a fresh install tiles in plain Python (the same minimum-area
+#: tiling, :mod:`ctui.engine.mesh.contour_tiling_py`) rather than waiting for the compiler;
+#: beyond it the kernel is compiled in this process (5-60 s) -- the triangles are the same
 PY_TILING_MAX_POINTS = 100_000
 
 
 def kernels_ready() -> bool:
     """Whether the compiled tiling kernel is ready (compiled or cached; ``CTUI_KERNELS``)."""
     return jit.use_compiled([_tile_range])
-
-
-def tile_greedy_py(P: np.ndarray, Q: np.ndarray, pid: np.ndarray, qid: np.ndarray) -> np.ndarray:
-    """:func:`tile_greedy` in plain Python (the same triangles), for use before it is compiled."""
-    n, m = len(P), len(Q)
-    s = int(np.argmin(((Q - P[0]) ** 2).sum(axis=1)))
-    p = P.tolist()
-    q = Q.tolist()
-    pi_, qi_ = pid.tolist(), qid.tolist()
-    out = np.empty((n + m, 3), np.int64)
-    rows = []
-    i = j = 0
-    while i < n or j < m:
-        pi, pn = i % n, (i + 1) % n
-        qj, qn = (j + s) % m, (j + 1 + s) % m
-        if j >= m:
-            adv_p = True
-        elif i < n:
-            a, b, c, d = p[pn], q[qj], p[pi], q[qn]
-            d1 = (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2
-            d2 = (c[0] - d[0]) ** 2 + (c[1] - d[1]) ** 2 + (c[2] - d[2]) ** 2
-            adv_p = d1 <= d2
-        else:
-            adv_p = False
-        if adv_p:
-            rows.append((pi_[pi], pi_[pn], qi_[qj]))
-            i += 1
-        else:
-            rows.append((pi_[pi], qi_[qn], qi_[qj]))
-            j += 1
-    out[:] = rows
-    return out

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import stat
 import subprocess
 import sys
 import tempfile
@@ -208,6 +209,27 @@ _LOCK = Path(tempfile.gettempdir()) / f"ctui-numba-warm-{os.getuid() if hasattr(
 _spawned = False
 
 
+def _take_lock() -> bool:
+    """Stamp the once-per-10-minutes lock in ``$TMPDIR``; False when it is fresh, or is not this
+    user's own regular file (a symlink planted there was followed and its target overwritten:
+    opened with O_NOFOLLOW, never through a link)."""
+    try:
+        st = os.lstat(_LOCK)
+    except FileNotFoundError:
+        st = None
+    if st is not None:
+        if not stat.S_ISREG(st.st_mode) or (hasattr(os, "getuid") and st.st_uid != os.getuid()):
+            return False
+        if time.time() - st.st_mtime < 600:
+            return False
+    fd = os.open(_LOCK, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    try:
+        os.write(fd, str(os.getpid()).encode())
+    finally:
+        os.close(fd)
+    return True
+
+
 def compile_in_background() -> bool:
     """Start ``python -m ctui.engine.mesh.warm`` detached at low priority (at most once per
     process and once per 10 minutes per user); True when started."""
@@ -216,9 +238,8 @@ def compile_in_background() -> bool:
         return False
     _spawned = True
     try:
-        if _LOCK.exists() and time.time() - _LOCK.stat().st_mtime < 600:
+        if not _take_lock():
             return False
-        _LOCK.write_text(str(os.getpid()))
         kw: dict[str, Any] = {"stdin": subprocess.DEVNULL, "stdout": subprocess.DEVNULL,
                               "stderr": subprocess.DEVNULL, "close_fds": True}
         if os.name == "posix":

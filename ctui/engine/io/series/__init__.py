@@ -38,6 +38,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption, dropped_share_error
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.volume import Volume
@@ -253,7 +254,7 @@ def _finite(vol: Volume) -> Volume:
     for z in range(d.shape[0]):
         sl = d[z]
         sl[~np.isfinite(sl)] = lo
-    vol.warnings.append(f"{bad} voxels are NaN or infinite: set to the lowest finite value {lo:g}")
+    vol.warnings.append(Assumption(f"{bad} voxels are NaN or infinite: set to the lowest finite value {lo:g}", "values"))
     return vol
 
 
@@ -349,12 +350,34 @@ def _load_dicom(files: list[Path], *, base: Path | None, path_label: Any, skippe
     loader = dicom.inspect_series if headers_only else dicom.load_series
     vol = loader(chosen, path=path_label, base=base, skipped=skipped, ids=ids, resample=resample,
                  spacing=spacing, all_series=summaries, **common)
+    unnamed = [d for d in skip2 if not d.get("series") and not d.get("object") and "not a DICOM" not in d["reason"]
+               and "empty file" not in d["reason"]] if len(ordered) == 1 else []  # broken files of the one series
+    _lost_slices(vol, [d for d in skip2 if d.get("series") == chosen.uid] + unnamed, len(chosen.frames),
+                 path_label, refuse=not headers_only)
     if len(ordered) > 1:
         idx = ordered.index(chosen)
         vol.warnings.append(f"{len(ordered)} series found; loaded [{idx}] {chosen.uid} "
                             f"({len(chosen.frames)} images); choose another with series=N")
     vol.meta["series_index"] = ordered.index(chosen)
     return vol
+
+
+def _lost_slices(vol: Volume, lost: list[dict[str, str]], n_read: int, path: Any, *, refuse: bool) -> None:
+    """Files of the loaded series that could not be read (``lost``, beside the ``n_read``
+    frames read) join the slices that could not be decoded in one "slices" assumption;
+    past :data:`~ctui.engine.core.assumptions.MAX_DROPPED_SHARE` the series is refused."""
+    if not lost:
+        return
+    prev = next((a for a in vol.assumptions if a.kind == "slices"), None)
+    count = len(lost) + (prev.count if prev else 0)
+    total = len(lost) + n_read
+    refusal = dropped_share_error(count, total)
+    if refusal and refuse:
+        raise LoadError(f"{refusal} ({lost[0]['file']}: {lost[0]['reason']})", path=path)
+    if prev is not None:
+        vol.warnings.remove(prev)
+    vol.warnings.append(Assumption(f"{count} of {total} slices could not be read and are missing "
+                                   f"({lost[0]['file']}: {lost[0]['reason']})", "slices", count, total))
 
 
 def inspect(path: str | os.PathLike | Sequence[str | os.PathLike], **options: Any) -> Volume:

@@ -13,6 +13,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption
 from ctui.engine.core import limits as _limits
 from ctui.engine.core.limits import MAX_SPACING_MM, MIN_SPACING_MM
 from ctui.engine.core.errors import CtuiError, LoadError
@@ -296,7 +297,8 @@ def orthonormal(direction: Any, *, what: str) -> tuple[np.ndarray, list[str]]:
     with np.errstate(all="ignore"):
         norms = np.sqrt((d * d).sum(axis=0))
     if not (np.all(np.isfinite(d)) and np.all(norms > 1e-9)) or abs(np.linalg.det(d / norms[None, :])) < 1e-6:
-        return np.eye(3), [f"{what} gives degenerate axis directions: axis-aligned directions used"]
+        return np.eye(3), [Assumption(f"{what} gives degenerate axis directions: axis-aligned directions used",
+                                      "orientation")]
     d = d / norms[None, :]
     if np.abs(d.T @ d - np.eye(3)).max() < 1e-3:
         return d, []
@@ -304,8 +306,8 @@ def orthonormal(direction: Any, *, what: str) -> tuple[np.ndarray, list[str]]:
     r = u @ vt
     cos = np.clip((d * r).sum(axis=0), -1.0, 1.0)
     worst = float(np.degrees(np.arccos(cos)).max())
-    return r, [f"{what} gives axes that are not at right angles (a shear): the nearest orthonormal directions "
-               f"are used (an axis moves by up to {worst:.1f} degrees)"]
+    return r, [Assumption(f"{what} gives axes that are not at right angles (a shear): the nearest orthonormal "
+                          f"directions are used (an axis moves by up to {worst:.1f} degrees)", "orientation")]
 
 
 def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
@@ -329,12 +331,13 @@ def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
     if bad and not spacing_given:
         vals = ", ".join(f"{'xyz'[a]} ({'NaN' if not np.isfinite(norms[a]) and np.isnan(norms[a]) else f'{norms[a]:g}'})"
                          for a in bad)
-        warnings.append(f"{what} gives an invalid voxel size along {vals}: 1 mm used instead; give "
-                        f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements")
+        warnings.append(Assumption(f"{what} gives an invalid voxel size along {vals}: 1 mm used instead; give "
+                                   f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements", "spacing"))
     norms = np.sqrt((m * m).sum(axis=0))
     if abs(np.linalg.det(m / norms[None, :])) < 1e-6:
         m = np.diag(norms)
-        warnings.append(f"{what} gives collinear axis directions: axis-aligned directions used")
+        warnings.append(Assumption(f"{what} gives collinear axis directions: axis-aligned directions used",
+                                   "orientation"))
     else:
         d, sheared = orthonormal(m / norms[None, :], what=what)
         m = d * norms[None, :]
@@ -347,5 +350,5 @@ def checked_axes(m: Any, origin: Any, *, what: str, spacing_given: bool = False
         o[:] = np.nan
     if not np.all(np.isfinite(o)) or np.abs(o).max() > 1e7:
         o = np.zeros(3)
-        warnings.append(f"{what} gives an invalid origin: (0, 0, 0) used")
+        warnings.append(Assumption(f"{what} gives an invalid origin: (0, 0, 0) used", "origin"))
     return m, o, warnings

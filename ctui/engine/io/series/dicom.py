@@ -55,6 +55,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption, dropped_share_error
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window
@@ -191,12 +192,13 @@ def prepare_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     warnings = list(geo["warnings"])
     odd = sorted({f.ignored_scaling for f in sorted_frames if f.ignored_scaling})
     if odd:
-        warnings.append(f"implausible header values: {odd[0]}" + (f" (and {len(odd) - 1} other kinds)" if len(odd) > 1 else ""))
+        text = f"implausible header values: {odd[0]}" + (f" (and {len(odd) - 1} other kinds)" if len(odd) > 1 else "")
+        warnings.append(Assumption(text, "spacing" if "PixelSpacing" in text else "values"))
     dy, dx = f0.pixel_spacing or (None, None)
     if dy is None:
         dy = dx = 1.0
         if not any("PixelSpacing" in w for w in warnings):
-            warnings.append("no PixelSpacing: default spacing 1 mm in-plane")
+            warnings.append(Assumption("no PixelSpacing: default spacing 1 mm in-plane", "spacing"))
     zs, ys, xs = plan.steps()
     dz_user = None
     if spacing is not None:
@@ -314,8 +316,12 @@ def load_series(
         zs, ys, xs = plan.steps()
         grid = plan_grid(prep.geo, zsel, dy=dy * ys, dx=dx * xs, ny=out.shape[1], nx=out.shape[2],
                          dz_user=prep.dz_user, resample=resample)
-        warnings.append(f"{len(bad)} slices could not be decoded and are missing"
-                        + (": the gaps are interpolated" if grid.positions is not None else " from the volume"))
+        refusal = dropped_share_error(len(bad), len(zsel) + len(bad))
+        if refusal:
+            raise LoadError(refusal + f" ({failures[0][1]})", path=path)
+        warnings.append(Assumption(f"{len(bad)} of {len(zsel) + len(bad)} slices could not be decoded and are missing"
+                                   + (": the gaps are interpolated" if grid.positions is not None else " from the volume"),
+                                   "slices", len(bad), len(zsel) + len(bad)))
 
     def check(nbytes: int, what: str) -> None:
         check_memory(nbytes, shape=(1, 1, 1), path=path, limit=memory_limit, what=what)
@@ -338,17 +344,21 @@ def inspect_series(s: Series, *, path: Any, base: Path | None, skipped: list[dic
     picks = sorted({zsel[0], zsel[len(zsel) // 2], zsel[-1]})
     check_memory(len(picks) * ny * nx * prep.dtype.itemsize, shape=(len(picks), ny, nx), path=path,
                  what=f"{len(picks)} sample slices of {ny}x{nx}")
-    sample = np.empty((len(picks), ny, nx), prep.dtype)
+    # int16 is the optimistic guess (load_series decodes again into int32 when a value does not
+    # fit): the sample is decoded into int32 so that unsigned CT above 33791 HU is not wrapped
+    sdtype = np.dtype(np.int32) if prep.optimistic and prep.dtype.itemsize < 4 else prep.dtype
+    sample = np.empty((len(picks), ny, nx), sdtype)
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
     # the same error mapping as load_series (run_parallel's _safe): undecodable pixels skip the sample
     why = [_safe(lambda k_, zi_: _decode_frame(prep.frames[zi_], sample[k_], plan.y, plan.x, full_plane, False, [], k_),
                  k, zi) for k, zi in enumerate(picks)]
     ok = [k for k, r in enumerate(why) if r is None]
     sampled = [picks[k] for k in ok]
-    sample = sample[ok] if ok else np.zeros((1, ny, nx), prep.dtype)  # for the window only; no value range
+    sample = sample[ok] if ok else np.zeros((1, ny, nx), sdtype)  # for the window only; no value range
     grid = prep.grid
     shape = grid.out_shape(len(zsel))
-    placeholder = np.broadcast_to(np.zeros((), prep.dtype), shape)
+    fits = sdtype == prep.dtype or (sample.min() >= np.iinfo(prep.dtype).min and sample.max() <= np.iinfo(prep.dtype).max)
+    placeholder = np.broadcast_to(np.zeros((), prep.dtype if fits else sdtype), shape)
     vol = _volume(placeholder, prep, grid, zsel, s=s, path=path, skipped=skipped, ids=ids, all_series=all_series,
                   sample=sample)
     vol.meta["headers_only"] = True

@@ -10,6 +10,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption
 from ctui.engine.io.series._common import natural_key, rel
 from ctui.engine.io.series.dicom_headers import Frame
 
@@ -48,22 +49,28 @@ def _orientation(frames: list[Frame], warnings: list[str]) -> tuple[np.ndarray, 
     if iop is not None:
         row, col = iop[:3], iop[3:]
         nr, nc = np.linalg.norm(row), np.linalg.norm(col)
-        if nr < 1e-6 or nc < 1e-6:
+        if not (np.isfinite(nr) and np.isfinite(nc)) or nr < 1e-6 or nc < 1e-6:
+            warnings.append(Assumption("ImageOrientationPatient has a zero or invalid vector: axial orientation "
+                                       "assumed", "orientation"))
             iop = None
         else:
+            if abs(nr - 1) > 1e-3 or abs(nc - 1) > 1e-3:
+                warnings.append(Assumption(f"ImageOrientationPatient vectors are not unit length ({nr:.4g}, {nc:.4g}): "
+                                           "normalised", "orientation"))
             row, col = row / nr, col / nc
             if abs(float(row @ col)) > 1e-3:
                 col = col - (col @ row) * row
                 nc = float(np.linalg.norm(col))
                 if nc < 1e-3:
-                    warnings.append("ImageOrientationPatient row and column vectors are parallel (invalid): "
-                                    "axial orientation assumed")
+                    warnings.append(Assumption("ImageOrientationPatient row and column vectors are parallel "
+                                               "(invalid): axial orientation assumed", "orientation"))
                     iop = None
                 else:
                     col = col / nc
-                    warnings.append("ImageOrientationPatient row and column vectors are not orthogonal; made orthogonal")
+                    warnings.append(Assumption("ImageOrientationPatient row and column vectors are not "
+                                               "orthogonal; made orthogonal", "orientation"))
     elif any(f.ipp is not None for f in frames) and f0.sop_class != "1.2.840.10008.5.1.4.1.1.7":
-        warnings.append("no ImageOrientationPatient: axial orientation assumed")
+        warnings.append(Assumption("no ImageOrientationPatient: axial orientation assumed", "orientation"))
     if iop is None:
         return np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     return row, col
@@ -210,10 +217,9 @@ def _unpositioned(frames: list[Frame], result: dict[str, Any]) -> dict[str, Any]
     dz, src = _header_dz(f0)
     if dz is None:
         dz = 1.0
-    result["warnings"].append(
-        f"no ImagePositionPatient: slices ordered by {how}; slice spacing "
-        + (f"{dz:g} mm from {src}" if src else "unknown, default spacing 1 mm")
-    )
+    text = (f"no ImagePositionPatient: slices ordered by {how}; slice spacing "
+            + (f"{dz:g} mm from {src}" if src else "unknown, default spacing 1 mm"))
+    result["warnings"].append(text if src else Assumption(text, "spacing"))
     result.update(order=order, positions=None, dz=float(dz), origin=f0.ipp if f0.ipp is not None else np.zeros(3))
     return result
 

@@ -24,7 +24,8 @@ import numpy as np
 from ctui.engine.core.limits import available_memory, fmt_bytes
 from ctui.engine.io.series._common import rel
 from ctui.engine.io.series.dicom_quick import _LONG_VRS, CODECS, PIXEL_TAGS, TEXT_VRS, decode_raw, quick_parse
-from ctui.engine.io.series.dicom_sop import _check_image, _NotImage, _Skip
+from ctui.engine.io.series.dicom_deflate import header_frames, is_deflated
+from ctui.engine.io.series.dicom_sop import _check_image, _NotImage, _Skip, series_uid_of
 from ctui.engine.io.series.dicom_values import (  # noqa: F401 - re-exported for the loaders
     _implausible,
     _int_or_none,
@@ -275,7 +276,7 @@ def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with np.errstate(all="ignore"):
-            frames, ids = _read_header(path)
+            frames, ids = _read_header(path, memory)
     if memory is not None:
         f0 = frames[0]
         need = f0.frame_bytes * len(frames)
@@ -285,7 +286,7 @@ def read_header(path: str | os.PathLike, *, memory: int | None = None) -> tuple[
     return frames, ids
 
 
-def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
+def _read_header(path: str | os.PathLike, memory: int | None = None) -> tuple[list[Frame], list[str]]:
     path = str(path)
     try:
         size = os.path.getsize(path)
@@ -302,6 +303,8 @@ def _read_header(path: str | os.PathLike) -> tuple[list[Frame], list[str]]:
         # reads and tells on a file cost more than the parsing: 300 CT headers 2x faster);
         # a header longer than that is parsed from the file itself
         head = fh.read(_HEAD_BYTES)
+        if is_deflated(head):  # inflated within a bound, never by pydicom in one call
+            return header_frames(path, memory, _parse, _Skip)
         quick = quick_parse(head)
         if quick is not None:
             try:
@@ -354,7 +357,8 @@ def _parse(fh: Any, path: str, size: int) -> tuple[list[Frame], list[str]]:
         if not syntax:
             syntax = "1.2.840.10008.1.2" if implicit else ("1.2.840.10008.1.2.1" if little else "1.2.840.10008.1.2.2")
         return _checked_frames(_Fast(ds), path, size, syntax, implicit, little, pos, fh)
-    except _Skip:
+    except _Skip as sk:
+        sk.series_uid = series_uid_of(ds)  # a slice of that series is lost
         raise
     except Exception as exc:
         raise _Skip(f"broken DICOM header ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
@@ -552,6 +556,8 @@ def read_headers(
             frames, fid = read_header(p, memory=memory)
         except _Skip as s:
             skipped.append({"file": rel(p, base), "reason": str(s)})
+            if getattr(s, "series_uid", "") and not isinstance(s, _NotImage):
+                skipped[-1]["series"] = s.series_uid  # an image of that series could not be read
             if isinstance(s, _NotImage):  # listed as a non-image object (ctui info shows them apart)
                 skipped[-1]["object"] = s.kind
         else:

@@ -3,10 +3,12 @@ slice, or pydicom's decoders for compressed transfer syntaxes)."""
 
 from __future__ import annotations
 
+import warnings
 from typing import Sequence
 
 import numpy as np
 
+from ctui.engine.io.series.dicom_deflate import DEFLATED, inflate_for_pixels
 from ctui.engine.io.series.dicom_headers import Frame, _quiet_pydicom, _Skip
 
 
@@ -123,13 +125,18 @@ def _decode_pydicom(f: Frame) -> np.ndarray:
 
     _quiet_pydicom()
     try:
-        ds = pydicom.dcmread(f.file, force=True)
+        src = inflate_for_pixels(f.file, f.frame_bytes * f.nframes) if f.syntax == DEFLATED else f.file
+        ds = pydicom.dcmread(src, force=True)
+        if f.syntax in JPEG_LS:
+            check_jpeg_ls(ds, f)
         if not hasattr(ds, "file_meta") or "TransferSyntaxUID" not in ds.file_meta:
             from pydicom.dataset import FileMetaDataset
 
             ds.file_meta = getattr(ds, "file_meta", None) or FileMetaDataset()
             ds.file_meta.TransferSyntaxUID = f.syntax
-        arr = pixel_array(ds, index=f.frame if f.nframes > 1 else None)
+        with warnings.catch_warnings():  # pydicom's excess-frames notice: judged by the caller's size check
+            warnings.simplefilter("ignore")
+            arr = pixel_array(ds, index=f.frame if f.nframes > 1 else None)
     except Exception as exc:
         msg = str(exc)
         if _codec_missing(f.syntax) or "plugin" in msg.lower() and "missing" in msg.lower():
@@ -141,6 +148,31 @@ def _decode_pydicom(f: Frame) -> np.ndarray:
 
             arr = convert_color_space(arr, f.photometric, "RGB")
     return arr
+
+
+JPEG_LS = ("1.2.840.10008.1.2.4.80", "1.2.840.10008.1.2.4.81")
+
+
+def check_jpeg_ls(ds, f: Frame) -> None:
+    """Refuse a JPEG-LS frame that is truncated or is not the header's image before CharLS
+    sees it: CharLS takes 5-13 s of CPU to fail on a truncated frame (an 8-slice series 30-60 s).
+    The frame must start with SOI, end with EOI (zero padding aside) and hold a SOF-55
+    segment giving the header's rows and columns."""
+    from pydicom.encaps import get_frame  # pydicom: with the decoder
+
+    try:
+        frame = bytes(get_frame(ds.PixelData, f.frame if f.nframes > 1 else 0, number_of_frames=f.nframes))
+    except Exception as exc:  # noqa: BLE001 - broken encapsulation: pydicom says how
+        raise _Skip(f"corrupt JPEG-LS fragments ({' '.join(str(exc).split())[:100]})") from None
+    body = frame.rstrip(b"\0")
+    if not (body.startswith(b"\xff\xd8") and body.endswith(b"\xff\xd9")):
+        raise _Skip(f"truncated JPEG-LS frame ({len(frame)} bytes, no end-of-image marker): not decoded")
+    sof = body.find(b"\xff\xf7")
+    if sof < 0 or len(body) < sof + 9:
+        raise _Skip("corrupt JPEG-LS frame (no frame header): not decoded")
+    rows, cols = int.from_bytes(body[sof + 5:sof + 7], "big"), int.from_bytes(body[sof + 7:sof + 9], "big")
+    if (rows, cols) != (f.rows, f.cols):
+        raise _Skip(f"JPEG-LS frame of {rows}x{cols} under a {f.rows}x{f.cols} header: not decoded")
 
 
 def _codec_missing(syntax: str) -> bool:

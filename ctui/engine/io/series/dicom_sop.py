@@ -74,6 +74,14 @@ class _Skip(Exception):
     """A file that is skipped; str(self) is the reason."""
 
 
+def series_uid_of(ds: Any) -> str:
+    """The header's SeriesInstanceUID, "" when it cannot be read."""
+    try:
+        return str(ds.get("SeriesInstanceUID", "") or "")[:64]
+    except Exception:  # noqa: BLE001 - a broken element: the file is skipped anyway
+        return ""
+
+
 class _NotImage(_Skip):
     """A DICOM object that is not an image slice (SEG, RTSTRUCT, SR...); ``kind`` names it."""
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.io.series._common import orthonormal
 from ctui.engine.core.volume import Volume
@@ -119,8 +120,9 @@ def mhd_spacing(hdr: dict[str, str]) -> tuple[list[float], list[str]]:
         warnings.append(f"the MetaImage header gives a negative ElementSpacing along {', '.join(negative)}: "
                         f"its size used")
     if invalid:
-        warnings.append(f"the MetaImage header gives an invalid ElementSpacing along {', '.join(invalid)}: 1 mm "
-                        f"used instead; give spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements")
+        warnings.append(Assumption(f"the MetaImage header gives an invalid ElementSpacing along {', '.join(invalid)}: "
+                                   f"1 mm used instead; give spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true "
+                                   "measurements", "spacing"))
     return out, warnings
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import check_memory, checked_axes, make_plan
@@ -117,9 +118,9 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
         pix = _raw_pixdim(nib, path, hdr)
         zero = [a for a in range(min(3, len(shape))) if not (np.isfinite(pix[a]) and pix[a] != 0)]
         if zero:
-            bad = [f"the NIfTI header gives an invalid voxel size along "
-                   f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in zero)}: 1 mm used instead; give "
-                   f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements"]
+            bad = [Assumption(f"the NIfTI header gives an invalid voxel size along "
+                              f"{', '.join(f'{chr(120 + a)} ({pix[a]:g})' for a in zero)}: 1 mm used instead; give "
+                              f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements", "spacing")]
     warnings += bad
     voff = int(getattr(img.dataobj, "offset", 352))  # (img.header's vox_offset is reset by nibabel)
     if str(path).lower().endswith((".nii", ".nii.gz")) and voff < 348:
@@ -234,7 +235,7 @@ def _load_nrrd(path: Path, *, skipped: list, crop=None, downsample=None, progres
     warnings += bad
     sp, direction = _geometry_from_matrix(m)
     if "space directions" not in hdr and "spacings" not in hdr:
-        warnings.append("default spacing 1 mm: the NRRD header gives no spacing")
+        warnings.append(Assumption("default spacing 1 mm: the NRRD header gives no spacing", "spacing"))
     if spacing is not None:
         sp = parse_spacing(spacing, path)
     encoding = str(hdr.get("encoding", "raw")).lower()

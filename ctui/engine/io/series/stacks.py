@@ -14,6 +14,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ctui.engine.core.assumptions import Assumption
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import check_memory, make_plan, natural_key, rel, run_parallel, to_grey
@@ -69,8 +70,8 @@ def parse_dtype(dtype: Any, path: Any) -> np.dtype:
 
 
 def _default_spacing_warning(what: str) -> str:
-    return (f"default spacing 1 mm: {what} has no voxel size; give spacing=(dz, dy, dx) "
-            f"(--spacing dz,dy,dx) for true measurements")
+    return Assumption(f"default spacing 1 mm: {what} has no voxel size; give spacing=(dz, dy, dx) "
+                      f"(--spacing dz,dy,dx) for true measurements", "spacing")
 
 
 def _finish(data, *, spacing, given, warnings, source, path, meta, skipped, plan, full, modality="OT",
