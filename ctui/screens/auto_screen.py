@@ -63,6 +63,7 @@ class AutoScreen(GuardMixin, ModalScreen[dict | None]):
     AutoScreen Horizontal { height: auto; }
     AutoScreen .name { width: 9; padding: 1 0 0 0; }
     AutoScreen Select { width: 1fr; }
+    AutoScreen #au-device { width: 12; }
     AutoScreen #au-names { width: 1fr; }
     AutoScreen Checkbox { width: auto; }
     AutoScreen #au-note { width: 1fr; color: $warning; }
@@ -77,7 +78,7 @@ class AutoScreen(GuardMixin, ModalScreen[dict | None]):
     def compose(self) -> ComposeResult:
         first = next(iter(auto.ROI_SETS))
         with Vertical():
-            yield Label(f"[b]{WHAT}[/b]: TotalSegmentator's classes as named objects (at most {MAX_OBJECTS})")
+            yield Label(f"[b]{WHAT}[/b]: TotalSegmentator's classes as objects (at most {MAX_OBJECTS})")
             with Horizontal():
                 yield Label("Task", classes="name")
                 yield Select([(f"{k}: {v}", k) for k, v in auto.TASKS.items()], value="total", allow_blank=False,
@@ -92,8 +93,8 @@ class AutoScreen(GuardMixin, ModalScreen[dict | None]):
                 yield Input(placeholder="class names, e.g. liver,spleen (replace the set)", id="au-names")
             with Horizontal():
                 yield Label("Merge", classes="name")
-                yield Select([(f"{k}: {v}", k) for k, v in auto.MERGE.items()], value="add", allow_blank=False,
-                             id="au-merge")
+                yield Select([(f"{k}: {v.split(';')[0]}", k) for k, v in auto.MERGE.items()], value="add",
+                             allow_blank=False, id="au-merge")
                 yield Select([(d, d) for d in auto.DEVICES], value="cpu", allow_blank=False, id="au-device")
             yield Label("", id="au-note")
             with Horizontal():
