@@ -16,14 +16,14 @@ import pytest
 
 pytest.importorskip("nibabel")
 
-from test_ai_totalseg import SHAPE, env, truth  # noqa: E402,F401  (env: the fixture)
+from test_ai_totalseg import SHAPE, env, truth  # noqa: F401  (env: the fixture)
 
-from ctui.engine.core.colors import MAX_OBJECTS  # noqa: E402
-from ctui.screens import graphics  # noqa: E402
-from ctui.screens.app import CtuiApp  # noqa: E402
-from ctui.screens.auto_screen import AutoScreen, fit_problem  # noqa: E402
-from ctui.screens.session import Session, load_volume  # noqa: E402
-from ctui.screens.testing import wait_for, wait_workspace  # noqa: E402
+from ctui.engine.core.colors import MAX_OBJECTS
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.auto_screen import AutoScreen, fit_problem
+from ctui.screens.session import Session, load_volume
+from ctui.screens.testing import wait_for, wait_workspace
 
 ABDOMEN = ["liver", "spleen", "kidney_left", "kidney_right", "pancreas", "gallbladder", "stomach"]
 
