@@ -140,13 +140,15 @@ def _lines(progress: Progress | None) -> Any:
     """The engine's output lines as progress: the fraction from "part i of n" / "i/n" when it prints one."""
     if progress is None:
         return None
-    state = {"done": 1.0}
+    state: dict[str, Any] = {"done": 1.0, "text": "running TotalSegmentator"}
 
     def line(text: str) -> bool | None:
+        """A line of output ("" while it prints nothing: the last line stays)."""
         m = re.search(r"(\d+)\s*(?:of|/)\s*(\d+)", text)
         if m and 0 < int(m.group(2)) < 10000 and int(m.group(1)) <= int(m.group(2)):
             state["done"] = max(state["done"], 5 + 85 * int(m.group(1)) / int(m.group(2)))
-        return progress(state["done"], 100, text[:120])
+        state["text"] = text[:120] or state["text"]
+        return progress(state["done"], 100, state["text"])
 
     return line
 
