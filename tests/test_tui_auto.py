@@ -79,6 +79,28 @@ async def test_draft_imports_named_objects_as_one_undo_step(env):  # noqa: F811
         assert np.array_equal(s.seg.labels, before)
 
 
+async def test_replace_takes_the_place_of_the_object_of_that_name(env):  # noqa: F811
+    series, _, _ = env
+    s, mine = _session(series)
+    s.seg.objects[2].name = "liver"  # the user's own liver (object 2), across the model's liver and spleen
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.press("D")
+        await wait_for(pilot, lambda: isinstance(app.screen, AutoScreen), what="the draft's dialog")
+        app.screen.query_one("#au-merge").value = "replace"
+        app.screen.query_one("#au-names").value = "liver,spleen"
+        await pilot.pause()
+        await pilot.click("#au-run")
+        await wait_for(pilot, lambda: len(s.seg.objects) == 2 and s.seg.voxels(1) > 0, timeout=60,
+                       what="the draft")
+        _, want = truth()
+        assert {i: o.name for i, o in s.seg.objects.items()} == {1: "spleen", 2: "liver"}
+        assert np.array_equal(s.seg.labels == 2, want["liver"])  # the model's liver, in the object's place
+        assert np.array_equal(s.seg.labels == 1, want["spleen"])  # the classes' voxels win
+        assert s.seg.objects[2].color == (0, 255, 255)
+
+
 SLOW = r'''#!{python}
 import os, sys, time
 from pathlib import Path
