@@ -157,7 +157,9 @@ async def test_missing_totalsegmentator_is_one_line(env, monkeypatch, tmp_path):
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_workspace(pilot, app)
         ws = app.workspace
-        await pilot.press("D")
+        palette = {c.title: c for c in app.get_system_commands(ws)}  # Ctrl+P finds it by name
+        assert "AI first draft (TotalSegmentator)" in palette
+        await palette["AI first draft (TotalSegmentator)"].callback()
         await pilot.pause()
         assert app.screen is ws  # no dialog to fill for nothing
         text = _status(ws)
