@@ -31,6 +31,7 @@ The seeds come from the reference labels (the deepest point); the seed positions
 mouse cells go through ``ctui.screens.planes`` (the display is in the patient's frame).
 
     python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
+    python3 benchmarks/tui_tasks.py --structures   # issue 37: the liver and the MR brain's lateral ventricles
 """
 
 from __future__ import annotations
@@ -334,6 +335,110 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
     return out
 
 
+MR_BRAIN = Path(__file__).resolve().parents[2] / "shared" / "data" / "itksnap_brain_mr"
+
+
+def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
+    """The voxel (z, y, x) of ``mask`` farthest from its surface (the seed a person picks in the middle)."""
+    from scipy import ndimage
+
+    dt = ndimage.distance_transform_edt(np.pad(mask, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
+    return tuple(int(v) for v in np.unravel_index(int(np.argmax(dt)), mask.shape))
+
+
+async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarray, name: str, *,
+                        out_dir: Path, use_range: bool = False) -> dict:
+    """One structure as :func:`session` does an organ (its deepest voxel as the seed, the TUI's defaults;
+    ``use_range``: its 5-95th percentile range typed first), then Ctrl+S and Enter; Dice of the saved
+    object, events split by kind (keys, clicks, typed)."""
+    from ctui.engine.actions.project import load_project
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.testing import wait_for, wait_workspace
+
+    graphics.use_graphics("halfblock")
+    os.chdir(out_dir)
+    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
+    app = CtuiApp(str(image), autosave_s=1e9)
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        s = app.session
+        c = Counter(pilot)
+        vals = s.volume.data[truth_mask]
+        rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95))) if use_range else None
+        row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
+                           review=False, rng=rng)
+        n_save = c.n
+        await c.press("ctrl+s")
+        await pilot.pause()
+        await c.press("enter")
+        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
+                       what="the saved project")
+        row.update(save_events=c.n - n_save, clicks=c.clicks, typed=c.typed, errors=list(app.internal_errors))
+        proj = s.project_path
+    got = load_project(proj).labels == row["object"]
+    row["dice"] = dice(got, truth_mask)
+    row["volume_ratio"] = float(got.sum()) / max(int(truth_mask.sum()), 1)
+    return row
+
+
+def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
+    """The liver (label 5) of ``ct_abdomen_3mm.nii.gz``; a string says why it was skipped."""
+    from ctui.engine.actions.opened import open_input
+
+    image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
+    if not image.exists():
+        return f"{image} is missing"
+    truth = open_input(str(labels)).labels == 5
+    return asyncio.run(one_structure(size, image, truth, "liver", out_dir=out_dir, use_range=use_range))
+
+
+def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
+    """The lateral ventricles (label 1, "vent-lat") of ITK-SNAP's MR brain sample. ctui reads no GIPL:
+    the image and its labels are written as NIfTI into ``out_dir`` (SimpleITK) first."""
+    orig, seg = data / "MRIcrop-orig.gipl.gz", data / "MRIcrop-seg.gipl.gz"
+    if not orig.exists():
+        return f"{orig} is missing"
+    try:
+        import SimpleITK as sitk
+    except ImportError:
+        return "SimpleITK (to read GIPL) is not installed"
+    folder = out_dir / "mr"
+    folder.mkdir(exist_ok=True)
+    image, labels = folder / "brain_mr.nii.gz", folder / "brain_mr_labels.nii.gz"
+    sitk.WriteImage(sitk.ReadImage(str(orig)), str(image))
+    sitk.WriteImage(sitk.ReadImage(str(seg)), str(labels))
+    from ctui.engine.actions.opened import open_input
+
+    truth = open_input(str(labels)).labels == 1
+    return asyncio.run(one_structure(size, image, truth, "lateral_ventricles", out_dir=out_dir,
+                                     use_range=use_range))
+
+
+def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) -> int:
+    """Issue 37's liver and MR lateral ventricles at each size: events by kind and Dice."""
+    print("ctui TUI tasks: liver (ct_abdomen_3mm, label 5), lateral ventricles (ITK-SNAP MR brain, label 1); "
+          f"deepest voxel as the seed, {'typed 5-95% range, ' if use_range else ''}the TUI's defaults")
+    print(f"{'size':>7} {'structure':<19} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'save':>4} "
+          f"{'seconds':>8} {'Dice':>6} {'vol ratio':>9}")
+    for size in sizes:
+        for task, folder in ((liver_task, data), (ventricles_task, mr)):
+            with tempfile.TemporaryDirectory() as tmp:
+                r = task(size, folder, Path(tmp), use_range)
+            if isinstance(r, str):
+                print(f"{size[0]:>3}x{size[1]:<3} skipped: {r}")
+                continue
+            keys = r["events"] - r["clicks"] - r["typed"]
+            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<19} {r['events']:>6} {keys:>5} {r['clicks']:>6} "
+                  f"{r['typed']:>5} {r['save_events']:>4} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+                  f"{r['volume_ratio']:>9.2f}"
+                  f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
+                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+    print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", action="append", default=None, help="terminal WxH (repeatable; default 160x50 and 80x24)")
@@ -343,6 +448,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
     ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
                     "save, reopen) instead of the organs")
+    ap.add_argument("--structures", action="store_true", help="issue 37's liver and MR lateral ventricles "
+                    "instead of the kidney and spleen")
+    ap.add_argument("--mr", default=str(MR_BRAIN), help="the itksnap_brain_mr folder")
     args = ap.parse_args(argv)
     data = Path(args.data)
     image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
@@ -352,6 +460,8 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
     if args.workflow:
         return print_workflow(sizes, image, labels)
+    if args.structures:
+        return print_structures(sizes, data, Path(args.mr), use_range=args.range)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"

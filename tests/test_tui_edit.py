@@ -52,7 +52,7 @@ async def test_brush_and_eraser_counts_and_undo():
         assert s.seg.voxels(1) == _disk_count(3) + 2 * 7  # each 1-px step adds one new column of 7
         # eraser smaller than the brush removes its disk
         s.brush = 1
-        await pilot.press("E", "E")
+        await pilot.press("E", "space", "E")  # eraser down, a dab of it, lifted
         assert s.seg.voxels(1) == _disk_count(3) + 14 - _disk_count(1)
         await pilot.press("u")
         assert s.seg.voxels(1) == _disk_count(3) + 14
@@ -63,6 +63,29 @@ async def test_brush_and_eraser_counts_and_undo():
             ws.dab("brush", (s.z, -5, 3))
         assert np.array_equal(before, s.seg.labels)
         assert not app.internal_errors
+
+
+async def test_brush_down_paints_nothing_until_it_moves():
+    """A painter's brush (issue 37): b b paints nothing; b then a move paints from where it went down
+    to where it stops (both ends), as a drag would; lifting and putting it down again starts afresh."""
+    s = _cylinder()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        s.brush = 3
+        await pilot.press("b", "b")
+        assert s.seg.voxels(1) == 0 and s.seg.undo_labels() == []
+        await pilot.press("b")
+        assert s.seg.voxels(1) == 0 and "Brush down" in str(app.workspace.query_one("#status").render())
+        x0 = s.x
+        await pilot.press("l", "l", "b")
+        want = np.zeros(s.shape[1:], bool)
+        yy, xx = np.mgrid[0:s.shape[1], 0:s.shape[2]]
+        for cx in (x0, x0 + 1, x0 + 2):  # the dab where it went down, then one per step
+            want |= (yy - s.y) ** 2 + (xx - cx) ** 2 <= 9 + 1e-6
+        assert np.array_equal(s.seg.labels[s.z] == 1, want) and s.seg.voxels(1) == _disk_count(3) + 2 * 7
+        await pilot.press("b", "b")  # down and up again somewhere painted: nothing new
+        assert s.seg.voxels(1) == _disk_count(3) + 2 * 7
 
 
 async def test_paint_limited_to_hu_range_and_slices():

@@ -100,7 +100,7 @@ def test_mouse_click_wheel_drag_in_tmux(tmux_session, tmp_path, size):
     _sgr(tmux_session, 65, cc, cr)
     _sgr(tmux_session, 65, cc, cr)
     _wait(tmux_session, f"Slice {start - 1}/")
-    # brush down (b: a 29-px dab at the cursor), then a drag 30 columns to the right paints
+    # brush down (b paints nothing), then a drag 30 columns to the right paints (its press: a 29-px dab)
     _keys(tmux_session, "b")
     _wait(tmux_session, "Brush down")
     cols = list(drag_cols)

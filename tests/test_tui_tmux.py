@@ -115,7 +115,7 @@ def test_tmux_without_colorterm_tells_how_to_fix(tmux_session, tmp_path):
 
 
 def test_paint_and_erase_in_tmux_voxel_counts(tmux_session, tmp_path):
-    """The real binary: brush a dab (space), a stroke (b, moves, b), erase (E), switch to
+    """The real binary: brush a dab (space), a stroke (b, moves, b), erase (E, space, E), switch to
     the sagittal view (orientation letters), save the project and count its voxels."""
     import numpy as np
 
@@ -137,7 +137,9 @@ def test_paint_and_erase_in_tmux_voxel_counts(tmux_session, tmp_path):
     _keys(tmux_session, ",", ",")  # radius 1: a 5-px eraser
     _wait(tmux_session, "Brush radius 2 mm")
     _keys(tmux_session, "E")
-    _wait(tmux_session, "Eraser down")
+    _wait(tmux_session, "Eraser down")  # putting it down erases nothing: Space erases a dab
+    _keys(tmux_session, "space")
+    _wait(tmux_session, "Erased 5 voxels")
     _keys(tmux_session, "E")
     _keys(tmux_session, "2")
     screen = _wait(tmux_session, "sagittal")

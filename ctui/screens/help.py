@@ -23,6 +23,7 @@ ACTION_TASK: dict[str, str] = {
     "filters": "Segment", "tolerance": "Segment", "range_edit": "Segment", "connectivity": "Segment",
     "prop_mode": "Segment", "limits": "Segment", "stop_slice": "Segment", "rename_object": "Segment",
     "click_fills": "Segment", "background_seed": "Segment", "box_corner": "Segment", "box_clear": "Segment",
+    "auto_draft": "Segment",
     # Review: proposals, what the pipeline sees, windows, drift
     "accept": "Review", "reject": "Review", "accept_to_here": "Review", "cut_here": "Review", "mark": "Review",
     "cancel": "Review", "view_cycle": "Review", "grid": "Review",

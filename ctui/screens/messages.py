@@ -146,6 +146,15 @@ class SectionsReady(Message):
     result: Any
 
 
+@event
+class AutoReady(Message):
+    """The AI first draft (``screens.auto_screen``) ended: ``result`` (an ``actions.auto.AutoResult``)
+    over ``snapshot``, the labels it started from."""
+
+    result: Any
+    snapshot: Any
+
+
 class LabelsChanged(Message):
     """The segmentation changed (posted by screens that edit it, to the workspace)."""
 

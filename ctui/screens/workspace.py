@@ -19,7 +19,7 @@ from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
-from ctui.screens.messages import (CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
+from ctui.screens.messages import (AutoReady, CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
                                    SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
@@ -262,6 +262,12 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         from ctui.screens.propagation import finished  # propagation imports the engine's segmentation
 
         finished(self, msg.run)
+
+    @on(AutoReady)
+    def _auto_ready(self, msg: AutoReady) -> None:
+        from ctui.screens.auto_screen import apply_result  # loaded with the draft's dialog
+
+        apply_result(self, msg.result, msg.snapshot)
 
     @on(JobFinished)
     def _job_finished(self, msg: JobFinished) -> None:

@@ -86,21 +86,26 @@ class EditMixin:
         self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {mm(self.s.brush)} mm); u undoes")
 
     def action_pen(self, tool: str) -> None:
-        """b / E: put the brush (eraser) down, so moving the cursor paints (erases); again lifts it."""
+        """b / E: put the brush (eraser) down, so moving the cursor paints (erases) from where it went down;
+        again lifts it. Putting it down paints nothing (b b leaves the labels as they were; Space dabs)."""
         s = self.s
         if not self.edit_tools.toggle_pen(tool):
             self.set_status(f"{tool.capitalize()} lifted")
             self.update_panel()
             return
-        self.action_dab()
-        self.set_status(f"{tool.capitalize()} down ({mm(s.brush)} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to paint; "
-                        f"{'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
+        self.refresh_view()  # the pen's outline
+        verb = "paint" if tool == "brush" else "erase"
+        self.set_status(f"{tool.capitalize()} down ({mm(s.brush)} mm, {s.edit_mode}{'; ' + s.limits.describe() if s.limits.slices or s.limits.values else ''}): move or drag to {verb} "
+                        f"from here (Space: a dab); {'b' if tool == 'brush' else 'E'} lifts it, ,/. size")
 
     def stroke(self, start: tuple[int, int, int], end: tuple[int, int, int]) -> None:
-        """Dabs from ``start`` to ``end`` (a cursor move with the pen down), as undo steps of one dab each."""
+        """Dabs from ``start`` to ``end`` (a cursor move with the pen down), as undo steps of one dab each;
+        the pen's first stroke since it went down paints ``start`` too (the stroke starts where it went down)."""
         steps = max(abs(a - b) for a, b in zip(start, end))
+        first = 0 if not self.edit_tools.pen_painted else 1
+        self.edit_tools.pen_painted = True
         pts = [tuple(int(round(a + (b - a) * t)) for a, b in zip(start, end))
-               for t in np.linspace(0.0, 1.0, steps + 1)[1:]] if steps else []
+               for t in np.linspace(0.0, 1.0, steps + 1)[first:]] if steps else []
         n = 0
         try:
             for p in dict.fromkeys(pts):

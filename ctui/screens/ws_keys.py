@@ -73,6 +73,7 @@ less_than_sign        propagate('backward')  Propagate back                     
 greater_than_sign     propagate('forward')   Propagate fwd                      hidden
 S                     segment_here           Segment from cursor
 G                     segment_panel          Segmentation options
+D                     auto_draft             AI first draft (TotalSegmentator)  hidden
 p                     propagate('both')      Propagate
 a                     accept                 Accept proposal                    hidden
 x                     reject                 Reject proposal                    hidden
@@ -314,6 +315,11 @@ class NavMixin:
 
         if not self._busy():
             self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
+
+    def action_auto_draft(self) -> None:
+        from ctui.screens.auto_screen import open_auto  # a screen's module loads when it first opens
+
+        open_auto(self)
 
     def action_render3d(self) -> None:
         from ctui.screens.view3d import View3DScreen  # a screen's module loads when it first opens: the workspace paints sooner

@@ -106,6 +106,7 @@ class EditTools:
 
     def __init__(self) -> None:
         self.pen: str | None = None  # "brush" / "eraser" while down
+        self.pen_painted = False  # the pen has painted since it went down (the first move paints its start too)
         self.click_fills = False  # a left click on a view fills there (as Enter) instead of only moving the cursor
         self.box_corner: tuple[int, int, int] | None = None  # (z, y, x) first corner of a box being set
         self.polygon: list[tuple[int, int]] = []  # scissors polygon, (x, y) voxels on the file's slices
@@ -117,6 +118,7 @@ class EditTools:
     def toggle_pen(self, tool: str) -> bool:
         """``tool`` ("brush"/"eraser") down, or lifted when it was down; True when down."""
         self.pen = None if self.pen == tool else tool
+        self.pen_painted = False
         return self.pen is not None
 
     def lift(self) -> bool:

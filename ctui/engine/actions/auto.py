@@ -43,6 +43,18 @@ MERGE = {"add": "new objects beside the existing ones; existing voxels stay thei
          "keep": "a class named like an existing object is skipped; the others are added"}
 DEVICES = ("cpu", "gpu")
 MAX_ID = 255
+#: Tasks offered by name (any other TotalSegmentator task can be given to ``auto_segment``).
+TASKS = {"total": "117 CT classes", "total_mr": "MR classes"}
+#: ROI subsets offered (TotalSegmentator class names, in both ``total`` and ``total_mr`` where they exist):
+#: each fits the TUI's editing (at most ``core.colors.MAX_OBJECTS`` objects); the first is the default.
+ROI_SETS = {
+    "abdominal organs": ("liver", "spleen", "kidney_left", "kidney_right", "pancreas", "gallbladder", "stomach"),
+    "abdominal vessels": ("aorta", "inferior_vena_cava", "portal_vein_and_splenic_vein", "iliac_artery_left",
+                          "iliac_artery_right"),
+    "chest": ("heart", "lung_upper_lobe_left", "lung_lower_lobe_left", "lung_upper_lobe_right",
+              "lung_middle_lobe_right", "lung_lower_lobe_right", "trachea", "esophagus", "aorta"),
+    "pelvis": ("urinary_bladder", "prostate", "colon", "small_bowel", "hip_left", "hip_right", "sacrum"),
+}
 
 
 @dataclass
@@ -70,13 +82,14 @@ class AutoResult:
 def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "total",
                  roi_subset: Sequence[str] = (), fast: bool = False, device: str = "cpu",
                  labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = "add",
-                 progress: Progress | None = None) -> AutoResult:
+                 max_id: int = MAX_ID, progress: Progress | None = None) -> AutoResult:
     """Run ``engine`` on ``volume`` (data (nz, ny, nx), spacing (dz, dy, dx) mm) and merge its classes into
     ``labels``/``objects`` (the caller's, default none) by ``merge``; see the module docstring.
 
     ``roi_subset``: class names to keep (TotalSegmentator's ``--roi_subset``); ``fast``: its 3 mm model;
-    ``device``: "cpu" or "gpu". Raises CtuiError before running when the engine, its weights or a
-    licence for a licensed task is missing, and when the run fails.
+    ``device``: "cpu" or "gpu"; ``max_id``: the highest object id (the TUI edits ids 1..10). Raises
+    CtuiError before running when the engine, its weights or a licence for a licensed task is missing,
+    and when the run fails.
     """
     if engine not in ENGINES:
         raise CtuiError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}", option="engine")
@@ -104,7 +117,8 @@ def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "
         placed = place_on_grid(got.labels, Geometry.of(got.volume), Geometry.of(volume), path="TotalSegmentator's output")
     report(progress, 95, 100, "merging the classes")
     res = merge_classes(placed, got.names, got.colours, labels=labels, objects=objects, merge=merge,
-                        spacing=tuple(float(v) for v in volume.spacing), source=f"TotalSegmentator {task}")
+                        spacing=tuple(float(v) for v in volume.spacing), source=f"TotalSegmentator {task}",
+                        max_id=max_id)
     res.engine, res.task, res.command, res.seconds = engine, task, cmd, time.perf_counter() - t0
     if task in totalseg.LICENSED_TASKS:
         res.warnings.append(f"{task} is a licensed TotalSegmentator task (free for non-commercial use)")
@@ -112,26 +126,40 @@ def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "
     return res
 
 
+def missing(task: str = "total", *, engine: str = "totalsegmentator") -> str:
+    """One line saying what is missing to run ``engine``'s ``task`` (the executable, its weights, a licence
+    and how to install them), or "" when it can run."""
+    try:
+        totalseg.find(task)
+    except CtuiError as exc:
+        return str(exc)
+    return ""
+
+
 def _lines(progress: Progress | None) -> Any:
     """The engine's output lines as progress: the fraction from "part i of n" / "i/n" when it prints one."""
     if progress is None:
         return None
-    state = {"done": 1.0}
+    state: dict[str, Any] = {"done": 1.0, "text": "running TotalSegmentator"}
 
     def line(text: str) -> bool | None:
+        """A line of output ("" while it prints nothing: the last line stays)."""
         m = re.search(r"(\d+)\s*(?:of|/)\s*(\d+)", text)
         if m and 0 < int(m.group(2)) < 10000 and int(m.group(1)) <= int(m.group(2)):
             state["done"] = max(state["done"], 5 + 85 * int(m.group(1)) / int(m.group(2)))
-        return progress(state["done"], 100, text[:120])
+        state["text"] = text[:120] or state["text"]
+        return progress(state["done"], 100, state["text"])
 
     return line
 
 
 def merge_classes(classes: np.ndarray, names: dict[int, str], colours: dict[int, Any], *,
                   labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = "add",
-                  spacing: tuple[float, float, float] = (1.0, 1.0, 1.0), source: str = "") -> AutoResult:
+                  spacing: tuple[float, float, float] = (1.0, 1.0, 1.0), source: str = "",
+                  max_id: int = MAX_ID) -> AutoResult:
     """Merge the label map ``classes`` (uint8 on the series' grid, values named by ``names``) into
-    ``labels`` and ``objects`` (not changed: copies are returned) by ``merge``; see the module docstring."""
+    ``labels`` and ``objects`` (not changed: copies are returned) by ``merge``, object ids 1..``max_id``;
+    see the module docstring."""
     out = np.zeros(classes.shape, np.uint8) if labels is None else np.array(labels, np.uint8, copy=True)
     objs = [dict(o) for o in objects]
     by_name = {str(o.get("name", "")): o for o in objs}
@@ -151,9 +179,9 @@ def merge_classes(classes: np.ndarray, names: dict[int, str], colours: dict[int,
             out[out == oid] = 0
             objs.remove(old)
         else:
-            oid = v if v not in used else next((i for i in range(1, MAX_ID + 1) if i not in used), 0)
+            oid = v if v not in used and v <= max_id else next((i for i in range(1, max_id + 1) if i not in used), 0)
             if not oid:
-                skipped.append(f"{name}: no free object id (at most {MAX_ID})")
+                skipped.append(f"{name}: no free object id (at most {max_id})")
                 continue
         used.add(oid)
         m = classes == v

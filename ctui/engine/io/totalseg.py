@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import re
 import shutil
 import subprocess
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +37,7 @@ from ctui.engine.io.labels import load_labels, nifti_affine
 
 EXECUTABLE = "TotalSegmentator"
 INSTALL = "pip install TotalSegmentator (it brings torch), then totalseg_download_weights -t TASK"
+POLL_S = 0.25  # the progress callback's period while TotalSegmentator prints nothing (a cancel is seen)
 LICENCE_URL = "https://backend.totalsegmentator.com/license-academic/"
 #: Tasks TotalSegmentator runs only with a licence number (its ``commercial_models``, 2.18).
 LICENSED_TASKS = frozenset({
@@ -135,19 +138,28 @@ def command(inst: Installation, src: Path, out: Path, *, task: str, roi_subset: 
 
 def run(cmd: list[str], *, progress: Callable[[str], bool | None] | None = None,
         env: dict[str, str] | None = None) -> list[str]:
-    """Run ``cmd``, each output line to ``progress`` (returning False stops it: CtuiError "cancelled");
-    returns the output's last lines. A failure is one CtuiError with its last meaningful line."""
+    """Run ``cmd``, each output line to ``progress`` (returning False stops it: CtuiError "cancelled"; it
+    is also called with "" every ``POLL_S`` seconds of silence, so a cancel is seen while the model loads);
+    returns the output's last lines. A failure is one CtuiError with its last meaningful line. Whatever
+    ``progress`` raises kills the process first."""
     tail: list[str] = []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace",
                             env=env)
     assert proc.stdout is not None
+    lines: queue.Queue[str | None] = queue.Queue()
+    threading.Thread(target=_pump, args=(proc.stdout, lines), daemon=True, name="totalseg-output").start()
     try:
-        for line in proc.stdout:
+        while True:
+            try:
+                line = lines.get(timeout=POLL_S)
+            except queue.Empty:
+                line = ""
+            if line is None:
+                break
             text = line.strip()
-            if not text:
-                continue
-            tail = (tail + [text])[-20:]
-            if progress is not None and progress(text) is False:
+            if text:
+                tail = (tail + [text])[-20:]
+            if progress is not None and (text or proc.poll() is None) and progress(text) is False:
                 proc.kill()
                 raise CtuiError("TotalSegmentator cancelled")
         code = proc.wait()
@@ -159,6 +171,15 @@ def run(cmd: list[str], *, progress: Callable[[str], bool | None] | None = None,
         last = next((t for t in reversed(tail) if "error" in t.lower()), tail[-1] if tail else "no output")
         raise CtuiError(f"TotalSegmentator failed (exit {code}): {last[:300]}")
     return tail
+
+
+def _pump(stream, lines: queue.Queue) -> None:
+    """The process's output lines into ``lines``, then None."""
+    try:
+        for line in stream:
+            lines.put(line)
+    finally:
+        lines.put(None)
 
 
 def read_output(path: Path) -> Classes:
