@@ -68,3 +68,14 @@ async def test_question_mark_shows_help_by_task(monkeypatch, tmp_path):
         assert body.index("Segment") < body.index("Review") and body.index("Edit") < body.index("Navigate")
         assert body.index("Fill") < body.index("Cursor left")
         assert len(body.splitlines()) < 46  # every group on one 160x50 screen
+
+
+def test_no_two_workspace_actions_share_a_key():
+    """Every key of the workspace does one thing: two tools added at once once both took ``D`` (the vessel's
+    start and the AI draft), and Textual silently ran only one of them."""
+    owners: dict[str, list[str]] = {}
+    for binding in WorkspaceScreen.BINDINGS:
+        for key in binding.key.split(","):
+            owners.setdefault(key.strip(), []).append(binding.action)
+    shared = {key: actions for key, actions in owners.items() if len(actions) > 1}
+    assert shared == {}

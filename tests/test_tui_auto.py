@@ -56,7 +56,7 @@ async def test_draft_imports_named_objects_as_one_undo_step(env):  # noqa: F811
     async with app.run_test(size=(80, 24)) as pilot:
         await wait_workspace(pilot, app)
         ws = app.workspace
-        await pilot.press("D")
+        await pilot.press("Z")
         await wait_for(pilot, lambda: isinstance(app.screen, AutoScreen), what="the draft's dialog")
         run = app.screen.query_one("#au-run")
         assert run.region.bottom <= 24 and not run.disabled  # the Run button fits at 80x24
@@ -86,7 +86,7 @@ async def test_replace_takes_the_place_of_the_object_of_that_name(env):  # noqa:
     app = CtuiApp(session=s, autosave_s=1e9)
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_workspace(pilot, app)
-        await pilot.press("D")
+        await pilot.press("Z")
         await wait_for(pilot, lambda: isinstance(app.screen, AutoScreen), what="the draft's dialog")
         app.screen.query_one("#au-merge").value = "replace"
         app.screen.query_one("#au-names").value = "liver,spleen"
@@ -122,7 +122,7 @@ async def test_escape_kills_the_run_and_changes_nothing(env):  # noqa: F811
     async with app.run_test(size=(160, 50)) as pilot:
         await wait_workspace(pilot, app)
         ws = app.workspace
-        await pilot.press("D")
+        await pilot.press("Z")
         await wait_for(pilot, lambda: isinstance(app.screen, AutoScreen), what="the draft's dialog")
         await pilot.press("enter")
         pidfile = bindir / "TotalSegmentator.pid"
@@ -174,7 +174,7 @@ async def test_a_subset_that_does_not_fit_is_refused(env):  # noqa: F811
     app = CtuiApp(session=s, autosave_s=1e9)
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_workspace(pilot, app)
-        await pilot.press("D")
+        await pilot.press("Z")
         await wait_for(pilot, lambda: isinstance(app.screen, AutoScreen), what="the draft's dialog")
         dlg = app.screen
         assert dlg.query_one("#au-run").disabled

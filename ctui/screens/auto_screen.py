@@ -1,4 +1,4 @@
-"""The workspace's AI first draft (``D``; Ctrl+P "AI first draft"): TotalSegmentator, where the user
+"""The workspace's AI first draft (``Z``; Ctrl+P "AI first draft"): TotalSegmentator, where the user
 installed it, run on the open series by ``actions.auto.auto_segment`` (the function ``ctui auto``
 calls) in a worker with progress (Escape cancels: the subprocess is killed), its classes imported
 as named objects into the open segmentation as one undo step.
@@ -146,7 +146,7 @@ class AutoScreen(GuardMixin, ModalScreen[dict | None]):
 
 
 def open_auto(ws) -> None:
-    """``D``: say what is missing in one line, else ask the options and start the worker."""
+    """``Z``: say what is missing in one line, else ask the options and start the worker."""
     if ws._busy():
         return
     why = auto.missing("total")

@@ -73,7 +73,7 @@ less_than_sign        propagate('backward')  Propagate back                     
 greater_than_sign     propagate('forward')   Propagate fwd                      hidden
 S                     segment_here           Segment from cursor
 G                     segment_panel          Segmentation options
-D                     auto_draft             AI first draft (TotalSegmentator)  hidden
+Z                     auto_draft             AI first draft (TotalSegmentator)  hidden
 p                     propagate('both')      Propagate
 a                     accept                 Accept proposal                    hidden
 x                     reject                 Reject proposal                    hidden
