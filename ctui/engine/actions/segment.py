@@ -34,9 +34,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 
+from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
 from ctui.engine.actions.segment_checks import body_check, check_background, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
@@ -44,7 +44,6 @@ from ctui.engine.core.progress import Progress, report
 from ctui.engine.segment.pipeline import Pipeline
 from ctui.engine.segment.autoneck import NeckChoice, cut_2d
 from ctui.engine.segment import nninteractive
-from ctui.engine.segment.necks import disc
 from ctui.engine.segment.methods import METHODS, Job
 from ctui.engine.segment.propagate import PropagationSettings
 from ctui.engine.segment.seeding import RangeChoice, auto_width, denoised, seed_depth, seed_range, seed_voxels
@@ -212,28 +211,6 @@ class _Start:
     depth_mm: float = 0.0  # the region's half-thickness at the seed (the size check's ball)
 
 
-SNAP_MM = 2.0  # a seed on a noise pixel outside the range starts at the nearest in-range pixel this close
-
-
-def _snap(final: np.ndarray, x: int, y: int, lo: float, hi: float, spacing_yx: tuple[float, float]
-          ) -> tuple[int, int, float] | None:
-    """(x, y, median) of the in-range pixel nearest (x, y) within ``SNAP_MM`` (at least one pixel), when the
-    median of that disc is in range: the seed fell on a noise pixel of the object. None otherwise (the
-    seed is on another tissue). ``final``: (ny, nx) the values fills use."""
-    ry, rx = (max(1, int(round(SNAP_MM / max(float(v), 1e-6)))) for v in spacing_yx)
-    y0, y1, x0, x1 = max(y - ry, 0), min(y + ry + 1, final.shape[0]), max(x - rx, 0), min(x + rx + 1, final.shape[1])
-    patch = np.asarray(final[y0:y1, x0:x1], dtype=np.float64)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    d2 = ((yy - y) * spacing_yx[0]) ** 2 + ((xx - x) * spacing_yx[1]) ** 2
-    disc = d2 <= max(SNAP_MM ** 2, float(max(spacing_yx)) ** 2 * 2) + 1e-9
-    med = float(np.median(patch[disc]))
-    ok = disc & (patch >= lo) & (patch <= hi)
-    if not lo <= med <= hi or not ok.any():
-        return None
-    k = int(np.argmin(np.where(ok, d2, np.inf)))
-    return int(xx.flat[k]), int(yy.flat[k]), med
-
-
 def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
     if opts.box is None:
         return None
@@ -248,7 +225,7 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     final = pipe.final_slice(volume, z)
     box = _limit(opts, volume.data.shape)
     if box is not None and not all(b.start <= c < b.stop for b, c in zip(box, (z, y, x))):
-        raise CtuiError(f"seed {x},{y},{z} is outside the box {_box_text(opts.box)}")
+        raise CtuiError(f"seed {x},{y},{z} is outside the box {box_text(opts.box)}")
     auto = None
     if th is None:
         auto = seed_range(volume, pipe, seed)
@@ -263,7 +240,7 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     value = float(final[y, x])
     moved = ""
     if not lo <= value <= hi:
-        near = _snap(final, x, y, lo, hi, spacing_yx)
+        near = snap(final, x, y, lo, hi, spacing_yx)
         if near is None:
             how = (", after a 3x3 median for the noise" if smooth is not None
                    else ", after the filters" if pipe.active_steps() else "")
@@ -282,13 +259,13 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
         if labels is not None:
             inr &= (labels[z] == 0) | (labels[z] == oid)
         if box is not None:
-            inr = inr & _box_mask2d(box, inr.shape)
+            inr = inr & box_mask2d(box, inr.shape)
         pts = seed_voxels(inr[None], (0, y, x))[:, 1:]
         start = np.zeros(inr.shape, bool)
         start[tuple(pts.T)] = True
         comp = seeded_components(inr, start, connectivity=opts.connectivity)
         if choice.region is not None and (start & comp).any():
-            comp = _in_region(comp, start, choice.region, z, width, spacing_yx, opts.connectivity)
+            comp = in_region(comp, start, choice.region, z, width, spacing_yx, opts.connectivity)
         mask, _st = cut_2d(comp, start, width_mm=width, spacing_yx=spacing_yx, fill_holes=opts.fill_holes,
                            connectivity=opts.connectivity)
     else:
@@ -297,7 +274,7 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
         mask = neck_fill(final, x, y, low=lo, high=hi, connectivity=opts.connectivity, neck_mm=width,
                          spacing_yx=spacing_yx)
         if box is not None:
-            mask &= _box_mask2d(box, mask.shape)
+            mask &= box_mask2d(box, mask.shape)
     if not mask.any():
         raise CtuiError(f"seed {x},{y},{z}: nothing to fill in the range [{lo:g}, {hi:g}]")
     if int(mask.sum()) < opts.min_area:
@@ -306,33 +283,6 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     return _Start(mask=mask, rng=(lo, hi), auto_range=auto, neck=choice, width=width, pipe=pipe,
                   denoise="median 3x3" if smooth is not None else "", seed=seed, moved=moved,
                   depth_mm=choice.depth_mm if choice is not None else depth)
-
-
-def _in_region(comp: np.ndarray, start: np.ndarray, region: Any, z: int, width: float,
-               spacing_yx: tuple[float, float], connectivity: int) -> np.ndarray:
-    """The seed slice's in-range component (bool (ny, nx)) kept to what the 3D sweep joined to the seed: its
-    region on slice z, widened by the neck's radius (the region rounds off thin rims of the organ, which
-    the slice's own cut keeps). Without it the slice's cut, which sees only its plane, let a neighbour
-    joined in-plane but not in 3D into the seed slice (the right kidney on the 1 x 1 x 3 mm grid, seeds one
-    slice off the deepest point: Dice 0.36-0.39 -> 0.92)."""
-    allowed = region.crop(z, 0, comp.shape[0], 0, comp.shape[1]).view(np.uint8)
-    r = width / 2.0
-    if r > 0:
-        allowed = cv2.dilate(allowed, disc(r / spacing_yx[0], r / spacing_yx[1]))
-    return seeded_components(comp & allowed.astype(bool), start & comp, connectivity=connectivity)
-
-
-def _box_mask2d(box: tuple[slice, slice, slice], shape: tuple[int, ...]) -> np.ndarray:
-    m = np.zeros(shape, bool)
-    m[box[1], box[2]] = True
-    return m
-
-
-def _box_text(box: Box | None) -> str:
-    if box is None:
-        return "(none)"
-    (z0, z1), (y0, y1), (x0, x1) = box
-    return f"x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}"
 
 
 SHELL_GROWTH = 3.0  # the object with its shell may be at most this many times the object alone
@@ -484,7 +434,7 @@ def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[
     seg.add_object(names[0] if names else f"object {oid}", object_id=oid)
     roi = None if opts.box is None else tuple((max(a, 0), min(b, n - 1)) for (a, b), n in zip(opts.box, shape))
     if roi is not None and any(a > b for a, b in roi):
-        raise CtuiError(f"the box {_box_text(opts.box)} lies outside the volume", option="box")
+        raise CtuiError(f"the box {box_text(opts.box)} lies outside the volume", option="box")
     rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, roi), server=opts.server,
                                     api_key=opts.api_key or None, progress=progress)
     box = seg.object_bbox(oid)
