@@ -31,8 +31,14 @@ def test_overview_step():
 @pytest.mark.egl
 @pytest.mark.parametrize("mode", ["mip", "minip"])
 def test_tall_series_renders_from_an_overview_like_full_resolution(mode, monkeypatch):
-    import ctui.engine.render.gl as gl
-    from ctui.engine.render import Camera, EGLUnavailable, Scene, SceneVolume, get_renderer
+    from ctui.engine.render import (
+        Camera,
+        EGLUnavailable,
+        Scene,
+        SceneVolume,
+        get_renderer,
+        gl,
+    )
 
     try:
         r = get_renderer()

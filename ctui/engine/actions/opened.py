@@ -21,7 +21,9 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
+from ctui.engine.io import memplan
 from ctui.engine.io.imports import is_label_file, label_kind, read_label_file
+from ctui.engine.io.memplan import MemoryPlan
 from ctui.engine.io.meshes import load_mesh
 from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
 from ctui.engine.io.series import load
@@ -160,6 +162,18 @@ def open_input(path: str | os.PathLike, *, kind: str | None = None, with_series:
     if spacing is not None:
         load_options["spacing"] = spacing
     return Opened("series", p, volume=load(p, **load_options))
+
+
+def memory_plan(command: str, path: Any, *, overview: bool = False, **load_options: Any) -> MemoryPlan:
+    """The memory plan of ``command`` on the series at ``path`` (``io/memplan``: from the
+    headers, before loading): ``mode`` "memory", "overview" (only when ``overview``: the
+    command may work from a ``downsample``-times coarser copy), "refuse" (``reason``: one line
+    naming what would fit) or "unknown" (not a series). ``load_options["memory_limit"]``: the limit."""
+    first = path[0] if isinstance(path, (list, tuple)) and path else path
+    if not first or input_kind(os.fspath(first)) in ("project", "mesh", "mric"):  # (a .nii.gz may be either)
+        return MemoryPlan(command, "unknown", "not a series")
+    return memplan.plan(command, first, memory=load_options.pop("memory_limit", None), overview=overview,
+                        **load_options)
 
 
 def series_available(project: Project) -> bool:
