@@ -32,18 +32,23 @@ class VolumeGPU:
         self.vmin = float(np.min(src))
         self.vmax = float(np.max(src))
         scale = 65535.0 / max(self.vmax - self.vmin, 1e-12)
-        u16 = np.empty(src.shape, np.uint16)
-        for z0 in range(0, nz, 32):  # slab by slab: no full-size float copy
+        self.tex = ctx.texture3d(self.dims, 1, None, dtype="nu2")
+        mins, maxs = [], []
+        for z0 in range(0, nz, 32):  # slab by slab: no full-size float or 16-bit copy
             sl = (np.asarray(src[z0:z0 + 32], np.float32) - self.vmin) * scale
-            u16[z0:z0 + 32] = np.clip(sl + 0.5, 0, 65535).astype(np.uint16)
-        self.tex = ctx.texture3d(self.dims, 1, u16, dtype="nu2")  # the array itself: no bytes copy
+            u16 = np.clip(sl + 0.5, 0, 65535).astype(np.uint16)
+            self.tex.write(u16, viewport=(0, 0, z0, nx, ny, u16.shape[0]))
+            mins.append(_plane_reduce(u16, BRICK, np.minimum))
+            maxs.append(_plane_reduce(u16, BRICK, np.maximum))
         self.tex.filter = (ctx.LINEAR, ctx.LINEAR)
         self.tex.repeat_x = self.tex.repeat_y = self.tex.repeat_z = False
-        self.bmin, self.bmax = brick_minmax(u16, BRICK)
+        # brick min/max: x and y per slab, then z over the (64x smaller) stack: as brick_minmax
+        self.bmin = brick_reduce(np.concatenate(mins), BRICK, 0, np.minimum).astype(np.float32) / 65535.0
+        self.bmax = brick_reduce(np.concatenate(maxs), BRICK, 0, np.maximum).astype(np.float32) / 65535.0
         self._proxy_key: Any = None
         self._proxy = None  # (vbo, vao) or None when nothing is occupied
         self.occ: np.ndarray | None = None
-        self.nbytes = u16.nbytes
+        self.nbytes = nz * ny * nx * 2
         self.grad_tex = None
         self.ref = weakref.ref(data) if isinstance(data, np.ndarray) else None
         # geometry: voxel index (of the subsampled grid) -> world
@@ -93,7 +98,7 @@ class VolumeGPU:
                 out[z0:z1, ..., 2] = np.rint(gz * inv).astype(np.int8)
                 # edge weight: 0 at noise-level gradients, 1 at >= ~2.5% of the range per voxel
                 out[z0:z1, ..., 3] = np.rint(np.clip((mag * 40.0 - 0.25) / 0.75, 0.0, 1.0) * 127.0).astype(np.int8)
-            self.grad_tex = ctx.texture3d((nx, ny, nz), 4, out.tobytes(), dtype="ni1")
+            self.grad_tex = ctx.texture3d((nx, ny, nz), 4, out, dtype="ni1")  # the array: no bytes copy
             self.grad_tex.filter = (ctx.LINEAR, ctx.LINEAR)
             self.grad_tex.repeat_x = self.grad_tex.repeat_y = self.grad_tex.repeat_z = False
             self.nbytes += out.nbytes
@@ -212,6 +217,11 @@ def brick_reduce(a: np.ndarray, b: int, axis: int, fn) -> np.ndarray:
         out[..., 1:] = fn(out[..., 1:], last[..., :-1])   # one voxel of the previous brick
         out[..., :-1] = fn(out[..., :-1], first[..., 1:])  # one voxel of the next brick
     return np.moveaxis(out, -1, axis)
+
+
+def _plane_reduce(u16: np.ndarray, b: int, fn) -> np.ndarray:
+    """:func:`brick_reduce` along x then y (the first two steps of :func:`brick_minmax`)."""
+    return brick_reduce(brick_reduce(u16, b, 2, fn), b, 1, fn)
 
 
 def brick_minmax(u16: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
