@@ -125,10 +125,10 @@ def test_tall_series_segments_and_meshes_under_an_address_space_limit(tall, tmp_
 
 @pytest.mark.slow
 def test_too_little_memory_is_refused_in_one_line_naming_what_fits(tall, tmp_path):
-    r = _ctui(["segment", tall, "--seed", "128,179,300", "--range", "200:3000", "--mode", "3d", "--memory", "300M",
+    r = _ctui(["segment", tall, "--seed", "128,179,300", "--range", "200:3000", "--mode", "3d", "--memory", "500M",
                "--project", tmp_path / "x.ctui"])
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
-    assert "300.0 MB is allowed by the memory option" in r.stderr and "--crop 0," in r.stderr
+    assert "500.0 MB is allowed by the memory option" in r.stderr and "--crop 0," in r.stderr
     assert not (tmp_path / "x.ctui").exists()
     r = _ctui(["render", tall, "--mode", "mip", "--out", tmp_path / "m.png"], env={"CTUI_MEMORY": "400M"})
     if r.returncode == 0:  # EGL present: the render ran from an overview and said so

@@ -30,11 +30,11 @@ PEAKS: dict[str, tuple[int, float]] = {
     "info": (60 * MB, 0.05),
     "load": (60 * MB, 1.1),
     "open": (300 * MB, 2.0),  # the TUI: the series, labels, slice views
-    "segment": (150 * MB, 3.5),  # 300 slices: 4.3x, 1,000: 2.4x (one blob through every slice)
-    "auto": (150 * MB, 3.5),
-    "drift": (150 * MB, 3.5),
-    "mesh": (80 * MB, 2.2),  # 300: 2.5x, 1,000: 2.1x
-    "render": (200 * MB, 4.0),  # 300: 5.1x, 1,000: 4.3x
+    "segment": (420 * MB, 2.0),  # 300 slices: 652 MB, 1,000: 1,201 MB (one blob through every slice)
+    "auto": (420 * MB, 2.0),
+    "drift": (420 * MB, 2.0),
+    "mesh": (80 * MB, 2.2),  # 300: 375 MB, 1,000: 1,069 MB
+    "render": (200 * MB, 3.5),  # 300: 674 MB (MIP); a DVR adds its gradients (4 bytes a voxel, at most 320 MB)
 }
 #: address space the libraries map without using it (numba/LLVM, thread stacks): counted
 #: against RLIMIT_AS only
