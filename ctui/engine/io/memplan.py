@@ -76,14 +76,15 @@ class MemoryPlan:
 
 def parse_memory(text: Any, option: str = "memory") -> int:
     """``"4G"``, ``"512M"``, ``"1.5GB"`` or a number of bytes -> bytes; one-line error otherwise."""
+    key = "memory" if option == "memory" else None  # CTUI_MEMORY is no option of an action
     t = str(text).strip().upper().removesuffix("B").removesuffix("I")
     mult = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}.get(t[-1:], 1)
     try:
         val = float(t[:-1] if t[-1:] in "KMGT" else t)
     except (ValueError, IndexError):
-        raise CtuiError(f"{option} {text!r}: expected a size such as 4G, 512M or bytes", option=option) from None
+        raise CtuiError(f"{option} {text!r}: expected a size such as 4G, 512M or bytes", option=key) from None
     if not (val > 0 and val * mult < 1 << 60):
-        raise CtuiError(f"{option} {text!r}: expected a positive size such as 4G", option=option)
+        raise CtuiError(f"{option} {text!r}: expected a positive size such as 4G", option=key)
     return int(val * mult)
 
 
@@ -179,10 +180,13 @@ def plan(command: str, path: Any, *, memory: Any = None, overview: bool = False,
     """The :class:`MemoryPlan` of ``command`` on the series at ``path`` (headers only);
     ``overview``: the command may work from a downsampled copy (volume rendering)."""
     limit, source = memory_limit(memory)
-    p = Path(os.fspath(path[0] if isinstance(path, (list, tuple)) and path else path))
-    if command not in PEAKS or not p.exists():
+    try:
+        p = Path(os.fspath(path[0] if isinstance(path, (list, tuple)) and path else path))
+        if command not in PEAKS or not p.exists():
+            raise ValueError
+        nbytes, compressed = _file_bytes(p)
+    except (OSError, ValueError, TypeError):  # a glob pattern, a name with NUL...: the loader says what is wrong
         return MemoryPlan(command, "unknown", "no estimate for this input", limit_bytes=limit, limit_source=source)
-    nbytes, compressed = _file_bytes(p)
     bound = nbytes * (_COMPRESSION if compressed else 1.0)
     if estimate(command, int(bound)) <= limit:  # quick: the files alone show that it fits
         return MemoryPlan(command, "memory", f"{command} needs at most {fmt_bytes(estimate(command, int(bound)))} "
