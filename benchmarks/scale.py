@@ -16,6 +16,9 @@ beside its wall time:
 * ``mesh``: ``ctui mesh SERIES --iso 300``; ``render``: ``ctui render SERIES --mode mip``;
 * ``measure``: ``ctui measure P --json``; ``export``: ``ctui export P --format dicom-seg``
   (DICOM only: the SEG references the source images).
+* ``tui`` (only when named in ``--commands``): ``benchmarks/first_paint.py`` on the series
+  (first slice and workspace, in tmux) and ``benchmarks/tui.py --slices N`` (slice step and
+  brush, median and p90; its last line is printed).
 
 ``--limit 4G`` runs every command with RLIMIT_AS at that size (and ``CTUI_MEMORY``): each must
 succeed or refuse in one line; the line is printed. ``--tree``: run another checkout's ctui
@@ -129,8 +132,9 @@ def _limit(nbytes: int | None):
     return pre
 
 
-def run(cmd: list[str], *, limit: int | None) -> tuple[float, int, int, str]:
-    """(wall s, peak RSS bytes, exit code, last stderr/stdout line) of one child process."""
+def run(cmd: list[str], *, limit: int | None, lines: str = "") -> tuple[float, int, int, str]:
+    """(wall s, peak RSS bytes, exit code, last stderr/stdout line) of one child process
+    (``lines``: the stdout lines holding one of these words, "|"-separated, instead)."""
     env = dict(os.environ, CTUI_NO_PROGRESS="1", PYTHONPATH=str(TREE))
     if limit:
         env["CTUI_MEMORY"] = str(limit)
@@ -141,9 +145,12 @@ def run(cmd: list[str], *, limit: int | None) -> tuple[float, int, int, str]:
         dt = time.perf_counter() - t
         out.seek(0)
         err.seek(0)
-        text = (err.read().decode(errors="replace").strip() or out.read().decode(errors="replace").strip())
+        stdout, stderr = out.read().decode(errors="replace").strip(), err.read().decode(errors="replace").strip()
     rc = os.waitstatus_to_exitcode(status)
+    text = stderr or stdout
     last = text.splitlines()[-1] if text else ""
+    if lines and rc == 0:
+        last = "; ".join(" ".join(ln.split()) for ln in stdout.splitlines() if any(w in ln for w in lines.split("|")))
     return dt, int(usage.ru_maxrss) * 1024, rc, last
 
 
@@ -206,6 +213,13 @@ def main() -> None:
                     res = "ok" if rc == 0 else f"exit {rc}: {last[:150]}"
                     print(f"{label:>16s} {name:>8s} {dt:7.1f} {peak / 2**20:8.0f} {peak / series_bytes:8.2f}  {res}",
                           flush=True)
+                if "tui" in wanted:  # first slice and workspace (tmux), slice step and brush (headless)
+                    for script, extra in (("first_paint.py", ["--runs", "1", str(path)]),
+                                          ("tui.py", ["--slices", str(nz), "--n", "20"])):
+                        dt, peak, rc, last = run([sys.executable, str(ROOT / "benchmarks" / script), *extra],
+                                                 limit=limit, lines="first slice|median")
+                        print(f"{label:>16s} {'tui':>8s} {dt:7.1f} {peak / 2**20:8.0f} {peak / series_bytes:8.2f}  "
+                              f"{script}: {last[:400] if rc == 0 else f'exit {rc}: ' + last[:150]}", flush=True)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
 
