@@ -34,7 +34,7 @@ PEAKS: dict[str, tuple[int, float]] = {
     "auto": (420 * MB, 2.0),
     "drift": (420 * MB, 2.0),
     "mesh": (80 * MB, 2.2),  # 300: 375 MB, 1,000: 1,069 MB
-    "render": (200 * MB, 3.5),  # 300: 674 MB (MIP); a DVR adds its gradients (4 bytes a voxel, at most 320 MB)
+    "render": (500 * MB, 2.6),  # MIP 300: 577 MB, 1,000: 1,285 MB; a DVR adds its gradients (<= 2 x 320 MB)
 }
 #: address space the libraries map without using it (numba/LLVM, thread stacks): counted
 #: against RLIMIT_AS only
