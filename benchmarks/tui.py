@@ -197,13 +197,25 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=60, help="slice changes timed per renderer")
     ap.add_argument("--size", default="160x50", help="terminal size COLSxROWS")
+    ap.add_argument("--slices", type=int, default=24, help="slices of the series (e.g. 2000: a big series)")
+    ap.add_argument("--profile", action="store_true", help="print where ctui's slice steps spend their time")
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.lower().split("x"))
     import psutil
 
     proc = psutil.Process()
-    vol = make_volume()
+    vol = make_volume(args.slices)
     rss0 = proc.memory_info().rss
+    if args.profile:
+        import cProfile
+        import pstats
+
+        prof = cProfile.Profile()
+        prof.enable()
+        asyncio.run(bench_ctui(vol, (w, h), args.n))
+        prof.disable()
+        pstats.Stats(prof).sort_stats("cumulative").print_stats(40)
+        return 0
     print(f"series {vol.shape} int16, terminal {w}x{h}, half-block, {args.n} slice changes each")
     ct = asyncio.run(bench_ctui(vol, (w, h), args.n))
     rss_ctui = proc.memory_info().rss

@@ -85,8 +85,29 @@ def main(argv: list[str] | None = None) -> int:
             sys.stdout = stdout
 
 
+def _memory_plan(args: argparse.Namespace) -> None:
+    """A command about to load a series: refused in one line when its estimated peak will not
+    fit (``actions.opened.memory_plan`` names what would); a volume render from an overview."""
+    path = getattr(args, "path", None) or getattr(args, "input", None)
+    if args.command not in ("segment", "mesh", "render", "auto", "drift") or getattr(args, "labels", None) or not path:
+        return
+    from ctui.commands.info import load_kwargs
+    from ctui.engine.actions.opened import memory_plan
+    from ctui.engine.core.errors import CtuiError
+
+    volume = args.command == "render" and getattr(args, "mode", None) in (None, "mip", "minip", "dvr") \
+        and getattr(args, "iso", None) is None
+    plan = memory_plan(args.command, path, overview=volume, **load_kwargs(args))
+    if plan.mode == "refuse":
+        raise CtuiError(plan.reason, path=path[0] if isinstance(path, list) else path, option="memory")
+    if plan.mode == "overview":
+        args.downsample = ",".join([str(plan.downsample)] * 3)
+        print(plan.summary(), file=sys.stderr)
+
+
 def _run(args: argparse.Namespace) -> int:
     try:
+        _memory_plan(args)
         rc = args.func(args)
         sys.stdout.flush()  # a closed pipe shows up here, not at exit
     except BrokenPipeError:

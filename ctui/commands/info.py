@@ -24,6 +24,7 @@ def add_load_options(p: argparse.ArgumentParser, *, series: bool = True) -> None
     g.add_argument("--crop", help="z0,z1,y0,y1,x0,x1 voxel ranges to load (end exclusive; empty = edge)")
     g.add_argument("--downsample", help="N (stride in y and x) or sz,sy,sx strides")
     g.add_argument("--no-resample", action="store_true", help="keep unevenly spaced DICOM slices as they are")
+    g.add_argument("--memory", help="memory the command may use, e.g. 4G (default: CTUI_MEMORY, else what is free)")
 
 
 def load_kwargs(args: argparse.Namespace) -> dict:
@@ -33,7 +34,7 @@ def load_kwargs(args: argparse.Namespace) -> dict:
                         shape=getattr(args, "shape", None), dtype=getattr(args, "dtype", None),
                         offset=getattr(args, "offset", None), crop=getattr(args, "crop", None),
                         downsample=getattr(args, "downsample", None),
-                        resample=not getattr(args, "no_resample", False))
+                        resample=not getattr(args, "no_resample", False), memory=getattr(args, "memory", None))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -7,6 +7,7 @@ import os
 from typing import Any, Sequence
 
 from ctui.engine.core.volume import Volume
+from ctui.engine.io import memplan
 from ctui.engine.io.series import inspect
 
 
@@ -42,4 +43,17 @@ def describe_series(path: str | os.PathLike | Sequence[str], **load_options: Any
     if vol.slice_positions is not None:
         d["slice_positions_mm"] = [round(float(v), 4) for v in vol.slice_positions]
     d["meta"] = {k: v for k, v in vol.meta.items() if isinstance(v, (str, int, float, bool, list, dict))}
+    d["memory_plan"] = memory_plans(vol.shape, load_options.get("memory_limit"))
     return vol, d
+
+
+def memory_plans(shape: Sequence[int], memory: Any = None) -> dict:
+    """Each command's :class:`~ctui.engine.io.memplan.MemoryPlan` for a series of ``shape``
+    (nz, ny, nx): ``{"limit_bytes", "limit_source", command: {"mode", "need_bytes", "reason"}}``."""
+    limit, source = memplan.memory_limit(memory)
+    out: dict[str, Any] = {"limit_bytes": limit, "limit_source": source}
+    if len(shape) == 3:
+        for cmd in ("open", "segment", "mesh", "render"):
+            p = memplan.decide(cmd, tuple(int(v) for v in shape), limit=limit, source=source)
+            out[cmd] = {"mode": p.mode, "need_bytes": p.need_bytes, "reason": p.reason}
+    return out

@@ -22,7 +22,9 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
+from ctui.engine.io import memplan
 from ctui.engine.io.imports import is_label_file, label_kind, read_label_file
+from ctui.engine.io.memplan import MemoryPlan
 from ctui.engine.io.meshes import load_mesh
 from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
 from ctui.engine.io.series import load
@@ -168,6 +170,18 @@ def assumed(volume: Volume | None) -> list[str]:
     """One note per thing the loader assumed in place of the file (spacing, slices,
     orientation, values: ``Volume.assumptions``), for every command's report."""
     return [note_of(a) for a in volume.assumptions] if volume is not None else []
+
+
+def memory_plan(command: str, path: Any, *, overview: bool = False, **load_options: Any) -> MemoryPlan:
+    """The memory plan of ``command`` on the series at ``path`` (``io/memplan``: from the
+    headers, before loading): ``mode`` "memory", "overview" (only when ``overview``: the
+    command may work from a ``downsample``-times coarser copy), "refuse" (``reason``: one line
+    naming what would fit) or "unknown" (not a series). ``load_options["memory_limit"]``: the limit."""
+    first = path[0] if isinstance(path, (list, tuple)) and path else path
+    if not first or input_kind(os.fspath(first)) in ("project", "mesh", "mric"):  # (a .nii.gz may be either)
+        return MemoryPlan(command, "unknown", "not a series")
+    return memplan.plan(command, first, memory=load_options.pop("memory_limit", None), overview=overview,
+                        **load_options)
 
 
 def series_available(project: Project) -> bool:

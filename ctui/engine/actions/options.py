@@ -2,7 +2,7 @@
 
 Lists are comma-separated in (z, y, x) order: ``--shape 40,256,256`` (or ``256,256`` per
 slice), ``--spacing 2,0.5,0.5``, ``--crop z0,z1,y0,y1,x0,x1``, ``--downsample 2`` or
-``1,2,2``. :func:`load_options` turns the text into keyword arguments for
+``1,2,2``, ``--memory 4G``. :func:`load_options` turns the text into keyword arguments for
 :func:`ctui.engine.io.series.load`, with a one-line error naming the option
 (``CtuiError.option``: the CLI adds its flag).
 """
@@ -92,8 +92,11 @@ def parse_pair(text: Any, option: str, *, integer: bool = False, form: str = "LO
 
 
 def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, dtype: Any = None,
-                 offset: Any = None, crop: Any = None, downsample: Any = None, resample: bool = True) -> dict:
-    """Keyword arguments for ``ctui.engine.io.series.load`` from option text."""
+                 offset: Any = None, crop: Any = None, downsample: Any = None, resample: bool = True,
+                 memory: Any = None) -> dict:
+    """Keyword arguments for ``ctui.engine.io.series.load`` from option text. ``memory``
+    (``4G``, ``512M``, bytes) -> ``memory_limit`` bytes: the loader's and the memory plan's
+    limit (``io/memplan``; else ``CTUI_MEMORY``, else what is available)."""
     kw: dict[str, Any] = {}
     if series not in (None, ""):
         s = str(series).strip()
@@ -116,4 +119,8 @@ def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, 
         kw["downsample"] = vals[0] if len(vals) == 1 else vals
     if not resample:
         kw["resample"] = False
+    if memory not in (None, ""):
+        from ctui.engine.io.memplan import parse_memory  # (this module is imported by `ctui --help`)
+
+        kw["memory_limit"] = parse_memory(memory)
     return kw

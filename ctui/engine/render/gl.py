@@ -15,7 +15,7 @@ from ctui.engine.render.camera import CameraSetup, look_at, ortho, setup_camera,
 from ctui.engine.render.gpu_objects import MeshGPU, Targets, vertex_normals  # noqa: F401 - vertex_normals: public here too
 from ctui.engine.render.scene import Scene, SceneMesh, SceneVolume, VOLUME_MODES
 from ctui.engine.render.transfer import resolve_preset, transfer_table
-from ctui.engine.render.volume_gpu import VolumeGPU
+from ctui.engine.render.volume_gpu import VolumeGPU, overview_step
 
 TF_SIZE = 1024
 
@@ -72,10 +72,11 @@ class GLEngine:
             old.release()
         return g
 
-    def _volume(self, vol: SceneVolume) -> VolumeGPU:
+    def _volume(self, vol: SceneVolume, *, step: int = 1, reduce: str = "stride") -> VolumeGPU:
         key = id(vol.data)
         g = self.volumes.get(key)
-        if g is not None and (g.ref is None or g.ref() is vol.data):
+        if g is not None and (g.ref is None or g.ref() is vol.data) and (g.step, g.reduce) == (
+                VolumeGPU.effective(vol, step, reduce)):
             self.volumes.move_to_end(key)
             return g
         if g is not None:
@@ -84,7 +85,7 @@ class GLEngine:
         while len(self.volumes) >= 2:
             _, old = self.volumes.popitem(last=False)
             old.release()
-        g = VolumeGPU(self.ctx, vol)
+        g = VolumeGPU(self.ctx, vol, step=step, reduce=reduce)
         self.volumes[key] = g
         return g
 
@@ -453,9 +454,12 @@ class GLEngine:
     def _volume_pass(self, scene: Scene, cs: CameraSetup, t: Targets, scene_tex, lpos, ldir):
         ctx = self.ctx
         opts = scene.options
-        g = self._volume(scene.volume)
         mode = {"mip": 0, "minip": 1, "dvr": 2}[scene.mode]
         w, h = t.size
+        s = float(np.clip(opts.volume_scale, 0.1, 1.0))
+        # an overview where the image cannot show more detail (orthographic views only)
+        step = overview_step(scene.volume.spacing, 2.0 * cs.half_height / max(1.0, h * s)) if cs.ortho else 1
+        g = self._volume(scene.volume, step=step, reduce=("max", "min", "stride")[mode])
         tab = self._tf(scene, g)
         wlo, whi = self._window_norm(scene, g)
         if mode == 2:
@@ -464,7 +468,6 @@ class GLEngine:
             kind, param, key = "mip", wlo, ("mip", round(wlo, 6))
         else:
             kind, param, key = "minip", whi, ("minip", round(whi, 6))
-        s = float(np.clip(opts.volume_scale, 0.1, 1.0))
         vsize = (max(1, int(round(w * s))), max(1, int(round(h * s))))
         fbo = t.volume_target(ctx, vsize)
         skip = self._proxy_depths(g, (kind, param, key), cs, t, vsize) if opts.empty_space_skipping else 0

@@ -19,30 +19,36 @@ GRADIENT_TEXTURE_MAX_VOXELS = 80_000_000  # 320 MB of RGBA8 gradients at most
 class VolumeGPU:
     """A volume as a 16-bit normalised 3D texture plus its brick min/max grid."""
 
-    def __init__(self, ctx, vol: SceneVolume) -> None:
+    def __init__(self, ctx, vol: SceneVolume, *, step: int = 1, reduce: str = "stride") -> None:
+        """``step``: the overview's stride at least (an image that cannot show more detail:
+        :func:`overview_step`); ``reduce``: how a block of step^3 voxels becomes one,
+        "stride" (its first voxel), "max" (MIP: nothing bright is lost) or "min" (MinIP)."""
         data = vol.data
-        step = 1
-        while data[::step, ::step, ::step].size > MAX_TEXTURE_VOXELS or max(s // step for s in data.shape) > 2048:
-            step += 1
-        self.step = step
-        src = data[::step, ::step, ::step] if step > 1 else data
+        self.step, self.reduce = step, reduce = self.effective(vol, step, reduce)
+        src = block_reduce(data, step, self.reduce) if step > 1 and self.reduce != "stride" else (
+            data[::step, ::step, ::step] if step > 1 else data)
         nz, ny, nx = src.shape
         self.dims = (nx, ny, nz)
         self.vmin = float(np.min(src))
         self.vmax = float(np.max(src))
         scale = 65535.0 / max(self.vmax - self.vmin, 1e-12)
-        u16 = np.empty(src.shape, np.uint16)
-        for z0 in range(0, nz, 32):  # slab by slab: no full-size float copy
+        self.tex = ctx.texture3d(self.dims, 1, None, dtype="nu2")
+        mins, maxs = [], []
+        for z0 in range(0, nz, 32):  # slab by slab: no full-size float or 16-bit copy
             sl = (np.asarray(src[z0:z0 + 32], np.float32) - self.vmin) * scale
-            u16[z0:z0 + 32] = np.clip(sl + 0.5, 0, 65535).astype(np.uint16)
-        self.tex = ctx.texture3d(self.dims, 1, u16.tobytes(), dtype="nu2")
+            u16 = np.clip(sl + 0.5, 0, 65535).astype(np.uint16)
+            self.tex.write(u16, viewport=(0, 0, z0, nx, ny, u16.shape[0]))
+            mins.append(_plane_reduce(u16, BRICK, np.minimum))
+            maxs.append(_plane_reduce(u16, BRICK, np.maximum))
         self.tex.filter = (ctx.LINEAR, ctx.LINEAR)
         self.tex.repeat_x = self.tex.repeat_y = self.tex.repeat_z = False
-        self.bmin, self.bmax = brick_minmax(u16, BRICK)
+        # brick min/max: x and y per slab, then z over the (64x smaller) stack: as brick_minmax
+        self.bmin = brick_reduce(np.concatenate(mins), BRICK, 0, np.minimum).astype(np.float32) / 65535.0
+        self.bmax = brick_reduce(np.concatenate(maxs), BRICK, 0, np.maximum).astype(np.float32) / 65535.0
         self._proxy_key: Any = None
         self._proxy = None  # (vbo, vao) or None when nothing is occupied
         self.occ: np.ndarray | None = None
-        self.nbytes = u16.nbytes
+        self.nbytes = nz * ny * nx * 2
         self.grad_tex = None
         self.ref = weakref.ref(data) if isinstance(data, np.ndarray) else None
         # geometry: voxel index (of the subsampled grid) -> world
@@ -50,6 +56,17 @@ class VolumeGPU:
         s = np.diag([step, step, step, 1.0])
         self.vox_to_world = a @ s
         self.world_to_vox = np.linalg.inv(self.vox_to_world)
+
+    @staticmethod
+    def effective(vol: SceneVolume, step: int, reduce: str) -> tuple[int, str]:
+        """(stride, reduction) a volume gets for the ``step`` asked: larger for volumes over
+        MAX_TEXTURE_VOXELS or 2048 voxels along an axis; "stride" at full resolution."""
+        shape = vol.data.shape
+        step = max(1, int(step))
+        while (int(np.prod([-(-n // step) for n in shape])) > MAX_TEXTURE_VOXELS
+               or max(n // step for n in shape) > 2048):
+            step += 1
+        return step, (reduce if step > 1 else "stride")
 
     def gradients(self, ctx, data: np.ndarray):
         """RGBA8 signed 3D texture: unit gradient (index space) and an edge weight
@@ -81,7 +98,7 @@ class VolumeGPU:
                 out[z0:z1, ..., 2] = np.rint(gz * inv).astype(np.int8)
                 # edge weight: 0 at noise-level gradients, 1 at >= ~2.5% of the range per voxel
                 out[z0:z1, ..., 3] = np.rint(np.clip((mag * 40.0 - 0.25) / 0.75, 0.0, 1.0) * 127.0).astype(np.int8)
-            self.grad_tex = ctx.texture3d((nx, ny, nz), 4, out.tobytes(), dtype="ni1")
+            self.grad_tex = ctx.texture3d((nx, ny, nz), 4, out, dtype="ni1")  # the array: no bytes copy
             self.grad_tex.filter = (ctx.LINEAR, ctx.LINEAR)
             self.grad_tex.repeat_x = self.grad_tex.repeat_y = self.grad_tex.repeat_z = False
             self.nbytes += out.nbytes
@@ -202,6 +219,11 @@ def brick_reduce(a: np.ndarray, b: int, axis: int, fn) -> np.ndarray:
     return np.moveaxis(out, -1, axis)
 
 
+def _plane_reduce(u16: np.ndarray, b: int, fn) -> np.ndarray:
+    """:func:`brick_reduce` along x then y (the first two steps of :func:`brick_minmax`)."""
+    return brick_reduce(brick_reduce(u16, b, 2, fn), b, 1, fn)
+
+
 def brick_minmax(u16: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-brick min and max (normalised 0..1) over each b^3 brick grown by one voxel
     (trilinear filtering and the gradients reach one voxel outside). Separable block
@@ -211,3 +233,22 @@ def brick_minmax(u16: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
         mx = brick_reduce(mx, b, ax, np.maximum)
         mn = brick_reduce(mn, b, ax, np.minimum)
     return mn.astype(np.float32) / 65535.0, mx.astype(np.float32) / 65535.0
+
+
+def overview_step(spacing, mm_per_pixel: float) -> int:
+    """The coarsest stride that still gives 1.5 voxels per image pixel along every axis
+    (1: the image can show every voxel; a MIP's block max keeps every bright voxel)."""
+    return max(1, int(mm_per_pixel / (1.5 * max(float(v) for v in spacing))))
+
+
+def block_reduce(data: np.ndarray, step: int, how: str) -> np.ndarray:
+    """``data`` (z, y, x) reduced by blocks of ``step`` voxels along every axis (the last
+    block may be partial) with max or min, one slab of ``step`` slices at a time."""
+    fn = np.maximum if how == "max" else np.minimum
+    nz, ny, nx = data.shape
+    iy, ix = np.arange(0, ny, step), np.arange(0, nx, step)
+    out = np.empty((len(range(0, nz, step)), len(iy), len(ix)), data.dtype)
+    for k, z0 in enumerate(range(0, nz, step)):
+        slab = fn.reduce(np.asarray(data[z0:z0 + step]), axis=0)
+        out[k] = fn.reduceat(fn.reduceat(slab, iy, axis=0), ix, axis=1)
+    return out

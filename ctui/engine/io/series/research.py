@@ -164,6 +164,11 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
             raise LoadError(f"NIfTI of {dt} voxels is not a scalar volume", path=path)
     out_dt = np.dtype(np.float32) if scaled or dt.kind in "fcV" else dt.newbyteorder("=")
     oshape = plan.out_shape(full)
+    if dt.kind in "iuf" and dt.fields is None and hasattr(proxy, "offset") and getattr(proxy, "order", "F") == "F":
+        data = _stream_nifti(path, nib, proxy, dt, full, plan, scaled=scaled, progress=progress,
+                             memory_limit=memory_limit)
+        return _finish(data, sp, direction, origin, path=path, fmt="NIfTI", skipped=skipped, warnings=warnings,
+                       plan=plan, full=full)
     # the proxy is sliced (crop, downsample, the first of several volumes): a gzip stream is
     # decompressed as it is read, never held whole (ctui info samples slices this way)
     check_memory(int(np.prod(oshape)) * (max(dt.itemsize, out_dt.itemsize) + out_dt.itemsize),
@@ -183,6 +188,58 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
         data = r * 0.299 + g * 0.587 + b * 0.114
     data = np.ascontiguousarray(data, dtype=out_dt)
     return _finish(data, sp, direction, origin, path=path, fmt="NIfTI", skipped=skipped, warnings=warnings, plan=plan, full=full)
+
+
+def _integral(v: Any) -> bool:
+    return v is None or (np.isfinite(float(v)) and float(v) == round(float(v)))
+
+
+def _stream_nifti(path: Path, nib: Any, proxy: Any, dt: np.dtype, full: tuple[int, int, int], plan: Any, *,
+                  scaled: bool, progress: Any, memory_limit: int | None) -> np.ndarray:
+    """The (cropped, downsampled) first volume of a NIfTI file read slice by slice from its
+    (possibly gzip) stream into the preallocated output: no full-size copy, no float copy
+    of integers. Scaled data is computed as nibabel does (``apply_read_scaling`` with the
+    proxy's slope and intercept, then float32), slice by slice; integers with an integral
+    slope and intercept are kept as int16 while every slice fits (the same values as
+    float32: |v| < 2**24), else the array becomes float32 once."""
+    from nibabel.volumeutils import apply_read_scaling
+
+    nz, ny, nx = full
+    oshape = plan.out_shape(full)
+    slope, inter = np.asanyarray(proxy.slope), np.asanyarray(proxy.inter)
+    as_int = scaled and dt.kind in "iu" and _integral(proxy.slope) and _integral(proxy.inter)
+    out_dt = np.dtype(np.int16) if as_int else np.dtype(np.float32) if scaled or dt.kind == "f" else dt.newbyteorder("=")
+    check_memory(int(np.prod(oshape)) * out_dt.itemsize, shape=oshape, path=path, limit=memory_limit)
+    out = np.empty(oshape, dtype=out_dt)
+    zsel = range(*plan.z.indices(nz))
+    zstop = max(zsel) + 1 if len(zsel) else 0
+    buf = np.empty(ny * nx, dtype=dt)
+    raw = memoryview(buf).cast("B")
+    k = 0
+    try:
+        with nib.openers.ImageOpener(proxy.file_like) as fh:
+            fh.seek(int(proxy.offset))
+            for z in range(zstop):
+                got = fh.readinto(raw)
+                if got != raw.nbytes:
+                    raise LoadError(f"the NIfTI data ends in slice {z} of {nz}", path=path)
+                if z not in zsel:
+                    continue
+                sl = buf.reshape(ny, nx)[plan.y, plan.x]
+                if scaled:
+                    sl = apply_read_scaling(sl, slope, inter)
+                    if as_int and out.dtype == np.int16 and sl.size and (sl.min() < -32768 or sl.max() > 32767):
+                        out = out.astype(np.float32)  # a value beyond int16: float32 from here on
+                out[k] = sl
+                k += 1
+                if progress is not None:
+                    progress(k, len(zsel))
+    except LoadError:
+        raise
+    except Exception as exc:
+        raise LoadError(f"cannot read the NIfTI data ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})",
+                        path=path) from None
+    return out
 
 
 # --------------------------------------------------------------------- NRRD
