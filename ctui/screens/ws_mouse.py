@@ -488,7 +488,9 @@ class MouseMixin(ToolsMixin):
         if cache is not None and cache[0] is src:
             return cache[1]
         seed = self._seed_mask(src) if src is self.pending.proposal else None
-        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed)
+        info = self.s.seg.objects.get(self.s.current) if seed is None else None  # an accepted object: its leaks
+        leaks = list((getattr(info, "settings", None) or {}).get("leaks", []))
+        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed, leaks=leaks)
         self._marks_cache = (src, found)
         return found
 
