@@ -82,3 +82,40 @@ def test_correct_organs_carry_no_leak_flag(abdomen, label):
     z, y, x = np.unravel_index(int(np.argmax(dt)), ref.shape)
     o = segment(vol, [(int(x), int(y), int(z))], []).objects[0]
     assert o.neck.get("leaks") == [], o.neck.get("leaks")
+
+
+async def test_the_review_strip_marks_where_the_leak_enters(monkeypatch, tmp_path):
+    """An accepted leaky object: the strip draws ``L`` at the entry slice, ``}`` goes there and the message line
+    names the background seed."""
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.session import Session
+    from ctui.screens.strip import ReviewStrip
+    from ctui.screens.testing import wait_workspace
+
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+    vol, _a, _b = dumbbell()
+    s = Session(vol, source_path="synthetic", z=20)
+    with graphics.using_graphics("halfblock"):
+        app = CtuiApp(session=s, autosave_s=1e9)
+        async with app.run_test(size=(120, 40)) as pilot:
+            await wait_workspace(pilot, app)
+            ws = app.workspace
+            res = segment(vol, [(32, 32, 20)], [(50, 200)], options=SegmentOptions(neck_mm=0), segmentation=s.seg)
+            entry = res.objects[0].neck["leaks"][0]["slice"]
+            s.current = res.objects[0].id
+            s.seg.objects[s.current].seeds.append((32, 32, 20))
+            ws.volumes.version += 1
+            ws.refresh_view()
+            ws.update_strip()
+            strip = ws.query_one("#strip", ReviewStrip)
+            assert "on" in strip.classes and entry in strip.leaked
+            for _ in range(4):
+                if s.z == entry:
+                    break
+                await pilot.press("right_curly_bracket")
+            assert s.z == entry
+            status = str(ws.query_one("#status").render())
+            assert "leak enters here" in status and "background seed at" in status, status
+            assert not app.internal_errors

@@ -515,9 +515,11 @@ class MouseMixin(ToolsMixin):
         seed_area = int(self._seed_mask(p).sum()) if p is not None else 0
         prof = review.profile(src, self.s.shape[0], seed_area=seed_area)
         marks = [m.z for m in self.review_marks()]
+        leaked = [m.z for m in self.review_marks() if "leak" in m.kind]
         keys = "} { marks, C cut, A accept to here" if p is not None else "} { marks"
         hint = f"{len(marks)} mark{'s' if len(marks) != 1 else ''}: {keys}" if marks else ("no marks" if p is not None else "")
-        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}")
+        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}",
+                       leaked=leaked)
         strip.set_class(True, "on")
 
     def _go_slice(self, z: int) -> None:
