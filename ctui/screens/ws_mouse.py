@@ -489,7 +489,7 @@ class MouseMixin(ToolsMixin):
             return cache[1]
         seed = self._seed_mask(src) if src is self.pending.proposal else None
         info = self.s.seg.objects.get(self.s.current) if seed is None else None  # an accepted object: its leaks
-        leaks = list((getattr(info, "settings", None) or {}).get("leaks", []))
+        leaks = list(getattr(src, "leak_entries", None) or (getattr(info, "settings", None) or {}).get("leaks", []))
         found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed, leaks=leaks)
         self._marks_cache = (src, found)
         return found

@@ -199,7 +199,8 @@ def leak_check(seg: Any, r: Any, start: Any, box: tuple[slice, slice, slice] | N
         return []
     x, y, z = start.seed
     seed = (z - box[0].start, y - box[1].start, x - box[2].start)
-    found = find_leaks(seg.labels[box] == r.id, spacing, seed, origin=tuple(b.start for b in box))
+    found = find_leaks(seg.labels[box] == r.id, spacing, seed, origin=tuple(b.start for b in box),
+                       shape=seg.labels.shape)
     r.neck["leaks"] = [lk.to_dict() for lk in found]
     info = seg.objects.get(r.id)
     if info is not None:  # kept with the object: the review strip marks them

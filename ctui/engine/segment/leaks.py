@@ -52,8 +52,17 @@ class Leak:
                 f"{self.click[2]} (deep in it) to remove it, if it is not part of the object")
 
 
-def _edt(mask: np.ndarray, spacing) -> np.ndarray:
-    return ndimage.distance_transform_edt(np.pad(mask, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
+def _edt(mask: np.ndarray, spacing, cut=((False, False),) * 3) -> np.ndarray:
+    """Distance (mm) to the object's edge; a face in ``cut`` ((before, after) per axis: the volume ends
+    there) is no edge: an organ cut off by the field of view is not thin there."""
+    pad = np.pad(mask, 1)
+    for ax, (a, b) in enumerate(cut):
+        for on, src, dst in ((a, 1, 0), (b, -2, -1)):
+            if on:
+                idx_s, idx_d = [slice(None)] * 3, [slice(None)] * 3
+                idx_s[ax], idx_d[ax] = src, dst
+                pad[tuple(idx_d)] = pad[tuple(idx_s)]
+    return ndimage.distance_transform_edt(pad, sampling=spacing)[1:-1, 1:-1, 1:-1]
 
 
 def _core(mask: np.ndarray, dt: np.ndarray, spacing, seed: tuple[int, int, int], r: float) -> np.ndarray:
@@ -70,10 +79,11 @@ def _core(mask: np.ndarray, dt: np.ndarray, spacing, seed: tuple[int, int, int],
     return lab == at
 
 
-def find_leaks(mask: np.ndarray, spacing, seed_zyx, *, origin=(0, 0, 0)) -> list[Leak]:
+def find_leaks(mask: np.ndarray, spacing, seed_zyx, *, origin=(0, 0, 0), shape=None) -> list[Leak]:
     """The leaks of a bool (z, y, x) object ``mask`` (its bounding box; ``origin`` the box's first voxel in the
-    volume) seeded at ``seed_zyx`` (box coordinates), ``spacing`` (dz, dy, dx) mm. Voxels in the result are
-    volume coordinates (x, y, z). Sorted by volume, largest first."""
+    volume, ``shape`` the volume's: the box's faces on the volume's are no edge) seeded at ``seed_zyx`` (box
+    coordinates), ``spacing`` (dz, dy, dx) mm. Voxels in the result are volume coordinates (x, y, z). Sorted by
+    volume, largest first."""
     sp = np.asarray(spacing, np.float64)
     step = 2 if mask.size > MAX_VOXELS else 1
     m = mask[::step, ::step, ::step] if step > 1 else mask
@@ -81,7 +91,9 @@ def find_leaks(mask: np.ndarray, spacing, seed_zyx, *, origin=(0, 0, 0)) -> list
     seed = tuple(min(int(v) // step, s - 1) for v, s in zip(seed_zyx, m.shape))
     if not m.any():
         return []
-    dt = _edt(m, sp_m)
+    cut = ((False, False),) * 3 if shape is None else tuple(
+        (int(o) == 0, int(o) + n >= int(full)) for o, n, full in zip(origin, mask.shape, shape))
+    dt = _edt(m, sp_m, cut)
     depth = float(dt[seed]) if m[seed] else float(dt.max())
     r = CORE_FRAC * depth
     if r < 1.5 * float(sp_m.max()):
