@@ -405,7 +405,7 @@ def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int,
 
     dt = ndimage.distance_transform_edt(np.pad(ref, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
     deep = dt >= min(6.0, 0.5 * float(dt.max()))
-    size = [max(1, int(round(10.0 / float(sp)))) | 1 for sp in spacing]
+    size = [max(1, round(10.0 / float(sp))) | 1 for sp in spacing]
     f = data.astype(np.float64)
     sd = np.sqrt(np.maximum(ndimage.uniform_filter(f * f, size) - ndimage.uniform_filter(f, size) ** 2, 0))
     return tuple(int(v) for v in np.unravel_index(int(np.argmax(np.where(deep, sd, -1))), ref.shape))

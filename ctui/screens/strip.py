@@ -71,7 +71,7 @@ class ReviewStrip(Widget):
         slices where a leak enters."""
         self.profile = profile
         self.marked = set(int(z) for z in marked)
-        self.leaked = set(int(z) for z in leaked)
+        self.leaked = {int(z) for z in leaked}
         self.cursor = int(cursor)
         self.seed = seed
         self.hint = hint
