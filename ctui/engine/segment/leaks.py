@@ -11,7 +11,8 @@ reports, for each piece outside the core of meaningful volume that touches it th
 * ``click``: the piece's deepest voxel (x, y, z), the background seed that removes it.
 
 The segment action turns each into a warning and a review mark ("leak enters here"); the TUI's strip draws it.
-Runs on the object's bounding box (a box over ``MAX_VOXELS`` is halved on every axis first).
+Runs on the object's bounding box (a box over ``MAX_VOXELS`` is sampled every 2nd, 3rd ... voxel first: a box
+134 x 512 x 512 full in 0.3 s, 2.7 s halved).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ MIN_ML = 2.0  # pieces smaller than this (mL) ...
 MIN_SHARE = 0.04  # ... or than this share of the object are not reported
 NARROW = 0.65  # a contact thinner (the object's depth there) than this many times the piece's depth is a neck
 MIN_DEPTH_VOX = 1.5  # a piece shallower (depth in its largest spacings) is a rind the opening shaved off
-MAX_VOXELS = 6_000_000
+MAX_VOXELS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ def find_leaks(mask: np.ndarray, spacing, seed_zyx, *, origin=(0, 0, 0), shape=N
     coordinates), ``spacing`` (dz, dy, dx) mm. Voxels in the result are volume coordinates (x, y, z). Sorted by
     volume, largest first."""
     sp = np.asarray(spacing, np.float64)
-    step = 2 if mask.size > MAX_VOXELS else 1
+    step = max(1, int(np.ceil(np.cbrt(mask.size / MAX_VOXELS))))
     m = mask[::step, ::step, ::step] if step > 1 else mask
     sp_m = sp * step
     seed = tuple(min(int(v) // step, s - 1) for v, s in zip(seed_zyx, m.shape))
