@@ -96,9 +96,9 @@ def find_leaks(mask: np.ndarray, spacing, seed_zyx, *, origin=(0, 0, 0), shape=N
         (int(o) == 0, int(o) + n >= int(full)) for o, n, full in zip(origin, mask.shape, shape))
     dt = _edt(m, sp_m, cut)
     depth = float(dt[seed]) if m[seed] else float(dt.max())
-    r = CORE_FRAC * depth
-    if r < 1.5 * float(sp_m.max()):
+    if depth < 2.0 * float(sp_m.max()):
         return []  # too thin a seed neighbourhood for a core
+    r = max(CORE_FRAC * depth, 1.5 * float(sp_m.max()))
     core = _core(m, dt, sp_m, seed, r)
     rest = m & ~core
     if not rest.any():
