@@ -17,6 +17,10 @@ seeds' median and lowest Dice, the spread between seeds (lowest pairwise Dice), 
 seeds, on a box of ``PEER_MM`` around the seed: SimpleITK ConfidenceConnected (multiplier 2.5, radius 2,
 4 iterations) and scikit-image's random walker (the seed's 3x3x3 against the box's faces).
 
+Leak flags (``ctui.engine.segment.leaks``): each result's "a leak of ... enters at slice" warnings are counted, on
+correct results (0.8-1.25x the reference, Dice >= 0.8: false flags) and overall; a flagged result prints the Dice
+after a background seed at the flag's own suggested voxel.
+
 Run: python3 benchmarks/organs_sets.py [--set abdomen,contrast,spleen,hn,brain] [--seeds N] [--patients K]
      [--no-peers] [--modes slice,3d]
 """
@@ -24,6 +28,7 @@ Run: python3 benchmarks/organs_sets.py [--set abdomen,contrast,spleen,hn,brain] 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from pathlib import Path
@@ -198,6 +203,18 @@ def clicks(vol, ref, seed, got, mode: str) -> str:
     return ", ".join(out)
 
 
+def flagged(warns: list[str]) -> list[tuple[int, int, int]]:
+    """The background voxels (x, y, z) the leak flags suggest (``ctui.engine.segment.leaks``)."""
+    return [tuple(int(v) for v in m.groups()) for w in warns if w.startswith("a leak of")
+            for m in [re.search(r"background seed at (\d+),(\d+),(\d+)", w)] if m]
+
+
+def suggested(vol, ref, seed, got, mode: str, at: tuple[int, int, int]) -> str:
+    """The flag's own click: Dice before -> after under the default method."""
+    m, _w, _n = run_ctui(vol, seed, mode, background=[at])
+    return f"flag's click {at[0]},{at[1]},{at[2]} " + ("refused" if m is None else f"{dice(got, ref):.3f}->{dice(m, ref):.3f}")
+
+
 def pairwise_min(masks: list[np.ndarray]) -> float:
     got = [m for m in masks if m is not None]
     if len(got) < 2:
@@ -222,7 +239,7 @@ def main() -> int:
     modes = args.modes.split(",")
     print(f"{'set':8s} {'structure':22s} {'mode':5s} {'Dice':>6s} {'vol x':>6s} {'HD95':>6s} | {'rnd med':>7s} "
           f"{'rnd min':>7s} {'spread':>6s} | {'out':>3s} {'warned':>6s} | range (deepest)")
-    total = {"runs": 0, "out": 0, "warned": 0, "refused": 0}
+    total = {"runs": 0, "out": 0, "warned": 0, "refused": 0, "ok": 0, "ok_flagged": 0, "flagged": 0}
     per_set: dict[str, list[float]] = {}
     t0 = time.perf_counter()
     for set_name, name, vol, ref in cases(which, args.patients):
@@ -245,6 +262,14 @@ def main() -> int:
                 if not 0.5 <= ratio <= 2.0:
                     out += 1
                     warned += bool(warns)
+                flags = flagged(warns)
+                total["flagged"] += bool(flags)
+                if 0.8 <= ratio <= 1.25 and ds[-1] >= 0.8:  # a correct result: a flag here is a false one
+                    total["ok"] += 1
+                    total["ok_flagged"] += bool(flags)
+                if flags:
+                    print(f"{'':8s} {name:22s} {mode:5s} seed {i}: {len(flags)} leak flag(s), x{ratio:.2f}, "
+                          f"{suggested(vol, ref, s, got, mode, flags[0])}")
                 if ratio > 2.0 and args.clicks and i == 0:
                     print(f"{'':8s} {name:22s} {mode:5s} leak {ratio:.1f}x, one click: {clicks(vol, ref, s, got, mode)}")
                 if i == 0:
@@ -271,7 +296,8 @@ def main() -> int:
                 sys.stdout.flush()
     print(f"\nsummary ({time.perf_counter() - t0:.0f} s): {total['runs']} results, {total['refused']} refused, "
           f"{total['out']} outside 0.5-2x the reference volume, {total['warned']} of them warned "
-          f"({total['out'] - total['warned']} silent)")
+          f"({total['out'] - total['warned']} silent); leak flags on {total['flagged']} results, "
+          f"{total['ok_flagged']} of the {total['ok']} correct ones (0.8-1.25x, Dice >= 0.8)")
     for k, v in per_set.items():
         a = np.array(v)
         print(f"  {k:14s} median Dice {np.median(a):.3f}, >= 0.90: {int((a >= 0.9).sum())}/{len(a)}")

@@ -32,6 +32,8 @@ mouse cells go through ``ctui.screens.planes`` (the display is in the patient's 
 
     python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
     python3 benchmarks/tui_tasks.py --structures   # issue 37: the liver and the MR brain's lateral ventricles
+    python3 benchmarks/tui_tasks.py --hard   (issue 34: the msd spleen and the left kidney from their least
+        uniform part, one background click where the proposal leaks)
 """
 
 from __future__ import annotations
@@ -446,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
     ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
     ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
+    ap.add_argument("--hard", action="store_true", help="issue 34: the msd spleen and the left kidney from the seed in "
+                    "their least uniform part, with one background click where the proposal leaks")
     ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
                     "save, reopen) instead of the organs")
     ap.add_argument("--structures", action="store_true", help="issue 37's liver and MR lateral ventricles "
@@ -462,6 +466,8 @@ def main(argv: list[str] | None = None) -> int:
         return print_workflow(sizes, image, labels)
     if args.structures:
         return print_structures(sizes, data, Path(args.mr), use_range=args.range)
+    if args.hard:
+        return print_hard(sizes, data.parent)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"
@@ -493,6 +499,113 @@ def print_workflow(sizes, image: Path, labels: Path) -> int:
               f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['section'][:90]}"
               f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
     print("(DICOM-SEG needs a DICOM series: this input is NIfTI, so STL only; the 3D view needs EGL: left out)")
+    return 0
+
+
+# --------------------------------------------------------------- issue 34: a seed in the organ's least uniform part
+HARD = (("spleen (msd)", "msd_spleen_crop/sub-spleen2_ct.nii.gz", "msd_spleen_crop/sub-spleen2_ct_seg-manual.nii.gz", None),
+        ("kidney_left", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 3),
+        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2))
+
+
+def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int]:
+    """(z, y, x): of the organ's voxels at least 6 mm deep (or half its depth when thinner), the one whose 10 mm
+    neighbourhood spreads most (sd of the values): cortex beside medulla, a vessel beside the pulp."""
+    from scipy import ndimage
+
+    dt = ndimage.distance_transform_edt(np.pad(ref, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
+    deep = dt >= min(6.0, 0.5 * float(dt.max()))
+    size = [max(1, round(10.0 / float(sp))) | 1 for sp in spacing]
+    f = data.astype(np.float64)
+    sd = np.sqrt(np.maximum(ndimage.uniform_filter(f * f, size) - ndimage.uniform_filter(f, size) ** 2, 0))
+    return tuple(int(v) for v in np.unravel_index(int(np.argmax(np.where(deep, sd, -1))), ref.shape))
+
+
+def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int] | None:
+    """The background click (x, y, z): the first leak flag's voxel (``entries``: the object's settings["leaks"]),
+    else (the person's eye, played by the reference) the deepest point of the result's largest piece outside the
+    organ when it is over 1.2x."""
+    from scipy import ndimage
+
+    if entries:
+        return tuple(int(v) for v in entries[0]["click"])
+    if proposal_mask.sum() <= 1.2 * ref.sum():
+        return None
+    parts, n = ndimage.label(proposal_mask & ~ndimage.binary_dilation(ref))
+    if not n:
+        return None
+    big = parts == int(np.argmax(np.bincount(parts.ravel())[1:])) + 1
+    dt = ndimage.distance_transform_edt(np.pad(big, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
+    z, y, x = np.unravel_index(int(np.argmax(dt)), big.shape)
+    return int(x), int(y), int(z)
+
+
+async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int | None, *,
+                       out_dir: Path) -> dict:
+    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: to the
+    seed, fill, ``p``, ``a``); when the result leaks, ``g`` + the leak's voxel, ``B`` (a background seed), ``p``
+    again and ``a``. Events counted."""
+    from ctui.engine.actions.opened import open_input
+    from ctui.screens import graphics
+    from ctui.screens.app import CtuiApp
+    from ctui.screens.testing import answer_prompt, wait_workspace
+
+    graphics._chosen = "halfblock"
+    os.chdir(out_dir)
+    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
+    app = CtuiApp(str(image), autosave_s=1e9)
+    t0 = time.perf_counter()
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        await pilot.pause()
+        s, ws = app.session, app.workspace
+        truth = open_input(str(ref)).labels
+        organ = truth == label if label is not None else truth > 0
+        z, y, x = least_uniform_seed(s.volume.data, organ, s.volume.spacing)
+        c = Counter(pilot)
+
+        async def goto(xyz) -> None:
+            text = ",".join(map(str, xyz))
+            await c.press("g")
+            c.n += len(text) + 1
+            await answer_prompt(pilot, text)
+
+        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None)
+        got = row["proposal"]
+        info = s.seg.objects.get(s.current)
+        clicked = _leak_voxel((info.settings.get("leaks") or []) if info is not None else [],
+                              s.seg.labels == s.current, organ, s.volume.spacing) if got else None
+        if clicked is not None:  # the leak: a background seed in it (B at the voxel), p again, a
+            await goto(clicked)
+            await c.press("B")
+            await c.press("p")
+            got = await _wait_proposal(pilot, ws)
+            if got:
+                await c.press("a")
+        await pilot.pause()
+        result = s.seg.labels == s.current
+        errors = list(getattr(app, "internal_errors", []))
+    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "dice": dice(result, organ),
+            "volume_ratio": float(result.sum()) / max(int(organ.sum()), 1), "seconds": time.perf_counter() - t0,
+            "proposal": got, "failed": row["failed"], "errors": errors}
+
+
+def print_hard(sizes, shared: Path) -> int:
+    print("ctui TUI tasks (issue 34): one organ from the seed in its least uniform part (largest 10 mm sd, >= 6 mm "
+          "deep); a background click (the leak flag's voxel, else the leak's deepest point) when the proposal leaks")
+    print(f"{'size':>7} {'organ':<13} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z; click")
+    for name, img, lab, label in HARD:
+        if not (shared / img).exists():
+            print(f"skipped {name}: {shared / img} is missing")
+            continue
+        for size in sizes:
+            with tempfile.TemporaryDirectory() as tmp:
+                r = asyncio.run(hard_session(size, shared / img, shared / lab, label, out_dir=Path(tmp)))
+            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+                  f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}; "
+                  f"{'none' if r['clicked'] is None else ','.join(map(str, r['clicked']))}"
+                  f"{'' if r['proposal'] else ' (no proposal: ' + r['failed'][:150] + ')'}{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+    print("goal (issue 34): <= 12 events to an accepted organ, a background click included where needed")
     return 0
 
 

@@ -147,6 +147,7 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
         proposal = propagate.Proposal.of_mask(oid, seed[2], mask, stops=dict(obj.stops), necks=list(obj.necks),
                                               settings=dict(res.settings[0]))
         proposal.cuts = list(obj.cuts)
+        proposal.leak_entries = list(obj.neck.get("leaks", []))  # where leaks enter: the review strip's L marks
         settings = res.segmentation.objects[oid].settings
     except Cancelled:
         ws.post_message(SegmentationFailed("Segmentation", "cancelled"))

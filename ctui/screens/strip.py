@@ -2,7 +2,8 @@
 main view, with the slice cursor, the seed slice and the slices marked by
 :func:`ctui.engine.segment.review.marks` (the area jumps or the centre moves), and a
 second line of markers. A click on it goes to that slice (to the marked slice when the
-column holds one); ``{`` / ``}`` jump between marks (``ctui.screens.ws_mouse``)."""
+column holds one); ``{`` / ``}`` jump between marks (``ctui.screens.ws_mouse``). A leak's entry slice
+(:mod:`ctui.engine.segment.leaks`) is marked ``L``."""
 
 from __future__ import annotations
 
@@ -47,7 +48,8 @@ def bars(profile: np.ndarray, cols: list[tuple[int, int]]) -> list[int]:
 
 
 class ReviewStrip(Widget):
-    """Two lines: the sparkline and the markers (``▲`` the slice, ``s`` the seed, ``!`` a mark)."""
+    """Two lines: the sparkline and the markers (``▲`` the slice, ``s`` the seed, ``!`` a mark, ``L`` where a
+    leak enters)."""
 
     DEFAULT_CSS = """
     ReviewStrip { height: 2; width: 1fr; display: none; }
@@ -58,14 +60,18 @@ class ReviewStrip(Widget):
         super().__init__(id=id)
         self.profile: np.ndarray | None = None
         self.marked: set[int] = set()
+        self.leaked: set[int] = set()
         self.cursor = 0
         self.seed: int | None = None
         self.hint = ""
 
-    def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None, hint: str = "") -> None:
-        """``hint``: a short text drawn right of the bars when it fits (e.g. the keys)."""
+    def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None, hint: str = "",
+                 leaked=()) -> None:
+        """``hint``: a short text drawn right of the bars when it fits (e.g. the keys); ``leaked``: the marked
+        slices where a leak enters."""
         self.profile = profile
         self.marked = set(int(z) for z in marked)
+        self.leaked = {int(z) for z in leaked}
         self.cursor = int(cursor)
         self.seed = seed
         self.hint = hint
@@ -105,7 +111,7 @@ class ReviewStrip(Widget):
                 if a <= self.cursor <= b:
                     segs.append(Segment("▲", _CURSOR))
                 elif any(a <= z <= b for z in self.marked):
-                    segs.append(Segment("!", _MARK))
+                    segs.append(Segment("L" if any(a <= z <= b for z in self.leaked) else "!", _MARK))
                 elif self.seed is not None and a <= self.seed <= b:
                     segs.append(Segment("s", _SEED))
                 else:

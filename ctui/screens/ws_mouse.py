@@ -488,7 +488,9 @@ class MouseMixin(ToolsMixin):
         if cache is not None and cache[0] is src:
             return cache[1]
         seed = self._seed_mask(src) if src is self.pending.proposal else None
-        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed)
+        info = self.s.seg.objects.get(self.s.current) if seed is None else None  # an accepted object: its leaks
+        leaks = list(getattr(src, "leak_entries", None) or (getattr(info, "settings", None) or {}).get("leaks", []))
+        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed, leaks=leaks)
         self._marks_cache = (src, found)
         return found
 
@@ -513,9 +515,11 @@ class MouseMixin(ToolsMixin):
         seed_area = int(self._seed_mask(p).sum()) if p is not None else 0
         prof = review.profile(src, self.s.shape[0], seed_area=seed_area)
         marks = [m.z for m in self.review_marks()]
+        leaked = [m.z for m in self.review_marks() if "leak" in m.kind]
         keys = "} { marks, C cut, A accept to here" if p is not None else "} { marks"
         hint = f"{len(marks)} mark{'s' if len(marks) != 1 else ''}: {keys}" if marks else ("no marks" if p is not None else "")
-        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}")
+        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}",
+                       leaked=leaked)
         strip.set_class(True, "on")
 
     def _go_slice(self, z: int) -> None:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
-from ctui.engine.actions.segment_checks import body_check, check_background, sanity, tissue_check, wrap_check
+from ctui.engine.actions.segment_checks import body_check, check_background, leak_check, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -142,7 +142,7 @@ class ObjectResult:
         if self.cuts:
             zs = sorted({c["slice"] for c in self.cuts})
             where = f", cut at slice{'s' if len(zs) > 1 else ''} " + ",".join(map(str, zs[:6])) + ("..." if len(zs) > 6 else "")
-        noise = f", filled on a {self.denoise} (noise)" if self.denoise else ""
+        noise = (f", filled on a {self.denoise} (noise)" if self.denoise else "") + "".join(f", leak at slice {k['slice']}" for k in self.neck.get("leaks", [])[:3])
         return f"object {self.id}: {self.volume_ml:.1f} mL{sl}, range {rng}{noise}, {guard}{where}"
 
 
@@ -404,7 +404,7 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
         r.warnings.extend(sanity(r, start, spacing, opts))
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
-        r.warnings.extend(body_check(volume, seg, r))
+        r.warnings.extend(body_check(volume, seg, r) + leak_check(seg, r, start, box, spacing))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.segment.leaks import find_leaks
 from ctui.engine.segment.seeding import seed_range
 
 Seed = tuple[int, int, int]
@@ -187,3 +188,21 @@ def body_check(volume: Any, seg: Any, r: Any) -> list[str]:
             f"the range {r.range[0]:.0f}:{r.range[1]:.0f} (its values overlap the tissue around it), so the result is "
             "that tissue; draw a box around the structure, add background seeds in what it ran into, or give a "
             "narrower range"]
+
+
+def leak_check(seg: Any, r: Any, start: Any, box: tuple[slice, slice, slice] | None, spacing: tuple[float, ...]) -> list[str]:
+    """Warnings for the pieces that hang on the object by a narrow neck (:mod:`ctui.engine.segment.leaks`): each
+    names the slice and voxel where it enters and the background seed that removes it. The leaks go into
+    ``r.neck["leaks"]`` ({"slice", "at": [x, y, z], "volume_ml", "neck_mm", "depth_mm", "click": [x, y, z]}),
+    which ``--json`` lists, and into the object's settings, which the review strip marks."""
+    if box is None or r.voxels == 0 or start.seed is None:
+        return []
+    x, y, z = start.seed
+    seed = (z - box[0].start, y - box[1].start, x - box[2].start)
+    found = find_leaks(seg.labels[box] == r.id, spacing, seed, origin=tuple(b.start for b in box),
+                       shape=seg.labels.shape)
+    r.neck["leaks"] = [lk.to_dict() for lk in found]
+    info = seg.objects.get(r.id)
+    if info is not None:  # kept with the object: the review strip marks them
+        info.settings["leaks"] = [dict(d) for d in r.neck["leaks"]]
+    return [lk.message() for lk in found]

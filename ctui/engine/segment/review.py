@@ -14,7 +14,9 @@ the seed's side):
 * ``shift``: the centroid moves by more than ``shift_frac`` of the previous slice's
   equivalent radius (and more than one pixel): the fill jumped to another structure;
 * ``seed``: the seed slice itself is out of line, larger than both neighbours by more than
-  ``area_jump`` (the fill leaked on the slice every other slice grew from).
+  ``area_jump`` (the fill leaked on the slice every other slice grew from);
+* ``leak``: where a leak found by :mod:`ctui.engine.segment.leaks` enters (given as ``leaks``, the
+  segment action's dicts), with the background seed that removes it.
 """
 
 from __future__ import annotations
@@ -95,10 +97,11 @@ def _centroid(entry) -> tuple[float, float] | None:
 
 
 def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: np.ndarray | None = None,
-          area_jump: float = 0.5, min_px: int = 20, shift_frac: float = 0.5) -> list[Mark]:
+          area_jump: float = 0.5, min_px: int = 20, shift_frac: float = 0.5, leaks=()) -> list[Mark]:
     """The slices where the area jumps or the centroid moves (see the module docstring),
     sorted by slice. ``seed_mask``: bool (ny, nx) of the object on the seed slice (the
-    reference for the first slice on each side when the proposal has none there)."""
+    reference for the first slice on each side when the proposal has none there). ``leaks``:
+    dicts {"slice", "at": [x, y, z], "volume_ml", "click": [x, y, z]} (``ObjectResult.neck["leaks"]``)."""
     s = int(proposal.start_slice)
     entries = dict(proposal.masks)
     if s not in entries and seed_mask is not None and seed_mask.any():
@@ -127,9 +130,13 @@ def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: 
         nb = [int(entries[z][2].sum()) for z in (s - 1, s + 1) if z in entries]
         if nb and a_s > (1 + area_jump) * max(nb) and a_s - max(nb) > min_px:
             out.append(Mark(s, "seed", f"the seed slice holds {a_s} px, its neighbours {' and '.join(map(str, nb))} px"))
+    for lk in leaks:
+        (x, y, _z), c = lk["at"], lk["click"]
+        out.append(Mark(int(lk["slice"]), "leak", f"leak enters here (x {x}, y {y}, {lk['volume_ml']:.0f} mL): "
+                        f"background seed at {c[0]},{c[1]},{c[2]}"))
     merged: dict[int, Mark] = {}
     for m in out:
-        merged[m.z] = Mark(m.z, "jump+shift", f"{merged[m.z].why}; {m.why}") if m.z in merged else m
+        merged[m.z] = Mark(m.z, f"{merged[m.z].kind}+{m.kind}", f"{merged[m.z].why}; {m.why}") if m.z in merged else m
     return [merged[z] for z in sorted(merged)]
 
 
