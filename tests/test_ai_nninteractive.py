@@ -5,6 +5,8 @@ failure (no server, refused key, server full, a timeout, no client) is one line 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import socket
@@ -76,9 +78,13 @@ def expected(pos=(), neg=()) -> np.ndarray:
 
 
 def run_cli(args, capsys):
-    rc = cli_main(args)
-    out, err = capsys.readouterr()
-    return rc, out, err
+    """The CLI's exit status, stdout and stderr, caught by redirecting the streams for this call (capsys
+    read nothing once in the full suite under load: an earlier app's teardown had put back its streams)."""
+    capsys.readouterr()
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = cli_main(args)
+    return rc, out.getvalue(), err.getvalue()
 
 
 def test_registered():

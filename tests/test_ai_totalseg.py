@@ -7,6 +7,8 @@ it on the series' grid. Objects are named, on the grid, merged by policy; missin
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import stat
@@ -130,9 +132,13 @@ def project(path: Path) -> tuple[np.ndarray, list[dict]]:
 
 
 def run(args, capsys):
-    rc = cli_main(args)
-    out, err = capsys.readouterr()
-    return rc, out, err
+    """The CLI's exit status, stdout and stderr, caught by redirecting the streams for this call (capsys
+    read nothing once in the full suite under load: an earlier app's teardown had put back its streams)."""
+    capsys.readouterr()
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = cli_main(args)
+    return rc, out.getvalue(), err.getvalue()
 
 
 def test_classes_named_on_the_grid(env, tmp_path, capsys):
