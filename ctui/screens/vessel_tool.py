@@ -19,8 +19,8 @@ from ctui.screens.keytable import keys
 from ctui.screens.messages import JobProgress, SegmentationFailed, Status
 
 VESSEL_BINDINGS = keys("""
-D                    vessel_point     Vessel: the cursor is its start, then a waypoint
-O                    vessel_end       Vessel: the cursor is its end; extract it
+D                    vessel_point     Vessel: the cursor is its start, then a waypoint  hidden
+O                    vessel_end       Vessel: the cursor is its end; extract it         hidden
 """)
 
 _POINTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # workspace -> [(x, y, z), ...]
