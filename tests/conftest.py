@@ -7,6 +7,8 @@ be created.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from pathlib import Path
 
@@ -44,3 +46,15 @@ def lobster() -> np.ndarray:
     if not path.is_file():
         pytest.skip(f"{path} missing")
     return np.fromfile(path, np.uint8).reshape(56, 324, 301)
+
+
+def cli_streams(args: list[str]) -> tuple[int, str, str]:
+    """``ctui ARGS`` in this process: its exit status, stdout and stderr, caught by redirecting the streams for
+    the call (capsys read nothing once in the full suite under load: an earlier app's teardown had put
+    back its own streams)."""
+    from ctui.cli import main as cli_main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = cli_main(args)
+    return rc, out.getvalue(), err.getvalue()

@@ -5,8 +5,6 @@ failure (no server, refused key, server full, a timeout, no client) is one line 
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import socket
@@ -21,7 +19,7 @@ import pytest
 pytest.importorskip("nnInteractive.inference.remote", reason="nninteractive-client (pip install 'ctui[ai]')")
 
 from ai_server import NEG_R, POS_R, PromptServer  # noqa: E402 - after the skip
-from ctui.cli import main as cli_main  # noqa: E402
+from conftest import cli_streams  # noqa: E402
 from ctui.engine.actions.segment import METHODS, SegmentOptions, segment  # noqa: E402
 from ctui.engine.actions.series import Segmentation  # noqa: E402
 from ctui.engine.core.errors import CtuiError  # noqa: E402
@@ -78,13 +76,8 @@ def expected(pos=(), neg=()) -> np.ndarray:
 
 
 def run_cli(args, capsys):
-    """The CLI's exit status, stdout and stderr, caught by redirecting the streams for this call (capsys
-    read nothing once in the full suite under load: an earlier app's teardown had put back its streams)."""
     capsys.readouterr()
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli_main(args)
-    return rc, out.getvalue(), err.getvalue()
+    return cli_streams(args)
 
 
 def test_registered():

@@ -7,8 +7,6 @@ it on the series' grid. Objects are named, on the grid, merged by policy; missin
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import stat
@@ -21,7 +19,7 @@ import pytest
 
 nib = pytest.importorskip("nibabel")
 
-from ctui.cli import main as cli_main  # noqa: E402
+from conftest import cli_streams  # noqa: E402
 from ctui.engine.actions.auto import merge_classes  # noqa: E402
 from ctui.engine.io import totalseg  # noqa: E402
 
@@ -132,13 +130,8 @@ def project(path: Path) -> tuple[np.ndarray, list[dict]]:
 
 
 def run(args, capsys):
-    """The CLI's exit status, stdout and stderr, caught by redirecting the streams for this call (capsys
-    read nothing once in the full suite under load: an earlier app's teardown had put back its streams)."""
     capsys.readouterr()
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli_main(args)
-    return rc, out.getvalue(), err.getvalue()
+    return cli_streams(args)
 
 
 def test_classes_named_on_the_grid(env, tmp_path, capsys):
