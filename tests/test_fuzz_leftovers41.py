@@ -56,3 +56,45 @@ def test_killed_worker_noise_silenced_and_one_line_row(capsys):
     row = _failed_row(Job(1, "s", (0, 0, 0), None, name="s"), exc)
     assert row["status"] == "failed" and "worker process running it died" in row["error"]
     assert "\n" not in row["error"] and len(row["error"]) < 120
+
+
+# ----------------------------------------------------------------- DICOM-SEG made on another series
+@pytest.fixture(scope="module")
+def two_series(tmp_path_factory):
+    import numpy as np
+
+    from ctui.engine.io.dicomseg import source_datasets, write_seg
+    from ctui.engine.io.phantom import make_phantom, write_series
+    from ctui.engine.io.series import load
+
+    root = tmp_path_factory.mktemp("seg41")
+    vol, _ = make_phantom(shape=(6, 32, 32), spacing=(4.0, 10.0, 10.0), noise_sd=0, drift=False)
+    write_series(root / "a", vol, seed=1)
+    write_series(root / "b", vol, seed=2)  # same grid, other UIDs: another series (another study's)
+    va = load(root / "a")
+    labels = np.zeros(va.shape, np.uint8)
+    labels[1:5, 8:20, 8:20] = 1
+    write_seg(root / "seg.dcm", labels, source_datasets(root / "a", va), objects=[{"id": 1, "name": "box"}])
+    return root
+
+
+def test_seg_of_another_series_is_said(two_series):
+    from ctui.engine.actions.opened import open_input
+
+    own = open_input(two_series / "a", labels=two_series / "seg.dcm")
+    assert not any("another series" in n or "Frame of Reference" in n for n in own.notes), own.notes
+    other = open_input(two_series / "b", labels=two_series / "seg.dcm")
+    assert any("references 6 of its 6 source images outside this series" in n for n in other.notes), other.notes
+    assert int(other.labels.sum()) == 4 * 12 * 12  # still placed (same grid), but not in silence
+
+
+def test_seg_in_another_frame_of_reference_is_said(two_series):
+    import pydicom
+
+    from ctui.engine.actions.opened import open_input
+
+    ds = pydicom.dcmread(two_series / "seg.dcm")
+    ds.FrameOfReferenceUID = "1.2.3.4.5"
+    ds.save_as(two_series / "seg-for.dcm")
+    opened = open_input(two_series / "a", labels=two_series / "seg-for.dcm")
+    assert any("Frame of Reference mismatch" in n and "1.2.3.4.5" in n for n in opened.notes), opened.notes
