@@ -98,3 +98,40 @@ def test_seg_in_another_frame_of_reference_is_said(two_series):
     ds.save_as(two_series / "seg-for.dcm")
     opened = open_input(two_series / "a", labels=two_series / "seg-for.dcm")
     assert any("Frame of Reference mismatch" in n and "1.2.3.4.5" in n for n in opened.notes), opened.notes
+
+
+# ----------------------------------------------------------------- a 255-segment DICOM-SEG: one decode, not 255
+def test_255_segment_seg_is_decoded_in_few_calls_and_exactly(two_series, monkeypatch):
+    import highdicom as hd
+    import numpy as np
+
+    from ctui.engine.io import dicomseg
+    from ctui.engine.io.series import load
+
+    va = load(two_series / "a")
+    labels = np.zeros(va.shape, np.uint8)
+    flat = labels.reshape(-1)
+    flat[np.arange(255) * 23 + 5] = np.arange(1, 256)  # 255 one-voxel objects spread over the 6 slices
+    path = two_series / "seg255.dcm"
+    dicomseg.write_seg(path, labels, dicomseg.source_datasets(two_series / "a", va),
+                       objects=[{"id": i, "name": f"o{i}"} for i in range(1, 256)])
+    calls = []
+    real = hd.seg.Segmentation.get_volume
+
+    def counted(self, *a, **k):
+        calls.append(len(k.get("segment_numbers") or []))
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(hd.seg.Segmentation, "get_volume", counted)
+    c = dicomseg.read_seg(path)
+    assert calls == [255]  # was 255 calls of one segment each (60 s for `ctui measure --labels` on a real series)
+    assert [s.number for s in c.segments] == list(range(1, 256)) and c.voxel_counts() == [1] * 255
+    calls.clear()
+    monkeypatch.setattr(dicomseg, "SEG_CHUNK_BYTES", 100 * c.number_of_frames * 32 * 32)  # chunks of 100: 100+100+55
+    chunked = dicomseg.read_seg(path)
+    assert calls == [100, 100, 55]
+    assert all(np.array_equal(chunked.mask(k), c.mask(k)) for k in range(255))
+    from ctui.engine.io.imports import read_label_file
+
+    imp = read_label_file(path, grid=va)
+    assert np.array_equal(imp.labels, labels)  # every segment where it was written
