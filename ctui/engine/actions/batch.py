@@ -27,6 +27,7 @@ and whose outputs are still there.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
@@ -34,6 +35,7 @@ import logging
 import os
 import stat
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -173,6 +175,49 @@ def read_manifest(path: str | os.PathLike, *, default_outdir: str = "") -> list[
         raise CtuiError(f"not a readable CSV manifest (line {reader.line_num}: {exc})", path=p) from None
 
 
+def refuse_cross_writes(jobs: list[Job]) -> int:
+    """Mark failed (``job.error``) each job whose outdir or outputs lie inside (or are) another row's
+    series (folder or file): its files would join that series. Returns how many were refused.
+    Each series is stat'ed once and each output's folders once: linear in rows."""
+    ids: dict[tuple[int, int], Job] = {}
+    for j in jobs:
+        if j.series:
+            try:
+                st = os.stat(j.series)
+            except (OSError, ValueError):
+                continue
+            ids.setdefault((st.st_dev, st.st_ino), j)
+    refused = 0
+    for j in jobs:
+        if j.error or not ids:
+            continue
+        for out in (j.outdir, *j.outputs()):
+            other = _inside_other(out, ids, j)
+            if other is not None:
+                j.error = (f"its output {out} is inside row {other.row}'s series {other.series}; refusing to write "
+                           "into another series, choose another outdir")
+                refused += 1
+                break
+    return refused
+
+
+def _inside_other(path: str, ids: dict[tuple[int, int], Job], job: Job) -> Job | None:
+    """The job (not ``job``) whose series is ``path`` or one of its folders, else None."""
+    cur = os.path.realpath(path)
+    while True:
+        try:
+            st = os.stat(cur)
+            other = ids.get((st.st_dev, st.st_ino))
+            if other is not None and other is not job and os.path.realpath(other.series) != os.path.realpath(job.series):
+                return other
+        except (OSError, ValueError):
+            pass
+        parent = os.path.dirname(cur)
+        if parent == cur:
+            return None
+        cur = parent
+
+
 MAX_TABLE_BYTES = 64 << 20  # a manifest or results table larger than this is not one
 
 
@@ -295,6 +340,32 @@ def _done(row: dict | None) -> bool:
         row.get(k) and os.path.exists(row[k]) for k in ("project", "mesh"))
 
 
+@contextlib.contextmanager
+def _quiet_dask() -> Any:
+    """distributed's own loggers muted for the run: a worker that dies (killed, out of memory) makes the
+    scheduler, nanny and client log a dozen lines and tracebacks; its job's row says it in one line."""
+    names = ["distributed", *(n for n in list(logging.Logger.manager.loggerDict) if n.startswith("distributed."))]
+    old = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL + 1)
+    try:
+        with warnings.catch_warnings():  # its HTTP server on another port when 8787 is taken: no matter here
+            warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
+            yield
+    finally:
+        for n, level in old.items():
+            logging.getLogger(n).setLevel(level)
+
+
+def _failed_row(j: Job, exc: BaseException) -> dict:
+    """The one-line row of a job whose worker died or that could not be sent."""
+    if type(exc).__name__ == "KilledWorker":
+        msg = "the worker process running it died (killed, or out of memory?), on every retry"
+    else:
+        msg = f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+    return {"job": j.key, "name": j.name, "series": j.series, "status": "failed", "error": msg}
+
+
 @dataclass
 class BatchResult:
     """``rows`` in manifest order; ``ran``, ``skipped``, ``failed`` counts; ``results`` path."""
@@ -325,7 +396,7 @@ def _client(scheduler: str | None, workers: int | None, processes: bool) -> tupl
                 from None
     extra = {"env": dict.fromkeys(SINGLE_THREAD_ENV, "1")} if processes else {}  # one core per job
     cluster = LocalCluster(n_workers=max(1, int(workers or 1)), threads_per_worker=1, processes=processes,
-                           dashboard_address=None, silence_logs=logging.ERROR, **extra)
+                           dashboard_address=None, silence_logs=logging.CRITICAL, **extra)
     return Client(cluster), cluster
 
 
@@ -346,6 +417,7 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
     if not jobs:
         raise CtuiError("the manifest holds no job", path=manifest)
     check_output(out_s, inputs=[manifest, *(j.series for j in jobs if j.series)], label="the results table")
+    refuse_cross_writes(jobs)  # a row's outputs inside another row's series folder: that row fails, one line
     previous = read_results(out_s)
     rows: dict[int, dict] = {}
     todo = []
@@ -360,28 +432,28 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
     report(progress, len(rows), len(jobs), f"{len(rows)} done before")
     last_write = time.perf_counter()
     if todo:
-        client, cluster = _client(scheduler, workers, processes)
-        try:
-            futures = {client.submit(job_fn, j, pure=False, key=f"ctui-job-{j.key}-{j.row}"): j for j in todo}
-            for fut in as_completed(futures):
-                j = futures[fut]
-                try:
-                    row = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker died or the job could not be sent
-                    row = {"job": j.key, "name": j.name, "series": j.series, "status": "failed",
-                           "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
-                rows[j.row] = row
-                res.ran += 1
-                res.failed += row.get("status") != "ok"
-                if time.perf_counter() - last_write >= WRITE_EVERY_S:  # not after every job: quadratic in rows
-                    write_results(out_s, order())
-                    last_write = time.perf_counter()
-                report(progress, len(rows), len(jobs), f"{j.name}: {row.get('status')}")
-            write_results(out_s, order())
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        with _quiet_dask():
+            client, cluster = _client(scheduler, workers, processes)
+            try:
+                futures = {client.submit(job_fn, j, pure=False, key=f"ctui-job-{j.key}-{j.row}"): j for j in todo}
+                for fut in as_completed(futures):
+                    j = futures[fut]
+                    try:
+                        row = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - a worker died or the job could not be sent
+                        row = _failed_row(j, exc)
+                    rows[j.row] = row
+                    res.ran += 1
+                    res.failed += row.get("status") != "ok"
+                    if time.perf_counter() - last_write >= WRITE_EVERY_S:  # not after every job: quadratic in rows
+                        write_results(out_s, order())
+                        last_write = time.perf_counter()
+                    report(progress, len(rows), len(jobs), f"{j.name}: {row.get('status')}")
+                write_results(out_s, order())
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
     res.rows = order()
     res.seconds = time.perf_counter() - t0
     return res

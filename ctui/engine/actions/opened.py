@@ -265,7 +265,8 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
     if spacing is not None:
         load_options["spacing"] = spacing
     volume = load(s, **load_options)
-    imp = read_label_file(lp, grid=volume, frame_of_reference=_frame_of_reference(s, volume, lp))
+    frame, instances = _series_references(s, volume, lp)
+    imp = read_label_file(lp, grid=volume, frame_of_reference=frame, instances=instances)
     project = Project(source_path=os.path.abspath(s), source_options=dict(load_options), labels=imp.labels,
                       objects=imp.objects, window=tuple(volume.window) if volume.window else None)
     project.set_source(volume)
@@ -273,17 +274,20 @@ def open_with_labels(series: str | os.PathLike, labels: str | os.PathLike, *, sp
                   notes=assumed(volume) + list(imp.warnings), masks=imp.masks)  # a series with labels: as a project (TUI's of_volume)
 
 
-def _frame_of_reference(series: str, volume: Volume, labels: str) -> str:
-    """The DICOM series' FrameOfReferenceUID when ``labels`` is an RTSTRUCT (its contours are
-    checked against it), else "" (not read: a header pass over the series)."""
+def _series_references(series: str, volume: Volume, labels: str) -> tuple[str, set[str]]:
+    """(FrameOfReferenceUID, SOPInstanceUIDs) of the DICOM series when ``labels`` is an RTSTRUCT
+    or a DICOM-SEG (what they reference is checked against them), else ("", set()) (not read:
+    a header pass over the series)."""
     try:
-        if label_kind(labels) != "rtstruct":
-            return ""
-        from ctui.engine.io.dicomseg import source_datasets  # pydicom: only for an RTSTRUCT over its series
+        if label_kind(labels) not in ("rtstruct", "dicom-seg"):
+            return "", set()
+        from ctui.engine.io.dicomseg import source_datasets  # pydicom: only for DICOM labels over their series
 
-        return str(source_datasets(series, volume)[0].get("FrameOfReferenceUID", "") or "")
+        dss = source_datasets(series, volume)
+        return (str(dss[0].get("FrameOfReferenceUID", "") or ""),
+                {str(d.get("SOPInstanceUID", "")) for d in dss if d.get("SOPInstanceUID")})
     except (CtuiError, OSError, ValueError, IndexError):  # not a DICOM series, or not its own grid: no check
-        return ""
+        return "", set()
 
 
 def labels_only_volume(project: Project, path: str = "") -> Volume:

@@ -26,7 +26,7 @@ own full mask, so measuring an object (:meth:`ImportedLabels.mask`) uses all its
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -236,10 +236,12 @@ def assemble(mask_of: Callable[[int], np.ndarray], numbers: Sequence[int], names
 
 
 # =========================================================================== readers
-def _from_seg(p: Path, grid: Geometry | None) -> ImportedLabels:
+def _from_seg(p: Path, grid: Geometry | None, frame_of_reference: str = "",
+              instances: Collection[str] = ()) -> ImportedLabels:
     from ctui.engine.io.dicomseg import read_seg  # DICOM label readers: loaded for a DICOM-SEG/RTSTRUCT only
 
     c = read_seg(p)
+    c.warnings[:0] = _seg_reference_warnings(c, frame_of_reference, instances)
     geom = grid if grid is not None else c.geometry
 
     def mask_of(k: int) -> np.ndarray:
@@ -305,6 +307,21 @@ def _frame_warnings(c: Any, frame_of_reference: str) -> list[str]:
             f"in {frame_of_reference}: positions may not correspond (check it was drawn on this series)"]
 
 
+def _seg_reference_warnings(c: Any, frame_of_reference: str, instances: Collection[str]) -> list[str]:
+    """Warnings when a DICOM-SEG references another Frame of Reference or other images than the
+    series it is placed on (its geometry is still checked by place_on_grid: a mismatch is refused)."""
+    out = []
+    if frame_of_reference and c.frame_of_reference and c.frame_of_reference != frame_of_reference:
+        out.append(f"Frame of Reference mismatch: the DICOM-SEG is in {c.frame_of_reference[:64]}, the series is in "
+                   f"{frame_of_reference[:64]}: positions may not correspond (check it was made on this series)")
+    refs = set(c.referenced_instances)
+    if instances and refs and not refs <= set(instances):
+        n = len(refs - set(instances))
+        out.append(f"the DICOM-SEG references {n} of its {len(refs)} source images outside this series "
+                   f"(series {', '.join(c.referenced_series)[:80] or 'unknown'}): it was made on another series")
+    return out
+
+
 def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
     lab, vol = load_labels(p)
     geom = Geometry.of(vol)
@@ -338,12 +355,14 @@ def _nrrd_names(p: Path) -> dict[int, str]:
     return out
 
 
-def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_reference: str = "") -> ImportedLabels:
+def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_reference: str = "",
+                    instances: Collection[str] = ()) -> ImportedLabels:
     """Read a label file, placed on ``grid`` (a Volume or Geometry of the series) when given.
 
     Without ``grid`` the file's own geometry is used (DICOM-SEG, NIfTI, NRRD); an RTSTRUCT
     needs one. ``frame_of_reference``: the series' FrameOfReferenceUID, when known (an
-    RTSTRUCT in another frame gets a warning). Raises FormatError (unreadable file) or
+    RTSTRUCT or DICOM-SEG in another frame gets a warning); ``instances``: the series'
+    SOPInstanceUIDs, when known (a DICOM-SEG made on other images gets a warning). Raises FormatError (unreadable file) or
     CtuiError (geometry mismatch, said how).
     """
     p = Path(path)
@@ -352,7 +371,7 @@ def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_refer
     g = None if grid is None else Geometry.of(grid)
     kind = label_kind(p)
     if kind == "dicom-seg":
-        return _from_seg(p, g)
+        return _from_seg(p, g, frame_of_reference, instances)
     if kind == "rtstruct":
         return _from_rtstruct(p, g, frame_of_reference)
     return _from_labelmap(p, g, kind)
