@@ -98,6 +98,7 @@ def test_journal_gives_up_past_its_length():
         seg.apply_region((slice(0, 1), slice(0, 1), slice(0, 1)), np.full((1, 1, 1), 1 + k % 2, np.uint8))
     assert seg.revision == 70 and seg.changes_since(0) is None
     delta, boxes = seg.changes_since(seg.revision - 3)
+    assert (int(delta[1]), int(delta[2]), int(abs(delta).sum())) == (-1, 1, 2)  # 1 -> 2 -> 1 -> 2: one voxel moved
     assert len(boxes) == 3
 
 
@@ -129,7 +130,10 @@ def _halfblock(monkeypatch, tmp_path):
         yield
 
 
-async def test_workspace_strip_and_volumes_after_brush_and_undo(_halfblock):
+async def test_workspace_strip_and_volumes_after_brush_and_undo(_halfblock, monkeypatch):
+    scans = []
+    full_scan = review.of_labels
+    monkeypatch.setattr(review, "of_labels", lambda *a, **k: scans.append(1) or full_scan(*a, **k))
     n, nz = 48, 20
     yy, xx = np.mgrid[0:n, 0:n]
     data = np.full((nz, n, n), -1000, np.int16)
@@ -153,4 +157,5 @@ async def test_workspace_strip_and_volumes_after_brush_and_undo(_halfblock):
                 assert [m.z for m in ws.review_marks()] == [m.z for m in review.marks(review.Stack(*_stack_args(s.seg.labels, s.current)))]
             else:
                 assert src is None
+        assert len(scans) == 1  # the object was read whole once; each edit re-read only its slices
         assert not app.internal_errors
