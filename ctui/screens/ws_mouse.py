@@ -23,6 +23,8 @@ Every display <-> voxel conversion goes through :mod:`ctui.screens.planes`.
 
 from __future__ import annotations
 
+import weakref
+
 import cv2
 
 from ctui.engine.actions import edit as et
@@ -477,14 +479,15 @@ class MouseMixin(ToolsMixin):
         seg, full = s.seg, getattr(self, "_object_full", None)  # (version, object, seg, labels, revision, Stack)
         rev = int(getattr(seg, "revision", -1))
         since = None
-        if full is not None and full[1:4] == (s.current, id(seg), id(seg.labels)) and hasattr(seg, "changes_since"):
+        if full is not None and full[1] == s.current and full[2]() is seg and full[3]() is seg.labels \
+                and hasattr(seg, "changes_since"):
             since = seg.changes_since(full[4])
             if since is not None and self.volumes.version - full[0] > rev - full[4]:
                 since = None  # more versions than journalled edits: the labels changed some other way
         # after brush/erase/undo/redo only the slices they touched are read again (a whole 1,000-slice scan: 2.3 s)
         whole = (review.of_labels(seg.labels, s.current, start) if since is None
                  else review.restack(full[5], seg.labels, s.current, since[1], start))
-        self._object_full = (self.volumes.version, s.current, id(seg), id(seg.labels), rev, whole)
+        self._object_full = (self.volumes.version, s.current, weakref.ref(seg), weakref.ref(seg.labels), rev, whole)
         stack = whole if whole.masks and max(whole.masks) - min(whole.masks) >= 2 else None
         self._object_stack = (key, stack)
         return stack

@@ -14,6 +14,7 @@ project saves: volume, labels, cursor, window, tools).
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -325,7 +326,7 @@ class ObjectVolumes:
     def __init__(self) -> None:
         self.version = 0
         self._cache: tuple[int, dict[int, float]] | None = None
-        self._counts: tuple[int, int, int, int, np.ndarray] | None = None  # version, seg, labels, revision, counts
+        self._counts: tuple | None = None  # version, seg and labels (weak references), revision, counts
 
     def changed(self) -> None:
         self.version += 1
@@ -334,15 +335,15 @@ class ObjectVolumes:
         """int64 (256,): voxels per label value of ``seg.labels`` at this version."""
         c = self._counts
         rev = int(getattr(seg, "revision", -1))
-        if c is not None and c[1] == id(seg) and c[2] == id(seg.labels):
+        if c is not None and c[1]() is seg and c[2]() is seg.labels:
             since = seg.changes_since(c[3]) if hasattr(seg, "changes_since") and rev >= 0 else None
             # each journalled change is one version at most: more versions mean a write outside it
             if since is not None and self.version - c[0] <= rev - c[3]:
                 counts = c[4] + since[0]
-                self._counts = (self.version, id(seg), id(seg.labels), rev, counts)
+                self._counts = (self.version, c[1], c[2], rev, counts)
                 return counts
         counts = label_counts(seg.labels)
-        self._counts = (self.version, id(seg), id(seg.labels), rev, counts)
+        self._counts = (self.version, weakref.ref(seg), weakref.ref(seg.labels), rev, counts)
         return counts
 
     def of(self, session) -> dict[int, float]:
