@@ -143,17 +143,30 @@ def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: 
         entries[s] = (0, 0, seed_mask)
     dy, dx = float(spacing_yx[0]), float(spacing_yx[1])
     out: list[Mark] = []
+    area: dict[int, int] = {}
+    centre: dict[int, tuple[float, float] | None] = {}  # each slice's figures once (each is read twice)
+
+    def area_of(z: int) -> int:
+        if z not in area:
+            area[z] = int(entries[z][2].sum())
+        return area[z]
+
+    def centre_of(z: int) -> tuple[float, float] | None:
+        if z not in centre:
+            centre[z] = _centroid(entries[z])
+        return centre[z]
+
     for step in (1, -1):
         prev = s
         z = s + step
         while z in entries:
-            a_prev = int(entries[prev][2].sum()) if prev in entries else 0
-            a = int(entries[z][2].sum())
+            a_prev = area_of(prev) if prev in entries else 0
+            a = area_of(z)
             if a_prev > 0:
                 change = (a - a_prev) / a_prev
                 if abs(change) > area_jump and abs(a - a_prev) > min_px:
                     out.append(Mark(z, "jump", f"area {a_prev} -> {a} px ({change:+.0%})"))
-                c0, c1 = _centroid(entries[prev]), _centroid(entries[z])
+                c0, c1 = centre_of(prev), centre_of(z)
                 if c0 is not None and c1 is not None:
                     moved_mm = float(np.hypot((c1[0] - c0[0]) * dy, (c1[1] - c0[1]) * dx))
                     radius_mm = float(np.sqrt(a_prev * dy * dx / np.pi))
