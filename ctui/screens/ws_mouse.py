@@ -216,11 +216,13 @@ class MouseMixin(ToolsMixin):
             return
         if tools.pen in ("brush", "eraser"):
             if self._editable():
+                n = 0
                 try:
-                    self.dab(tools.pen)
+                    n = self.dab(tools.pen)
                 except EDIT_ERRORS as exc:
                     self.app.notify(str(exc), severity="error")
-                self.labels_changed()
+                if n:  # a dab over what is painted already changes nothing: no new version
+                    self.labels_changed()
             self._drag = ("paint", iv, plane, s.zyx)
         elif tools.click_fills:
             self.refresh_view()
