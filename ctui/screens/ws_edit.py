@@ -83,7 +83,11 @@ class EditMixin:
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
-        self._edited(f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {mm(self.s.brush)} mm); u undoes")
+        msg = f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {mm(self.s.brush)} mm); u undoes"
+        if n:
+            self._edited(msg)
+        else:  # nothing changed: no new labels version (it would recount every object's volume)
+            self.set_status(msg)
 
     def action_pen(self, tool: str) -> None:
         """b / E: put the brush (eraser) down, so moving the cursor paints (erases) from where it went down;

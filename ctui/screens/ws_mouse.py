@@ -23,6 +23,8 @@ Every display <-> voxel conversion goes through :mod:`ctui.screens.planes`.
 
 from __future__ import annotations
 
+import weakref
+
 import cv2
 
 from ctui.engine.actions import edit as et
@@ -214,11 +216,13 @@ class MouseMixin(ToolsMixin):
             return
         if tools.pen in ("brush", "eraser"):
             if self._editable():
+                n = 0
                 try:
-                    self.dab(tools.pen)
+                    n = self.dab(tools.pen)
                 except EDIT_ERRORS as exc:
                     self.app.notify(str(exc), severity="error")
-                self.labels_changed()
+                if n:  # a dab over what is painted already changes nothing: no new version
+                    self.labels_changed()
             self._drag = ("paint", iv, plane, s.zyx)
         elif tools.click_fills:
             self.refresh_view()
@@ -471,12 +475,22 @@ class MouseMixin(ToolsMixin):
         cache = getattr(self, "_object_stack", None)
         if cache is not None and cache[0] == key:
             return cache[1]
-        stack = None
-        rng = s.seg.slice_range(s.current)
-        if rng is not None and rng[1] - rng[0] >= 2:
-            info = s.seg.objects.get(s.current)
-            seeds = list(getattr(info, "seeds", []) or [])
-            stack = review.of_labels(s.seg.labels, s.current, int(seeds[-1][2]) if seeds else None)
+        info = s.seg.objects.get(s.current)
+        seeds = list(getattr(info, "seeds", []) or [])
+        start = int(seeds[-1][2]) if seeds else None
+        seg, full = s.seg, getattr(self, "_object_full", None)  # (version, object, seg, labels, revision, Stack)
+        rev = int(getattr(seg, "revision", -1))
+        since = None
+        if full is not None and full[1] == s.current and full[2]() is seg and full[3]() is seg.labels \
+                and hasattr(seg, "changes_since"):
+            since = seg.changes_since(full[4])
+            if since is not None and self.volumes.version - full[0] > rev - full[4]:
+                since = None  # more versions than journalled edits: the labels changed some other way
+        # after brush/erase/undo/redo only the slices they touched are read again (a whole 1,000-slice scan: 2.3 s)
+        whole = (review.of_labels(seg.labels, s.current, start) if since is None
+                 else review.restack(full[5], seg.labels, s.current, since[1], start))
+        self._object_full = (self.volumes.version, s.current, weakref.ref(seg), weakref.ref(seg.labels), rev, whole)
+        stack = whole if whole.masks and max(whole.masks) - min(whole.masks) >= 2 else None
         self._object_stack = (key, stack)
         return stack
 

@@ -14,6 +14,7 @@ project saves: volume, labels, cursor, window, tools).
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -315,20 +316,41 @@ class SeedRange:
 
 
 class ObjectVolumes:
-    """The labels' version (one more per edit) and each object's volume, counted once per version."""
+    """The labels' version (one more per edit) and each object's volume, counted once per version.
+
+    After edits made through the Segmentation (brush, erase, undo, redo: its ``changes_since``
+    journal), the counts are updated from the voxels those edits changed, not recounted over the
+    whole label volume (166 ms per side-panel update at 1,000 x 512 x 512); any other change of
+    the labels (more versions than journalled changes, another label array) recounts them."""
 
     def __init__(self) -> None:
         self.version = 0
         self._cache: tuple[int, dict[int, float]] | None = None
+        self._counts: tuple | None = None  # version, seg and labels (weak references), revision, counts
 
     def changed(self) -> None:
         self.version += 1
+
+    def counts(self, seg) -> np.ndarray:
+        """int64 (256,): voxels per label value of ``seg.labels`` at this version."""
+        c = self._counts
+        rev = int(getattr(seg, "revision", -1))
+        if c is not None and c[1]() is seg and c[2]() is seg.labels:
+            since = seg.changes_since(c[3]) if hasattr(seg, "changes_since") and rev >= 0 else None
+            # each journalled change is one version at most: more versions mean a write outside it
+            if since is not None and self.version - c[0] <= rev - c[3]:
+                counts = c[4] + since[0]
+                self._counts = (self.version, c[1], c[2], rev, counts)
+                return counts
+        counts = label_counts(seg.labels)
+        self._counts = (self.version, weakref.ref(seg), weakref.ref(seg.labels), rev, counts)
+        return counts
 
     def of(self, session) -> dict[int, float]:
         """Volume (ml) per object id of ``session``'s labels; recounted only when they changed."""
         if self._cache is not None and self._cache[0] == self.version:
             return self._cache[1]
-        counts = label_counts(session.seg.labels)
+        counts = self.counts(session.seg)
         vox_ml = session.volume.voxel_volume_mm3() / 1000.0
         vols = {i: float(counts[i]) * vox_ml for i in range(1, len(counts)) if counts[i]}
         self._cache = (self.version, vols)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Mark", "Stack", "cut_at", "keep_to", "marks", "next_mark", "of_labels", "profile"]
+__all__ = ["Mark", "Stack", "cut_at", "keep_to", "marks", "next_mark", "of_labels", "profile", "restack"]
 
 
 @dataclass(frozen=True)
@@ -53,19 +53,54 @@ def of_labels(labels: np.ndarray, object_id: int, start_slice: int | None = None
     """The object ``object_id`` of a (z, y, x) label volume as a :class:`Stack` (each slice
     cropped to its bounding box); ``start_slice`` defaults to the slice of largest area.
 
-    One comparison of the volume and its row/column projections, not a search per slice (a large
-    object on 300 x 512 x 512: 0.23-0.33 s -> 0.06-0.07 s, paid when the review strip opens a project)."""
+    One comparison per slab of slices and its row/column projections, not a search per slice and
+    no whole-volume temporary (1,000 x 512 x 512: a 262 MB bool copy and 2.3 s before)."""
     masks, areas = {}, {}
-    eq = labels == object_id
-    zs = np.flatnonzero(eq.any(axis=(1, 2)))
-    if len(zs):
-        z0, z1 = int(zs[0]), int(zs[-1]) + 1
-        rows, cols = eq[z0:z1].any(axis=2), eq[z0:z1].any(axis=1)
-        counts = np.count_nonzero(eq[z0:z1], axis=(1, 2))
-        for z in zs:
-            ys, xs = np.flatnonzero(rows[z - z0]), np.flatnonzero(cols[z - z0])
+    _read_slices(labels, object_id, 0, labels.shape[0], masks, areas)
+    return _stack(labels, masks, areas, start_slice)
+
+
+def restack(stack: Stack, labels: np.ndarray, object_id: int, boxes, start_slice: int | None = None) -> Stack:
+    """``stack`` (:func:`of_labels` of an earlier state of ``labels``) after changes confined to
+    ``boxes`` ((z, y, x) slices, e.g. ``Segmentation.changes_since``): only the slices those boxes
+    span are read again. Equal to ``of_labels(labels, object_id, start_slice)``."""
+    masks, areas = dict(stack.masks), dict(stack.areas)
+    spans = sorted((int(b[0].start), int(b[0].stop)) for b in boxes)
+    merged: list[list[int]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    for a, b in merged:
+        for z in range(a, b):
+            masks.pop(z, None)
+            areas.pop(z, None)
+        _read_slices(labels, object_id, a, b, masks, areas)
+    order = sorted(masks)  # slice order, as of_labels builds them (the largest area's ties go to the first)
+    return _stack(labels, {z: masks[z] for z in order}, {z: areas[z] for z in order}, start_slice)
+
+
+_SLAB = 16  # slices compared at once
+
+
+def _read_slices(labels: np.ndarray, object_id: int, za: int, zb: int, masks: dict, areas: dict) -> None:
+    """Add slices za..zb-1 holding ``object_id`` to ``masks`` {z: (y0, x0, bool)} and ``areas``."""
+    for s0 in range(za, zb, _SLAB):
+        s1 = min(s0 + _SLAB, zb)
+        eq = labels[s0:s1] == object_id
+        zs = np.flatnonzero(eq.any(axis=(1, 2)))
+        if not len(zs):
+            continue
+        rows, cols = eq.any(axis=2), eq.any(axis=1)
+        counts = np.count_nonzero(eq, axis=(1, 2))
+        for k in zs:
+            ys, xs = np.flatnonzero(rows[k]), np.flatnonzero(cols[k])
             ya, yb, xa, xb = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
-            masks[int(z)], areas[int(z)] = (ya, xa, eq[z, ya:yb, xa:xb].copy()), int(counts[z - z0])
+            masks[int(s0 + k)], areas[int(s0 + k)] = (ya, xa, eq[k, ya:yb, xa:xb].copy()), int(counts[k])
+
+
+def _stack(labels: np.ndarray, masks: dict, areas: dict, start_slice: int | None) -> Stack:
     if start_slice is None or start_slice not in masks:
         start_slice = max(areas, key=areas.get) if areas else 0
     return Stack(int(start_slice), tuple(labels.shape), masks, areas)
@@ -108,17 +143,30 @@ def marks(proposal, *, spacing_yx: tuple[float, float] = (1.0, 1.0), seed_mask: 
         entries[s] = (0, 0, seed_mask)
     dy, dx = float(spacing_yx[0]), float(spacing_yx[1])
     out: list[Mark] = []
+    area: dict[int, int] = {}
+    centre: dict[int, tuple[float, float] | None] = {}  # each slice's figures once (each is read twice)
+
+    def area_of(z: int) -> int:
+        if z not in area:
+            area[z] = int(entries[z][2].sum())
+        return area[z]
+
+    def centre_of(z: int) -> tuple[float, float] | None:
+        if z not in centre:
+            centre[z] = _centroid(entries[z])
+        return centre[z]
+
     for step in (1, -1):
         prev = s
         z = s + step
         while z in entries:
-            a_prev = int(entries[prev][2].sum()) if prev in entries else 0
-            a = int(entries[z][2].sum())
+            a_prev = area_of(prev) if prev in entries else 0
+            a = area_of(z)
             if a_prev > 0:
                 change = (a - a_prev) / a_prev
                 if abs(change) > area_jump and abs(a - a_prev) > min_px:
                     out.append(Mark(z, "jump", f"area {a_prev} -> {a} px ({change:+.0%})"))
-                c0, c1 = _centroid(entries[prev]), _centroid(entries[z])
+                c0, c1 = centre_of(prev), centre_of(z)
                 if c0 is not None and c1 is not None:
                     moved_mm = float(np.hypot((c1[0] - c0[0]) * dy, (c1[1] - c0[1]) * dx))
                     radius_mm = float(np.sqrt(a_prev * dy * dx / np.pi))

@@ -16,6 +16,7 @@ tolerance (:func:`fill_range`); 8-connected by default, 4 optional. Fills smalle
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,7 @@ from ctui.engine.segment.edit import EditMixin
 from ctui.engine.segment.necks import cut_necks_2d
 
 SLAB = 16  # slices per chunk in whole-volume queries
+JOURNAL = 64  # changes whose counts and boxes Segmentation.changes_since can sum
 
 
 @dataclass
@@ -71,6 +73,7 @@ class _Change:
     label: str
     objects_before: dict[int, dict[str, Any]] | None = None
     objects_after: dict[int, dict[str, Any]] | None = None
+    delta: np.ndarray | None = None  # int64 (256,): voxels per label after minus before (the journal's)
 
     @property
     def nbytes(self) -> int:
@@ -201,6 +204,8 @@ class Segmentation(EditMixin):
         self.max_undo_bytes = int(max_undo_bytes)
         self._undo: list[_Change] = []
         self._redo: list[_Change] = []
+        self.revision = 0  # one more per change, undo or redo of the labels through this object
+        self._journal: deque[tuple[int, tuple[slice, slice, slice], np.ndarray]] = deque(maxlen=JOURNAL)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -290,7 +295,10 @@ class Segmentation(EditMixin):
         if np.array_equal(before, after):
             return
         self.labels[box] = after
-        self._push(_Change(box=box, before=before, after=after, label=label))
+        change = _Change(box=box, before=before, after=after, label=label)
+        change.delta = label_counts(after) - label_counts(before)
+        self._push(change)
+        self._log(box, change.delta)
 
     def paint(self, mask: np.ndarray, object_id: int, *, offset: tuple[int, int, int] = (0, 0, 0),
               overwrite: bool = False, label: str | None = None) -> int:
@@ -407,6 +415,7 @@ class Segmentation(EditMixin):
         c = self._undo.pop()
         self.labels[c.box] = c.before
         self._redo.append(c)
+        self._log(c.box, None if c.delta is None else -c.delta)
         return c.label
 
     def redo(self) -> str | None:
@@ -416,7 +425,27 @@ class Segmentation(EditMixin):
         c = self._redo.pop()
         self.labels[c.box] = c.after
         self._undo.append(c)
+        self._log(c.box, c.delta)
         return c.label
+
+    def _log(self, box: tuple[slice, slice, slice], delta: np.ndarray | None) -> None:
+        self.revision += 1
+        if delta is None:  # a change of unknown counts: the journal before it cannot be summed
+            self._journal.clear()
+        else:
+            self._journal.append((self.revision, box, delta))
+
+    def changes_since(self, revision: int) -> tuple[np.ndarray, list[tuple[slice, slice, slice]]] | None:
+        """What changed in the labels after ``revision`` (of :attr:`revision`) through this object:
+        (int64 (256,) voxels gained per label value, the changed (z, y, x) boxes), or None when
+        the journal (the last JOURNAL changes) does not reach back that far. Lets a view keep
+        volumes and per-slice figures without recounting the whole label volume."""
+        if revision == self.revision:
+            return np.zeros(256, np.int64), []
+        entries = [e for e in self._journal if e[0] > revision]
+        if revision > self.revision or not entries or entries[0][0] != revision + 1:
+            return None
+        return np.sum([e[2] for e in entries], axis=0), [e[1] for e in entries]
 
     def undo_bytes(self) -> int:
         """Memory held by the undo and redo stacks (bytes)."""
