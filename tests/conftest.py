@@ -8,6 +8,7 @@ be created.
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import os
 from pathlib import Path
@@ -58,3 +59,15 @@ def cli_streams(args: list[str]) -> tuple[int, str, str]:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = cli_main(args)
     return rc, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(autouse=True)
+def _collect_leaked_coroutines():
+    """After every test, collect what it left in reference cycles. A Textual app runs its message loop
+    inside ``redirect_stdout``/``redirect_stderr``; an app coroutine left pending when a test's event loop
+    closed (a worker still blocked under load) is closed whenever the garbage collector reaches it, and
+    its ``with`` blocks then put back the streams of *its* test: a later test's capsys read nothing (CI:
+    ``test_bad_input_gives_one_line_naming_the_file[info empty_dir]``, ``test_failure_is_one_line``).
+    Collected here, in the test that left it, pytest resets the streams before the next test."""
+    yield
+    gc.collect()
