@@ -47,6 +47,23 @@ class PropagationRun:
         self.object_settings = dict(object_settings or {})
         self.ws.post_message(ProposalReady(self))
 
+    def progress(self, worker, label: str):
+        """The engine's ``progress(done, total, message)`` for this run's thread ``worker``: False (stop) once
+        the worker, the run or the workspace is gone; a ``JobProgress`` "<label>: message" at most every
+        50 ms."""
+        last = [0.0]
+
+        def callback(done: float, total: float, message: str = "") -> bool:
+            if worker.is_cancelled or self.event.is_set() or not self.ws.is_attached:
+                return False
+            now = time.perf_counter()
+            if now - last[0] > 0.05:
+                last[0] = now
+                self.ws.post_message(JobProgress(f"{label}: {message}", int(100 * done / max(total, 1e-9)), 100))
+            return True
+
+        return callback
+
 
 def settings_for(session, direction: str):
     """PropagationSettings from the current object's fill range (or the session's) and
@@ -119,18 +136,7 @@ def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | N
 def _segment_work(run: PropagationRun, seed, opts, th) -> None:
     ws = run.ws
     s = ws.s
-    worker = get_current_worker()
-    last = [0.0]
-
-    def progress(done: float, total: float, message: str = "") -> bool:
-        if worker.is_cancelled or run.event.is_set() or not ws.is_attached:
-            return False
-        now = time.perf_counter()
-        if now - last[0] > 0.05:
-            last[0] = now
-            ws.post_message(JobProgress(f"Segmenting: {message}", int(100 * done / max(total, 1e-9)), 100))
-        return True
-
+    progress = run.progress(get_current_worker(), "Segmenting")
     oid = s.current
     try:
         with s._lock:

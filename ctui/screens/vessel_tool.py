@@ -9,14 +9,13 @@ its bindings (:data:`VESSEL_BINDINGS`)."""
 
 from __future__ import annotations
 
-import time
 import weakref
 
 from textual.worker import get_current_worker
 
 from ctui.engine.core.progress import Cancelled
 from ctui.screens.keytable import keys
-from ctui.screens.messages import JobProgress, SegmentationFailed, Status
+from ctui.screens.messages import SegmentationFailed, Status
 
 VESSEL_BINDINGS = keys("""
 D                    vessel_point     Vessel: the cursor is its start, then a waypoint  hidden
@@ -70,17 +69,7 @@ def _work(run, start, vias, end) -> None:
 
     ws = run.ws
     s = ws.s
-    worker = get_current_worker()
-    last = [0.0]
-
-    def progress(done: float, total: float, message: str = "") -> bool:
-        if worker.is_cancelled or run.event.is_set() or not ws.is_attached:
-            return False
-        now = time.perf_counter()
-        if now - last[0] > 0.05:
-            last[0] = now
-            ws.post_message(JobProgress(f"Vessel: {message}", int(100 * done / max(total, 1e-9)), 100))
-        return True
+    progress = run.progress(get_current_worker(), "Vessel")
 
     try:
         res = vessel(s.volume, start=start, ends=[end], vias=vias, progress=progress)
