@@ -61,13 +61,36 @@ def cli_streams(args: list[str]) -> tuple[int, str, str]:
     return rc, out.getvalue(), err.getvalue()
 
 
+_APPS_MADE = [0]
+
+
+def _count_apps() -> None:
+    """Count every Textual app made, so that only the tests that made one pay for a full collection."""
+    from textual.app import App
+
+    init = App.__init__
+
+    def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        _APPS_MADE[0] += 1
+        init(self, *args, **kwargs)
+
+    App.__init__ = counting_init  # type: ignore[method-assign]
+
+
+_count_apps()
+
+
 @pytest.fixture(autouse=True)
 def _collect_leaked_coroutines():
-    """After every test, collect what it left in reference cycles. A Textual app runs its message loop
-    inside ``redirect_stdout``/``redirect_stderr``; an app coroutine left pending when a test's event loop
-    closed (a worker still blocked under load) is closed whenever the garbage collector reaches it, and
-    its ``with`` blocks then put back the streams of *its* test: a later test's capsys read nothing (CI:
-    ``test_bad_input_gives_one_line_naming_the_file[info empty_dir]``, ``test_failure_is_one_line``).
-    Collected here, in the test that left it, pytest resets the streams before the next test."""
+    """After every test that made a Textual app, collect what it left in reference cycles. A Textual app
+    runs its message loop inside ``redirect_stdout``/``redirect_stderr``; an app coroutine left pending
+    when a test's event loop closed (a worker still blocked under load) is closed whenever the garbage
+    collector reaches it, and its ``with`` blocks then put back the streams of *its* test: a later test's
+    capsys read nothing (CI: ``test_bad_input_gives_one_line_naming_the_file[info empty_dir]``,
+    ``test_failure_is_one_line``). Collected here, in the test that left it, pytest resets the streams
+    before the next test. Only tests that made an app can leave one (a full collection after each of the
+    1,100 tests cost about ten minutes)."""
+    made = _APPS_MADE[0]
     yield
-    gc.collect()
+    if _APPS_MADE[0] != made:
+        gc.collect()
