@@ -117,7 +117,7 @@ def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "
         placed = place_on_grid(got.labels, Geometry.of(got.volume), Geometry.of(volume), path="TotalSegmentator's output")
     report(progress, 95, 100, "merging the classes")
     res = merge_classes(placed, got.names, got.colours, labels=labels, objects=objects, merge=merge,
-                        spacing=tuple(float(v) for v in volume.spacing), source=f"TotalSegmentator {task}",
+                        spacing=_spacing3(volume.spacing), source=f"TotalSegmentator {task}",
                         max_id=max_id)
     res.engine, res.task, res.command, res.seconds = engine, task, cmd, time.perf_counter() - t0
     if task in totalseg.LICENSED_TASKS:
@@ -151,6 +151,11 @@ def _lines(progress: Progress | None) -> Any:
         return progress(state["done"], 100, state["text"])
 
     return line
+
+
+def _spacing3(spacing: Sequence[float]) -> tuple[float, float, float]:
+    dz, dy, dx = (float(v) for v in spacing)
+    return dz, dy, dx
 
 
 def merge_classes(classes: np.ndarray, names: dict[int, str], colours: dict[int, Any], *,

@@ -262,8 +262,12 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
 
 def _vessel(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
     """(labels uint8, pipeline dict, propagation dict) of a vessel row (the vessel action, ``ctui vessel``)."""
+    if job.vessel is None:
+        raise CtuiError(f"row {job.name!r} is not a vessel row")
     start, ends, vias = job.vessel
     res = vessel(volume, start=start, ends=ends, vias=vias, value_range=job.range)
+    if res.mask is None:
+        raise CtuiError("the vessel action returned no mask")
     return res.mask.astype(np.uint8), {}, propagation_record([])
 
 
@@ -336,7 +340,9 @@ def write_results(path: str | os.PathLike, rows: list[dict]) -> None:
 
 
 def _done(row: dict | None) -> bool:
-    return bool(row) and row.get("status") == "ok" and all(
+    if not row:
+        return False
+    return row.get("status") == "ok" and all(
         row.get(k) and os.path.exists(row[k]) for k in ("project", "mesh"))
 
 

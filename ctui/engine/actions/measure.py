@@ -137,7 +137,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     labels = opened.mask(oid) if oid in opened.masks else opened.labels  # overlapping imported segments
     res = summary.measure_object(labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
                                  path=path, path_voxels=path_voxels, step_mm=step_mm,
-                                 between=tuple(between) if between is not None else None, mesh=mesh, area=area,
+                                 between=(float(between[0]), float(between[1])) if between is not None else None, mesh=mesh, area=area,
                                  average_mm=average_mm, image=image)
     pv = res.get("partial_volume")
     vol = opened.volume

@@ -79,6 +79,8 @@ def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = N
         return [m for _, m in sorted(label_meshes(opened.labels, opened.geometry, ids).items())]
     if mode in SURFACE_MODES:
         vol = opened.volume
+        if vol is None:
+            raise CtuiError(f"mode {mode} needs a series", path=opened.path, option="mode")
         if iso is None:
             raise CtuiError(f"mode {mode} on a series needs an iso value (e.g. 300 HU for bone)", path=opened.path,
                            option="iso")
@@ -147,9 +149,10 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
     o.shadows, o.antialias, o.wireframe_overlay = bool(shadows), antialias, bool(wire_overlay)
     o.frame = frame  # "auto": the objects in surface modes (not the whole series), the volume in volume modes
     if window is not None:
-        o.window = tuple(window)
+        o.window = (float(window[0]), float(window[1]))
     if background is not None:
-        o.background = tuple(v / 255.0 for v in background)
+        r, g, b = (v / 255.0 for v in background)
+        o.background = (r, g, b)
     if slice_plane:
         if volume is None:
             raise CtuiError("a slice plane needs a series or a project whose source series loads", path=opened.path,
@@ -182,7 +185,7 @@ def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = N
         ids = list(objects or [])
         if opened.kind == "project" and not ids and len(opened.object_ids) == 1:
             ids = opened.object_ids  # the project's only object
-        if opened.kind != "project" or opened.geometry is None or len(ids) != 1:
+        if opened.kind != "project" or opened.geometry is None or opened.labels is None or len(ids) != 1:
             raise CtuiError("an automatic fly-through path needs a .ctui project and one object (a tubular one)",
                             path=opened.path, option="objects")
         g = opened.geometry

@@ -147,7 +147,7 @@ def _seg_segments(seg_path: str, opened: Opened, ids: Sequence[int], sources: Se
         for o in imp.objects:
             theirs = imp.mask(o["id"])
             inter = np.count_nonzero(mine & theirs)
-            dice = 2.0 * inter / max(1, np.count_nonzero(mine) + np.count_nonzero(theirs))
+            dice = 2.0 * inter / max(1, int(np.count_nonzero(mine) + np.count_nonzero(theirs)))
             if dice > score:
                 best, score = o, dice
         if best is None or score < SEG_MATCH_DICE:

@@ -96,7 +96,8 @@ class SegmentOptions:
         if self.neck_mm is not None and (not np.isfinite(self.neck_mm) or not 0 <= self.neck_mm <= 1000):
             raise CtuiError("the neck width must be a number of mm between 0 and 1000, or automatic")
         if self.box is not None:
-            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+            (z0, z1), (y0, y1), (x0, x1) = self.box
+            self.box = ((int(z0), int(z1)), (int(y0), int(y1)), (int(x0), int(x1)))
             if any(a > b for a, b in self.box):
                 raise CtuiError("the box is empty: each of its ranges needs first <= last")
         if self.min_island < 0:
@@ -299,7 +300,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     medulla in its cortex, an arterial phase) is tried once more with the range that holds both; that result is
     kept when it carries no warning of its own (but the values' shift, which the shell makes) and is at most ``SHELL_GROWTH`` times the first (the shell was
     the rest of the organ, not a neighbour), else the first stays with its warning."""
-    seg = segmentation if segmentation is not None else Segmentation(tuple(volume.data.shape))  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(tuple(volume.data.shape))
     before = len(seg.undo_labels())
     known = set(seg.objects)
     res = _segment(volume, seeds, thresholds, background=background, options=options, pipeline=pipeline,
@@ -307,7 +308,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     r = res.objects[0]
     if len(res.objects) != 1 or r.auto_range is None or r.shell_range is None:
         return res
-    trial = Segmentation(seg.labels.shape)  # type: ignore[arg-type]
+    trial = Segmentation(seg.labels.shape)
     trial.labels[:] = np.where(seg.labels == r.id, 0, seg.labels)
     try:
         got = _segment(volume, [r.seed], [r.shell_range], background=background, options=options, pipeline=pipeline,
@@ -372,7 +373,7 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
     fg = [_check_seed(s, shape, "seed") for s in seeds]
     bg = [_check_seed(s, shape, "background seed") for s in background]
     ths = _ranges(thresholds, len(fg))
-    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(shape)
     free = [i for i in range(1, 11) if i not in seg.objects] if object_ids is None else [int(i) for i in object_ids]
     if len(fg) > len(free):
         raise CtuiError(f"at most 10 objects: {len(fg)} seeds but {len(free)} free object ids")
@@ -419,6 +420,13 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
     return SegmentResult(segmentation=seg, pipeline=pipe, settings=settings, objects=results, method=opts.method)
 
 
+def _clip_box(box: Box, shape: Sequence[int]) -> Box:
+    """``box`` ((z0, z1), (y0, y1), (x0, x1)) voxels, clipped to a volume of ``shape``."""
+    (z0, z1), (y0, y1), (x0, x1) = box
+    nz, ny, nx = (int(n) for n in shape)
+    return (max(z0, 0), min(z1, nz - 1)), (max(y0, 0), min(y1, ny - 1)), (max(x0, 0), min(x1, nx - 1))
+
+
 def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[Sequence[int]],
               opts: SegmentOptions, pipe: Pipeline, segmentation: Segmentation | None, names: Sequence[str] | None,
               progress: Progress | None, object_ids: Sequence[int] | None) -> SegmentResult:
@@ -427,12 +435,12 @@ def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[
     shape = tuple(volume.data.shape)
     fg = [_check_seed(s, shape, "seed") for s in seeds]
     bg = [_check_seed(s, shape, "background seed") for s in background]
-    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(shape)
     oid = int(object_ids[0]) if object_ids else next((i for i in range(1, 11) if i not in seg.objects), 0)
     if not oid:
         raise CtuiError("at most 10 objects: no free object id")
     seg.add_object(names[0] if names else f"object {oid}", object_id=oid)
-    roi = None if opts.box is None else tuple((max(a, 0), min(b, n - 1)) for (a, b), n in zip(opts.box, shape))
+    roi = None if opts.box is None else _clip_box(opts.box, shape)
     if roi is not None and any(a > b for a, b in roi):
         raise CtuiError(f"the box {box_text(opts.box)} lies outside the volume", option="box")
     rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, roi), server=opts.server,

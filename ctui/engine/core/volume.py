@@ -94,7 +94,8 @@ class Volume:
     @property
     def shape(self) -> tuple[int, int, int]:
         """(nz, ny, nx)."""
-        return tuple(self.data.shape)  # type: ignore[return-value]
+        nz, ny, nx = self.data.shape
+        return int(nz), int(ny), int(nx)
 
     @property
     def spacing_xyz(self) -> np.ndarray:
