@@ -52,7 +52,7 @@ class _MethodHelp(str):
     """Help text that lists each registered method with its line of help when argparse
     formats it (``help % params``), so the registry is read only for ``--help``."""
 
-    def __mod__(self, params):  # type: ignore[override]
+    def __mod__(self, params):  # type: ignore[override]  # a str whose % formats the registry's help lazily
         from ctui.engine.actions.segment import METHODS
 
         return f"{self}: " + "; ".join(f"{m.name}: {m.help}" + (" (default)" if m.name == params.get("default") else "")
@@ -62,7 +62,7 @@ class _MethodHelp(str):
 class _ThresholdAction(argparse.Action):
     """Keeps --range and --tolerance in one ordered list so the n-th pairs with the n-th --seed."""
 
-    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[override]
+    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[override]  # argparse.Action's signature, values untyped
         items = list(getattr(namespace, self.dest, None) or [])
         items.append((self.const, values))
         setattr(namespace, self.dest, items)

@@ -433,7 +433,10 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
         else:
             todo.append(j)
     res = BatchResult(out_s, [], skipped=len(rows))
-    order = lambda: [rows[j.row] for j in jobs if j.row in rows]
+
+    def order() -> list[dict]:
+        return [rows[j.row] for j in jobs if j.row in rows]
+
     write_results(out_s, order())
     report(progress, len(rows), len(jobs), f"{len(rows)} done before")
     last_write = time.perf_counter()

@@ -16,8 +16,8 @@ from ctui.engine.core.atomic import check_outputs
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
 from ctui.engine.measure.report import path_table, plot_sections, write_path_csv, write_sections_csv
-from ctui.engine.measure.sections import find_steps  # re-exported: the measure screen marks steps in the profile
-from ctui.engine.measure.paths import LINE_AXES, line_through  # re-exported: the measure screen's section at the cursor
+from ctui.engine.measure.sections import find_steps  # noqa: F401 - re-exported: the measure screen marks steps in the profile
+from ctui.engine.measure.paths import LINE_AXES, line_through  # noqa: F401 - re-exported: the measure screen's section at the cursor
 
 
 @dataclass

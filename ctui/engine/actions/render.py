@@ -64,7 +64,7 @@ def _open(src: str, *, need_volume: bool, load_options: dict) -> Opened:
 
 def _colour(c: Any) -> tuple[float, float, float] | None:
     if isinstance(c, (list, tuple)) and len(c) == 3:
-        return tuple(float(v) / 255.0 if max(c) > 1 else float(v) for v in c)  # type: ignore[return-value]
+        return tuple(float(v) / 255.0 if max(c) > 1 else float(v) for v in c)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
     return None
 
 

@@ -215,7 +215,7 @@ class _Start:
 def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
     if opts.box is None:
         return None
-    return tuple(slice(max(a, 0), min(b, n - 1) + 1) for (a, b), n in zip(opts.box, shape))  # type: ignore[return-value]
+    return tuple(slice(max(a, 0), min(b, n - 1) + 1) for (a, b), n in zip(opts.box, shape))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, th: Threshold,
@@ -501,7 +501,8 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
                        auto_range=None if start.auto_range is None else start.auto_range.to_dict(),
                        denoise=start.denoise)
     s = _settings(opts, start, volume.data.shape)
-    spacing = tuple(float(v) for v in volume.spacing)
+    dz, dy, dx = (float(v) for v in volume.spacing)
+    spacing = (dz, dy, dx)
     info = seg.objects[oid]
     info.seeds.append(seed)
     info.settings.update({"low": start.rng[0], "high": start.rng[1], "connectivity": opts.connectivity,
@@ -518,7 +519,7 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
     if job.neck_status == "thin" and start.width > 0:
         res.warnings.append(f"the neck width {start.width:g} mm is wider than the object around the seed, so "
                             "the leak guard cut nothing: use the automatic width or a smaller one")
-    _clean(seg, oid, opts, spacing)  # type: ignore[arg-type]
+    _clean(seg, oid, opts, spacing)
     info.settings["propagation"] = res.stops
     return res, s.to_dict()
 

@@ -96,7 +96,7 @@ class Geometry:
         if not isinstance(d, dict):
             raise CtuiError("geometry: expected an object")
         direction = _direction(d.get("direction"), orthonormal=True)  # files: strict
-        return cls(d.get("shape_zyx"), d.get("spacing_zyx_mm", (1.0, 1.0, 1.0)),  # type: ignore[arg-type]
+        return cls(d.get("shape_zyx"), d.get("spacing_zyx_mm", (1.0, 1.0, 1.0)),  # type: ignore[arg-type]  # a file's fields: __post_init__ checks each one and raises CtuiError
                    d.get("origin_xyz_mm", (0.0, 0.0, 0.0)), direction)
 
     def to_dict(self) -> dict:

@@ -160,7 +160,7 @@ def _as_loops(items: Sequence[Any], z: int) -> list[_Loop]:
     for it in items:
         if hasattr(it, "points"):
             pts, hole = np.asarray(it.points, np.float64), bool(getattr(it, "hole", False))
-        elif isinstance(it, tuple) and len(it) == 2 and not np.isscalar(it[1]) is False:
+        elif isinstance(it, tuple) and len(it) == 2 and np.isscalar(it[1]):  # (points, hole flag)
             pts, hole = np.asarray(it[0], np.float64), bool(it[1])
         else:
             pts = np.asarray(it, np.float64)

@@ -98,7 +98,7 @@ class PropagationSettings:
         if self.mode not in ("slice", "3d"):
             raise ValueError(f"mode must be 'slice' or '3d', got {self.mode!r}")
         if self.box is not None:
-            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         if self.neck_rule not in ("opening", "sweep"):
             raise ValueError(f"neck_rule must be 'opening' or 'sweep', got {self.neck_rule!r}")
         if not math.isfinite(float(self.neck_mm)) or not (math.isfinite(float(self.low)) and math.isfinite(float(self.high))):
@@ -537,7 +537,7 @@ def propagate(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settin
     Returns the :class:`Proposal` (pending; call ``proposal.accept(segmentation)``).
     """
     own = _Either(cancel)
-    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own,  # type: ignore[arg-type]
+    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own,  # type: ignore[arg-type]  # _Either is the callable cancel check that iter_propagation takes
                            region=region)
     try:
         while True:
