@@ -29,7 +29,8 @@ def menu_items(session) -> tuple[list[tuple[str, str]], str]:
     registered format the input supports, in registry order, its current-object variant
     when it writes surfaces, then the slice view PNG), and a note saying why the other
     formats are not offered ("" when all are)."""
-    items, missing = [], {}
+    items: list[tuple[str, str]] = []
+    missing: dict[str, list[str]] = {}
     for fmt, why in available_formats(opened_of(session)):
         if why:
             missing.setdefault(why, []).append(fmt.title)

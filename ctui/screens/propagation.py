@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 from textual.worker import get_current_worker
 
@@ -31,8 +32,8 @@ class PropagationRun:
         self.ws = ws
         self.direction = direction
         self.event = threading.Event()
-        self.proposal = None
-        self.report = None
+        self.proposal: propagate.Proposal | None = None
+        self.report: Any = None  # the segment action's ObjectResult (None: a propagation)
         self.seed: tuple[int, int, int] | None = None
         self.object_settings: dict = {}
         self.started = time.perf_counter()
@@ -43,7 +44,7 @@ class PropagationRun:
     def done(self, proposal, *, report=None, seed=None, object_settings: dict | None = None) -> None:
         """The worker's result, posted to the workspace (``ProposalReady``)."""
         self.proposal, self.report = proposal, report
-        self.seed = None if seed is None else tuple(int(v) for v in seed)
+        self.seed = None if seed is None else (int(seed[0]), int(seed[1]), int(seed[2]))
         self.object_settings = dict(object_settings or {})
         self.ws.post_message(ProposalReady(self))
 
@@ -77,7 +78,7 @@ def settings_for(session, direction: str):
         lo, hi = s.range_
     else:
         raise CtuiError(f"object {s.current} has no fill yet: press Enter on it first")
-    kw = {}
+    kw: dict[str, Any] = {}
     lim = s.limits.slices
     if lim is not None:
         if not lim[0] <= s.z <= lim[1]:
@@ -100,7 +101,7 @@ def object_seed(session) -> tuple[int, int, int] | None:
     """The current object's last seed (x, y, z) (set by Enter, S or ctui segment), or None."""
     info = session.seg.objects.get(session.current) if session.seg is not None else None
     seeds = list(getattr(info, "seeds", []) or [])
-    return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]
+    return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _idle(ws) -> bool:
@@ -144,7 +145,7 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
             if "prompts" not in METHODS[opts.method].options:  # a model's prompts refine the object as it is
                 labels[labels == oid] = 0
             scratch = Segmentation(s.seg.shape, labels=labels)
-            res = segment_action(s.volume, [seed], th, background=list(getattr(s, "background_seeds", []) or []),
+            res = segment_action(s.volume, [seed], th, background=list(s.background_seeds),
                                  options=opts, pipeline=s.pipeline, segmentation=scratch, progress=progress,
                                  object_ids=[oid])
         obj = res.objects[0]
@@ -219,6 +220,8 @@ def finished(ws, run: PropagationRun) -> None:
     ws.jobs.segmentation_ended()
     ws.show_progress(None)
     p = run.proposal
+    if p is None:  # done() always gives one; a run that ended without is a SegmentationFailed
+        return
     ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
     rng = p.slices
     secs = time.perf_counter() - run.started

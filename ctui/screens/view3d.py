@@ -82,7 +82,7 @@ class View3DScreen(GuardMixin, Screen):
         self.mode = "surface"
         self.method = METHODS[0]
         self.meshes: dict | None = None
-        self.scene = None
+        self.scene: render.Scene | None = None
         self.fixed_image = image
         self._req = 0
         self.last_image = None
