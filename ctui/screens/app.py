@@ -342,7 +342,7 @@ class CtuiApp(App):
     def action_help(self) -> None:
         from ctui.screens.dialogs import TextScreen, bindings_help
 
-        from ctui.screens.help import task_help
+        from ctui.screens.keyhelp import task_help
 
         screen = self.screen
         cols = int(self.size.width * 0.9) - 6  # the help box's text width: groups side by side when it fits
