@@ -9,7 +9,7 @@ from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.project import new_project, propagation_record
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions.series import Pipeline, Segmentation
-from ctui.engine.actions import edit as edittools
+from ctui.engine.actions import defaults, edit as edittools
 from ctui.screens.planes import PLANES
 from ctui.screens.session import PanelOptions, Session
 
@@ -127,7 +127,7 @@ def session_from_project(proj, volume, path: str) -> Session:
     s.tolerance = float(prop.get("tolerance", s.tolerance))
     s.range_ = tuple(prop["range"]) if prop.get("range") else None
     s.connectivity = int(prop.get("connectivity", 8))
-    s.prop_mode = str(prop.get("mode", "slice")) if prop.get("mode") in ("slice", "3d") else "slice"
+    s.prop_mode = str(prop["mode"]) if prop.get("mode") in defaults.PROPAGATION_MODES else defaults.PROPAGATION_MODE
     s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
     s.view = str(meta.get("view", s.view))
     _editing_from_meta(s, meta)

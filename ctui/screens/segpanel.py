@@ -22,8 +22,6 @@ from ctui.engine.core.errors import CtuiError
 from ctui.screens.session import Session
 from ctui.screens.ws_state import describe  # noqa: F401 - the panel's one-line summary, read with the panel
 
-DIRECTIONS = ("both", "forward", "backward")
-
 
 def options_for(session: Session, direction: str = "both") -> tuple[SegmentOptions, list]:
     """(SegmentOptions, thresholds) for the session: the panel's choices, the propagation mode (``m`` in the

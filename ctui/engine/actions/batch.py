@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.measure import measure_object
 from ctui.engine.actions.opened import Opened, existing_path
 from ctui.engine.actions.options import parse_pair
@@ -65,7 +66,7 @@ RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", 
                   "slices", "project", "mesh", "seconds", "cpu_seconds")
 #: thread-count variables set to 1 in local worker processes: N workers use N cores, not N x all
 SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
-MODES = ("slice", "3d")
+MODES = defaults.PROPAGATION_MODES
 
 
 @dataclass

@@ -110,11 +110,11 @@ def _wire_budget(meshes: list, opened: Opened) -> list:
 
 def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[int] | None = None,
                 iso: float | None = None, opacity: float | None = None, azimuth: float = defaults.RENDER_AZIMUTH,
-                elevation: float = defaults.RENDER_ELEVATION, roll: float = 0.0, zoom: float = 1.0,
+                elevation: float = defaults.RENDER_ELEVATION, roll: float = defaults.RENDER_ROLL, zoom: float = defaults.RENDER_ZOOM,
                 perspective: bool = False, light: Sequence[float] | None = None, shadows: bool = False,
-                antialias: str = "fxaa", wire_overlay: bool = False, window: Sequence[float] | None = None,
+                antialias: str = defaults.RENDER_ANTIALIAS, wire_overlay: bool = False, window: Sequence[float] | None = None,
                 background: Sequence[float] | None = None, slice_plane: str | None = None,
-                preset: str | None = None, frame: str = "auto") -> tuple[Scene, str]:
+                preset: str | None = None, frame: str = defaults.RENDER_FRAME) -> tuple[Scene, str]:
     """(Scene, mode) for ``opened``; colours from the project's objects."""
     kind = opened.kind
     mode = mode or ("dvr" if kind == "series" and iso is None else "surface")

@@ -211,7 +211,7 @@ def _is_seg(path: str) -> bool:
     return label_kind(path) == "dicom-seg"
 
 
-def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, format: str = "sr",
+def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, format: str = defaults.REPORT_FORMAT,
                  series: str | os.PathLike | None = None, seg: str | os.PathLike | None = None,
                  objects: int | Sequence[int] | None = None, path: Any = None,
                  step_mm: float = defaults.SECTION_STEP_MM, sections: str = "extremes",

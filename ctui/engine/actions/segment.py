@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
 from ctui.engine.actions.segment_checks import body_check, check_background, leak_check, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
@@ -67,21 +68,21 @@ Box = tuple[tuple[int, int], tuple[int, int], tuple[int, int]]
 class SegmentOptions:
     """How to segment (keyword defaults = the CLI's defaults)."""
 
-    method: str = "fill"
-    mode: str = "slice"
-    direction: str = "both"
-    connectivity: int = 8
-    neighbourhood: int = 2
-    min_area: int = 5
-    leak_factor: float | None = 2.5
+    method: str = defaults.SEGMENT_METHOD
+    mode: str = defaults.PROPAGATION_MODE
+    direction: str = defaults.DIRECTION
+    connectivity: int = defaults.CONNECTIVITY
+    neighbourhood: int = defaults.NEIGHBOURHOOD
+    min_area: int = defaults.MIN_AREA
+    leak_factor: float | None = defaults.LEAK_FACTOR
     neck_mm: float | None = None  # None: chosen from the data (autoneck); a number forces it; 0: off
     fill_holes: bool = True  # holes enclosed in each slice of the object are part of it (renal sinus, vessels)
     box: Box | None = None  # fills, propagation and growing stay inside this box
     slices: tuple[int, int] | None = None
     keep_largest: bool = False
-    min_island: int = 0
+    min_island: int = defaults.MIN_ISLAND_VOXELS
     interpolate: bool = False
-    curvature: float = 0.5  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
+    curvature: float = defaults.LEVELSET_CURVATURE_MM  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
     overwrite: bool = False
     server: str = ""  # nninteractive: the server's URL (else CTUI_NNI_SERVER); never saved
     api_key: str = field(default="", repr=False)  # nninteractive: the server's key (else CTUI_NNI_KEY); never saved

@@ -15,6 +15,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.export import export
 from ctui.engine.actions.formats import format_for_path
 from ctui.engine.actions.opened import Opened
@@ -76,7 +77,7 @@ def _zyx(p: Sequence[int], what: str) -> tuple[int, int, int]:
 
 
 def vessel(volume: Any, *, start: Sequence[int], ends: Sequence[Sequence[int]], vias: Sequence[Sequence[int]] = (),
-           value_range: tuple[float, float] | None = None, lumen: str = "contrast", step_mm: float = SECTION_STEP_MM,
+           value_range: tuple[float, float] | None = None, lumen: str = defaults.VESSEL_LUMEN, step_mm: float = SECTION_STEP_MM,
            source: str = "", progress: Progress | None = None) -> VesselResult:
     """Extract one vessel from ``volume`` (a :class:`~ctui.engine.core.volume.Volume`).
 

@@ -31,10 +31,9 @@ from ctui.engine.core.colors import object_color_float
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
-from ctui.engine.core.rendermodes import MODES, VOLUME_MODES  # noqa: F401 - MODES re-exported (ctui.engine.render)
+from ctui.engine.core.rendermodes import ANTIALIAS, FRAMES, MODES, VOLUME_MODES  # noqa: F401 - re-exported (ctui.engine.render)
 
 PROJECTIONS = ("orthographic", "perspective")
-ANTIALIAS = ("fxaa", "msaa", "none")
 
 
 @dataclass
@@ -168,10 +167,9 @@ class RenderOptions:
     frame: str = "auto"
 
 
-#: what the camera frames (``RenderOptions.frame``): "auto" = the visible meshes in the
-#: surface modes and the volume box in the volume modes (or when there is no mesh);
-#: "objects" = the meshes; "series" = the volume box and the meshes
-FRAMES = ("auto", "objects", "series")
+# FRAMES (core.rendermodes): what the camera frames (``RenderOptions.frame``): "auto" = the visible meshes
+# in the surface modes and the volume box in the volume modes (or when there is no mesh);
+# "objects" = the meshes; "series" = the volume box and the meshes
 
 
 @dataclass
