@@ -166,7 +166,8 @@ def _tool(cmd: list[str], root: Path, env: dict[str, str]) -> tuple[int, str]:
     except (OSError, subprocess.TimeoutExpired) as exc:
         return -1, f"not run: {exc}"
     text = (out.stdout + out.stderr).strip().splitlines()
-    return out.returncode, (text[-1] if text else "")
+    summary = [t for t in text if re.search(r"Found \d+ error|All checks passed|Success:|Contracts:", t)]
+    return out.returncode, (summary or text or [""])[-1]
 
 
 def tools(root: Path) -> None:
