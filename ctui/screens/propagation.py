@@ -21,6 +21,7 @@ from ctui.engine.segment import propagate
 from ctui.engine.segment.selection import Segmentation
 from ctui.screens.messages import JobProgress, ProposalReady, SegmentationFailed
 from ctui.screens.segpanel import describe, options_for
+from ctui.screens.session import Session
 
 
 class PropagationRun:
@@ -66,7 +67,7 @@ class PropagationRun:
         return callback
 
 
-def settings_for(session, direction: str):
+def settings_for(session: Session, direction: str) -> propagate.PropagationSettings:
     """PropagationSettings from the current object's fill range (or the session's) and
     the session's slice limits (``s`` stops at a slice, ``i`` sets a range)."""
     s = session
@@ -97,7 +98,7 @@ def clip_to_slices(proposal, limits: tuple[int, int] | None) -> None:
         proposal.areas.pop(z, None)
 
 
-def object_seed(session) -> tuple[int, int, int] | None:
+def object_seed(session: Session) -> tuple[int, int, int] | None:
     """The current object's last seed (x, y, z) (set by Enter, S or ctui segment), or None."""
     info = session.seg.objects.get(session.current) if session.seg is not None else None
     seeds = list(getattr(info, "seeds", []) or [])

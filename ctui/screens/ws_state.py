@@ -363,7 +363,7 @@ def mm(v: float) -> str:
     return f"{float(v):.1f}".removesuffix(".0")
 
 
-def value_unit(s) -> str:
+def value_unit(s: Session) -> str:
     """The unit of the values a range or tolerance is in: HU on CT, the signal on MR and
     other modalities, 0..255 after a pipeline that leaves the HU domain."""
     if s.pipeline is not None and s.pipeline.domain != "hu":
