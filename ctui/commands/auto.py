@@ -69,9 +69,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _input(args: argparse.Namespace):
     """(volume, labels or None, objects, source path, source options) of PATH."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import open_input
 
-    if args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.path.endswith(PROJECT_SUFFIXES):
         opened = open_input(args.path, kind="project", with_series=True)
         proj = opened.project
         return opened.volume, opened.labels, list(proj.objects or []), proj.source_path, dict(proj.source_options or {})

@@ -44,10 +44,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _source(args: argparse.Namespace):
     """(Opened with labels, seg or None, pipeline or None, settings) for the drift check."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import Opened, open_input
 
 
-    if args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.path.endswith(PROJECT_SUFFIXES):
         if not os.path.exists(args.path):
             raise CtuiError("no such file", path=args.path)
         return open_input(args.path, kind="project", require_labels=True,

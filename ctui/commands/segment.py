@@ -354,11 +354,13 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
 def run(args: argparse.Namespace) -> int:
     import json  # 2 ms: loaded when a command prints, not for `ctui --help`
 
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
+
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
 
     if getattr(args, "refine", False):
         volume, start, ids = _refine_input(args)
-    elif args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
+    elif args.path.endswith(PROJECT_SUFFIXES) and not args.seed:
         return _edit_project(args)
     else:
         volume, start, ids = load_volume(args.path, **load_kwargs(args)), None, None
@@ -392,10 +394,11 @@ def run(args: argparse.Namespace) -> int:
 def _refine_input(args: argparse.Namespace):
     """--refine: (volume, Segmentation, [object id]) from the project PATH, whose source series is loaded;
     ``args.path`` becomes the series' path (the new project's source)."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import open_input
     from ctui.engine.actions.series import Segmentation
 
-    if args.method != "nninteractive" or not args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.method != "nninteractive" or not args.path.endswith(PROJECT_SUFFIXES):
         raise _err("--refine refines an object of a .ctui project PATH with --method nninteractive")
     opened = open_input(args.path, kind="project", require_labels=True, with_series=True)
     proj = opened.project

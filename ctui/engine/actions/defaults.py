@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ctui.engine.core.rendermodes import ANTIALIAS, FRAMES
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
+from ctui.engine.mesh import CONTOUR_TILINGS  # the mesh package's list (plain data)
 # propagation's defaults and lists, defined in the segment package (plain data) and read here by the CLI
 from ctui.engine.segment import (CONNECTIVITIES, CONNECTIVITY, DIRECTION, DIRECTIONS, DOMAIN, DOMAINS,  # noqa: F401
                                  LEAK_FACTOR, MIN_AREA, NEIGHBOURHOOD, PROPAGATION_MODE, PROPAGATION_MODES)
@@ -23,7 +24,6 @@ SECTION_AVERAGE_MM = 0.0
 MESH_METHODS = ("marching-cubes", "contours")
 MESH_METHOD = MESH_METHODS[0]
 #: Contour tiling: "dp" (minimum area) or "greedy".
-CONTOUR_TILINGS = ("dp", "greedy")
 CONTOUR_TILING = CONTOUR_TILINGS[0]
 #: Taubin smoothing iterations after meshing (0 = none).
 MESH_SMOOTH_ITERATIONS = 0

@@ -61,6 +61,7 @@ import numpy as np
 
 from ctui.engine.core.borders import object_borders
 from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh import CONTOUR_TILINGS
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
 from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
 from ctui.engine.mesh.surface import _fix_handedness, affine_from
@@ -439,7 +440,7 @@ def connect_contours(
     Mesh
         Closed, welded, outward-oriented triangle mesh in patient mm (object_id 0).
     """
-    if method not in ("dp", "greedy"):
+    if method not in CONTOUR_TILINGS:
         raise ValueError(f"unknown tiling method {method!r} (use 'dp' or 'greedy')")
     aff = affine_from(spacing, origin, direction)
     builder = _Builder()
