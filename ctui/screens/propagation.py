@@ -100,9 +100,11 @@ def clip_to_slices(proposal, limits: tuple[int, int] | None) -> None:
 
 def object_seed(session: Session) -> tuple[int, int, int] | None:
     """The current object's last seed (x, y, z) (set by Enter, S or ctui segment), or None."""
-    info = session.seg.objects.get(session.current) if session.seg is not None else None
-    seeds = list(getattr(info, "seeds", []) or [])
-    return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
+    info = session.seg.objects.get(session.current)
+    if info is None or not info.seeds:
+        return None
+    x, y, z = info.seeds[-1]
+    return int(x), int(y), int(z)
 
 
 def _idle(ws) -> bool:
