@@ -37,7 +37,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse with its errors as ONE line ``ctui CMD: <fault> (see ctui CMD --help)``, exit 2
     (the usage block is in --help); subcommand parsers are of this class too."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):  # type: ignore[override]  # argparse's error() is typed NoReturn; this one exits too, without the annotation
         from ctui.engine.core.safetext import printable
 
         self.exit(2, f"{self.prog}: {printable(message)} (see {self.prog} --help)\n")

@@ -36,6 +36,8 @@ class _Choices:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "auto", run,
         help="a first draft from TotalSegmentator (where installed): its classes as named objects",
@@ -46,17 +48,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                "--fast --project ct-auto.ctui",
     )
     p.add_argument("path", help="series folder/file (anything `ctui open` loads), or a .ctui project to add to")
-    p.add_argument("--engine", choices=_Choices("ENGINES"), default="totalsegmentator", metavar="ENGINE",
+    p.add_argument("--engine", choices=_Choices("ENGINES"), default=defaults.AUTO_ENGINE, metavar="ENGINE",
                    help="the model to run: totalsegmentator (default)")
-    p.add_argument("--task", default="total", metavar="TASK",
+    p.add_argument("--task", default=defaults.AUTO_TASK, metavar="TASK",
                    help="TotalSegmentator's task (default total: 117 CT classes; total_mr for MR; licensed tasks "
                         "need its licence number)")
     p.add_argument("--roi-subset", default="", metavar="NAME,...",
                    help="only these classes, e.g. liver,spleen,kidney_left (TotalSegmentator's --roi_subset)")
     p.add_argument("--fast", action="store_true", help="TotalSegmentator's 3 mm model (about a minute on a CPU)")
-    p.add_argument("--device", choices=_Choices("DEVICES"), default="cpu", metavar="cpu|gpu",
-                   help="where the model runs (default cpu)")
-    p.add_argument("--merge", choices=_Choices("MERGE"), default="add", metavar="add|replace|keep",
+    p.add_argument("--device", choices=_Choices("DEVICES"), default=defaults.AUTO_DEVICE, metavar="cpu|gpu",
+                   help="where the model runs (default %(default)s)")
+    p.add_argument("--merge", choices=_Choices("MERGE"), default=defaults.AUTO_MERGE, metavar="add|replace|keep",
                    help="with a .ctui PATH: add (default: new objects, existing voxels stay theirs), replace "
                         "(a class named like an object replaces it), keep (such a class is skipped)")
     p.add_argument("--project", metavar="OUT.ctui", help="the project to write (default <stem>-auto.ctui)")
@@ -67,9 +69,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _input(args: argparse.Namespace):
     """(volume, labels or None, objects, source path, source options) of PATH."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import open_input
 
-    if args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.path.endswith(PROJECT_SUFFIXES):
         opened = open_input(args.path, kind="project", with_series=True)
         proj = opened.project
         return opened.volume, opened.labels, list(proj.objects or []), proj.source_path, dict(proj.source_options or {})

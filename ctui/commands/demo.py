@@ -10,6 +10,8 @@ from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "demo", run,
         help="write the synthetic CT phantom series (the bundled sample) to OUTDIR",
@@ -19,8 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "with each object's analytic volume, HU, seed voxel and cross-sections.",
     )
     p.add_argument("outdir", help="folder to write into (created if missing)")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    p.add_argument("--noise", type=float, default=8.0, help="noise sigma in HU (default 8)")
+    p.add_argument("--seed", type=int, default=defaults.DEMO_SEED, help="noise seed (default %(default)s)")
+    p.add_argument("--noise", type=float, default=defaults.DEMO_NOISE_HU, help="noise sigma in HU (default %(default)g)")
     p.add_argument("--no-drift", action="store_true", help="leave out the drifted slices")
 
 

@@ -13,6 +13,8 @@ from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "drift", run,
         help="per-slice centroids of segmented objects and slices that drifted",
@@ -29,10 +31,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--objects", metavar="IDS", default=None, help="object ids to check, e.g. 1,3 (default: all)")
     p.add_argument("--threshold", type=number("--threshold", 0, 1e4, above=True), default=None, metavar="MM",
                    help="flag slices whose centroid deviates more than MM (default: max(1 mm, 0.75 pixel))")
-    p.add_argument("--fit", choices=("median", "poly"), default="median",
+    p.add_argument("--fit", choices=defaults.DRIFT_FITS, default=defaults.DRIFT_FIT,
                    help="smooth fit along the slices: running median (default) or robust polynomial")
-    p.add_argument("--fit-window", type=number("--fit-window", 1, 10001, integer=True), default=9, metavar="N", help="running-median window in slices (default 9)")
-    p.add_argument("--estimate", choices=("centroid", "phase"), default="centroid",
+    p.add_argument("--fit-window", type=number("--fit-window", 1, 10001, integer=True), default=defaults.DRIFT_FIT_WINDOW, metavar="N", help="running-median window in slices (default %(default)s)")
+    p.add_argument("--estimate", choices=defaults.DRIFT_ESTIMATES, default=defaults.DRIFT_ESTIMATE,
                    help="correction shift from centroid alignment (default) or phase correlation")
     p.add_argument("--project", metavar="OUT.ctui",
                    help="write a project with the drift corrections recorded (undoable; data unchanged)")
@@ -42,10 +44,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _source(args: argparse.Namespace):
     """(Opened with labels, seg or None, pipeline or None, settings) for the drift check."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import Opened, open_input
 
 
-    if args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.path.endswith(PROJECT_SUFFIXES):
         if not os.path.exists(args.path):
             raise CtuiError("no such file", path=args.path)
         return open_input(args.path, kind="project", require_labels=True,

@@ -12,6 +12,8 @@ from ctui.engine.core.errors import CtuiError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "edit", run,
         help="3D edits of an object: keep/remove the island at a voxel, scissors, smoothing",
@@ -32,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--keep-island", default=None, metavar="X,Y,Z", help="keep only the island through this voxel")
     p.add_argument("--remove-island", default=None, metavar="X,Y,Z", help="remove the island through this voxel")
     p.add_argument("--island-slice", action="store_true", help="islands of the voxel's slice only (2D)")
-    p.add_argument("--cut", choices=("inside", "outside"), default=None,
+    p.add_argument("--cut", choices=defaults.CUT_SIDES, default=None,
                    help="scissors: erase the object inside/outside the --box or --polygon")
     p.add_argument("--polygon", default=None, metavar='"X,Y;X,Y;X,Y..."', help="scissors polygon (pixels, every slice)")
     p.add_argument("--slices", default=None, metavar="A:B", help="scissors on slices A..B (inclusive)")

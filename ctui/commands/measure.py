@@ -39,9 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"distance between sections (default {defaults.SECTION_STEP_MM:g} mm, as the TUI's M screen)")
     p.add_argument("--between", default=None, metavar="S1,S2",
                    help="volume between the planes normal to the path at arc lengths S1 and S2 mm")
-    p.add_argument("--area", choices=("pv", "contour"), default="pv",
+    p.add_argument("--area", choices=defaults.SECTION_AREAS, default=defaults.SECTION_AREA,
                    help="section area estimate: partial-volume integral (default) or shoelace of the contour")
-    p.add_argument("--average", type=number("--average", 0, 1000), default=0.0, metavar="MM",
+    p.add_argument("--average", type=number("--average", 0, 1000), default=defaults.SECTION_AVERAGE_MM, metavar="MM",
                    help="average each section over MM of path (thin slab; halves the scatter of small binary "
                    "tubes, blurs changes over MM; default 0 = single planes)")
     p.add_argument("--reference", default=None, metavar="A1,A2,...",

@@ -42,9 +42,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="marching-cubes (default for series and projects) or contours (default for .mric)")
     p.add_argument("--iso", type=number("--iso"), metavar="VALUE", help="iso value for a series (HU for CT)")
     p.add_argument("--object", type=number("--object", 0, 65535, integer=True), metavar="N", help="object id in a project / label file (default: all)")
-    p.add_argument("--smooth", type=number("--smooth", 0, 1000, integer=True), default=0, metavar="ITER", help="Taubin smoothing iterations (volume-preserving)")
+    p.add_argument("--smooth", type=number("--smooth", 0, 1000, integer=True), default=defaults.MESH_SMOOTH_ITERATIONS, metavar="ITER", help="Taubin smoothing iterations (volume-preserving)")
     p.add_argument("--decimate", type=number("--decimate", 4, 1e9, integer=True), metavar="N", help="reduce to about N triangles")
-    p.add_argument("--tiling", choices=("dp", "greedy"), default="dp", help="contour tiling: minimum-area DP or greedy")
+    p.add_argument("--tiling", choices=defaults.CONTOUR_TILINGS, default=defaults.CONTOUR_TILING, help="contour tiling: minimum-area DP or greedy")
     p.add_argument("--terraced", action="store_true",
                    help="project / label file: plain marching cubes of the label map, every object in one pass "
                    "(voxel staircase kept) instead of smoothed signed-distance surfaces")

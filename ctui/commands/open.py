@@ -11,7 +11,7 @@ from ctui.engine.actions.options import load_options
 from ctui.engine.core.colors import MAX_OBJECTS
 from ctui.engine.core.errors import CtuiError
 
-GRAPHICS = ("auto", "sixel", "kitty", "halfblock", "ascii")
+from ctui.screens.graphics import MODES as GRAPHICS  # the terminal's image modes: one list (stdlib-only module)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

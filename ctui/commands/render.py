@@ -34,8 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(default: ct-bone for CT, mr-default otherwise)")
     p.add_argument("--azimuth", type=number("--azimuth", -36000, 36000), default=defaults.RENDER_AZIMUTH, help="degrees about the patient's z axis (0 = from the front)")
     p.add_argument("--elevation", type=number("--elevation", -36000, 36000), default=defaults.RENDER_ELEVATION, help="degrees above the horizontal (90 = from above)")
-    p.add_argument("--roll", type=number("--roll", -36000, 36000), default=0.0, help="degrees about the view axis")
-    p.add_argument("--zoom", type=number("--zoom", 0, 1000, above=True), default=1.0, help="magnification (default 1 = fit)")
+    p.add_argument("--roll", type=number("--roll", -36000, 36000), default=defaults.RENDER_ROLL, help="degrees about the view axis")
+    p.add_argument("--zoom", type=number("--zoom", 0, 1000, above=True), default=defaults.RENDER_ZOOM, help="magnification (default %(default)g = fit)")
     p.add_argument("--size", default="{}x{}".format(*defaults.RENDER_SIZE),
                    help="WxH pixels (default {}x{})".format(*defaults.RENDER_SIZE))
     p.add_argument("--light", default=None, help="AZ,EL of the movable light relative to the camera (default 35,35)")
@@ -47,13 +47,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="project: render only this object id (repeatable)")
     p.add_argument("--opacity", type=number("--opacity", 0, 1), default=None, help="opacity of all surfaces (0..1)")
     p.add_argument("--perspective", action="store_true", help="perspective instead of orthographic projection")
-    p.add_argument("--aa", choices=("fxaa", "msaa", "none"), default="fxaa", help="anti-aliasing (default fxaa)")
+    p.add_argument("--aa", choices=defaults.ANTIALIAS, default=defaults.RENDER_ANTIALIAS, help="anti-aliasing (default %(default)s)")
     p.add_argument("--wire-overlay", action="store_true", help="draw triangle edges over the surfaces")
     p.add_argument("--window", default=None, help="C,W display window for mip/minip and slice planes")
     p.add_argument("--slice", default=None, metavar="AXIS[:INDEX]",
                    help="show a slice plane in place (axis z|y|x; needs a series or project source)")
     p.add_argument("--background", default=None, help="R,G,B 0..255 (default dark grey)")
-    p.add_argument("--frame", choices=("auto", "objects", "series"), default="auto",
+    p.add_argument("--frame", choices=defaults.FRAMES, default=defaults.RENDER_FRAME,
                    help="what the camera frames: auto (the objects in surface modes, the volume in volume "
                         "modes), objects, or series (the whole volume box)")
     p.add_argument("--flythrough", default=None, metavar="auto|X,Y,Z;X,Y,Z;...",

@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", help="a .ctui project or a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)")
     p.add_argument("--out", required=True, metavar="PATH", help="file to write (.dcm for sr)")
-    p.add_argument("--format", choices=defaults.REPORT_FORMATS, default="sr",
+    p.add_argument("--format", choices=defaults.REPORT_FORMATS, default=defaults.REPORT_FORMAT,
                    help="sr (default): DICOM SR TID 1500; json; csv: one row per object")
     p.add_argument("--series", default=None, metavar="SERIES",
                    help="the DICOM series the labels were drawn on (default: the project's source)")

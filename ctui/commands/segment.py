@@ -52,7 +52,7 @@ class _MethodHelp(str):
     """Help text that lists each registered method with its line of help when argparse
     formats it (``help % params``), so the registry is read only for ``--help``."""
 
-    def __mod__(self, params):  # type: ignore[override]
+    def __mod__(self, params):  # type: ignore[override]  # a str whose % formats the registry's help lazily
         from ctui.engine.actions.segment import METHODS
 
         return f"{self}: " + "; ".join(f"{m.name}: {m.help}" + (" (default)" if m.name == params.get("default") else "")
@@ -62,7 +62,7 @@ class _MethodHelp(str):
 class _ThresholdAction(argparse.Action):
     """Keeps --range and --tolerance in one ordered list so the n-th pairs with the n-th --seed."""
 
-    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[override]
+    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[override]  # argparse.Action's signature, values untyped
         items = list(getattr(namespace, self.dest, None) or [])
         items.append((self.const, values))
         setattr(namespace, self.dest, items)
@@ -70,13 +70,15 @@ class _ThresholdAction(argparse.Action):
 
 def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) -> None:
     """Options shared by ``segment`` and ``drift``. Slices are numbered from 0 everywhere."""
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p.add_argument("--seed", action="append", default=[], metavar="X,Y,Z",
                    help="seed voxel inside the object: column, row, slice (numbered from 0, slice 0 lowest along "
                         "the slice normal, as in the TUI); repeat for several objects" + ("" if required else " (instead of --mask)"))
     p.add_argument("--background", action="append", default=[], metavar="X,Y,Z",
                    help="background seed: a voxel of a neighbour with the same values that the object must not "
                         "reach (column, row, slice from 0); repeatable, shared by every object")
-    p.add_argument("--method", choices=_MethodChoices(), default="fill", metavar="METHOD",  # metavar: not read now
+    p.add_argument("--method", choices=_MethodChoices(), default=defaults.SEGMENT_METHOD, metavar="METHOD",  # metavar: not read now
                    help=_MethodHelp("segmentation method"))
     p.add_argument("--range", dest="thresholds", action=_ThresholdAction, const="range", metavar="LO:HI|auto",
                    help="in-range values LO..HI inclusive (HU for CT in the default hu domain); "
@@ -85,13 +87,13 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--tolerance", dest="thresholds", action=_ThresholdAction, const="tolerance", metavar="T",
                    help="in-range values: seed value +- T (in the seed slice's final view)")
     p.add_argument("--filter", action="append", default=[], metavar="SPEC", help=FILTER_HELP)
-    p.add_argument("--domain", choices=("hu", "window8"), default="hu",
+    p.add_argument("--domain", choices=defaults.DOMAINS, default=defaults.DOMAIN,
                    help="filters and thresholds work on HU values (hu, default) or on windowed 0..255 values (window8)")
     p.add_argument("--window", metavar="C,W", default=None, help="window centre,width for window8/equalize/invert (default: the series')")
-    p.add_argument("--connectivity", type=int, choices=(4, 8), default=8, help="in-slice connectivity (default 8)")
-    p.add_argument("--direction", choices=("both", "forward", "backward"), default="both",
+    p.add_argument("--connectivity", type=int, choices=defaults.CONNECTIVITIES, default=defaults.CONNECTIVITY, help="in-slice connectivity (default %(default)s)")
+    p.add_argument("--direction", choices=defaults.DIRECTIONS, default=defaults.DIRECTION,
                    help="propagate from the seed slice towards higher slices, lower, or both (default)")
-    p.add_argument("--mode", choices=("slice", "3d"), default="slice",
+    p.add_argument("--mode", choices=defaults.PROPAGATION_MODES, default=defaults.PROPAGATION_MODE,
                    help="slice-by-slice propagation (default) or one 3D flood fill; both cut necks (--neck)")
     p.add_argument("--slices", metavar="A:B", default=None,
                    help="propagate (and grow) only within slices A..B inclusive, numbered from 0")
@@ -105,18 +107,18 @@ def add_segmentation_args(p: argparse.ArgumentParser, *, required: bool = True) 
     p.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1", default=None,
                    help="two opposite corners (column, row, slice from 0, inclusive): fills, propagation and "
                         "growing stay inside this box")
-    p.add_argument("--leak-factor", type=number("--leak-factor", 1, 1000, above=True), default=2.5,
+    p.add_argument("--leak-factor", type=number("--leak-factor", 1, 1000, above=True), default=defaults.LEAK_FACTOR,
                    help="second leak guard, slice mode with --neck MM: stop when the area grows more than this factor "
-                        "from one slice to the next (default 2.5; in 3D mode only with --neck 0; with --neck auto "
+                        "from one slice to the next (default %(default)g; in 3D mode only with --neck 0; with --neck auto "
                         "the width's region and its 3D cut do this)")
-    p.add_argument("--neighbourhood", type=number("--neighbourhood", 0, 100, integer=True), default=2,
-                   help="pixels the previous slice's object is grown by to seed the next slice (default 2; 0 = overlap only)")
-    p.add_argument("--min-area", type=number("--min-area", 1, 1e9, integer=True), default=5, help="smallest accepted fill / object slice in pixels (default 5)")
-    p.add_argument("--curvature", type=number("--curvature", 0, 100), default=0.5, metavar="MM",
-                   help="levelset: weight of the curvature term in mm (default 0.5): smooths corners sharper than "
+    p.add_argument("--neighbourhood", type=number("--neighbourhood", 0, 100, integer=True), default=defaults.NEIGHBOURHOOD,
+                   help="pixels the previous slice's object is grown by to seed the next slice (default %(default)s; 0 = overlap only)")
+    p.add_argument("--min-area", type=number("--min-area", 1, 1e9, integer=True), default=defaults.MIN_AREA, help="smallest accepted fill / object slice in pixels (default %(default)s)")
+    p.add_argument("--curvature", type=number("--curvature", 0, 100), default=defaults.LEVELSET_CURVATURE_MM, metavar="MM",
+                   help="levelset: weight of the curvature term in mm (default %(default)g): smooths corners sharper than "
                         "MM; the front does not enter necks narrower than about 2 x MM")
     p.add_argument("--keep-largest", action="store_true", help="keep only each object's largest 3D island")
-    p.add_argument("--min-island", type=number("--min-island", 0, 1e12, integer=True), default=0, metavar="N", help="remove each object's islands under N voxels")
+    p.add_argument("--min-island", type=number("--min-island", 0, 1e12, integer=True), default=defaults.MIN_ISLAND_VOXELS, metavar="N", help="remove each object's islands under N voxels")
     p.add_argument("--interpolate", action="store_true",
                    help="fill the empty slices between each object's slices by signed-distance interpolation")
     p.add_argument("--series", default=None, help="SeriesInstanceUID (or index) when PATH holds several series")
@@ -352,11 +354,13 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
 def run(args: argparse.Namespace) -> int:
     import json  # 2 ms: loaded when a command prints, not for `ctui --help`
 
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
+
     check_outputs({o: getattr(args, o[2:], None) for o in ("--project", "--mask", "--mric")}, inputs=[args.path])
 
     if getattr(args, "refine", False):
         volume, start, ids = _refine_input(args)
-    elif args.path.endswith((".ctui", ".ctui.autosave")) and not args.seed:
+    elif args.path.endswith(PROJECT_SUFFIXES) and not args.seed:
         return _edit_project(args)
     else:
         volume, start, ids = load_volume(args.path, **load_kwargs(args)), None, None
@@ -390,10 +394,11 @@ def run(args: argparse.Namespace) -> int:
 def _refine_input(args: argparse.Namespace):
     """--refine: (volume, Segmentation, [object id]) from the project PATH, whose source series is loaded;
     ``args.path`` becomes the series' path (the new project's source)."""
+    from ctui.engine.actions.defaults import PROJECT_SUFFIXES
     from ctui.engine.actions.opened import open_input
     from ctui.engine.actions.series import Segmentation
 
-    if args.method != "nninteractive" or not args.path.endswith((".ctui", ".ctui.autosave")):
+    if args.method != "nninteractive" or not args.path.endswith(PROJECT_SUFFIXES):
         raise _err("--refine refines an object of a .ctui project PATH with --method nninteractive")
     opened = open_input(args.path, kind="project", require_labels=True, with_series=True)
     proj = opened.project

@@ -14,6 +14,8 @@ LUMEN_CHOICES = ("contrast", "wall")  # actions.vessel.LUMENS (checked by tests/
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "vessel", run,
         help="a vessel from its start, waypoints and end(s): path, surface, diameters along it",
@@ -31,9 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="a voxel in the lumen where it ends (repeat: a tree from one start)")
     p.add_argument("--via", action="append", default=[], metavar="X,Y,Z",
                    help="a waypoint in the lumen (repeat; each belongs to the leg of the end it lies nearest)")
-    p.add_argument("--range", default="auto", metavar="auto|LO:HI",
+    p.add_argument("--range", default=defaults.VESSEL_RANGE, metavar="auto|LO:HI",
                    help="the lumen's values (default: from the values at the points)")
-    p.add_argument("--lumen", choices=LUMEN_CHOICES, default="contrast",
+    p.add_argument("--lumen", choices=LUMEN_CHOICES, default=defaults.VESSEL_LUMEN,
                    help="contrast: the bright lumen; wall: also what lies inside the vessel's wall, up to the "
                         "fat around it (a dissection's false lumen, mural thrombus)")
     p.add_argument("--project", metavar="OUT.ctui", help="write a project with the vessel as object 1")

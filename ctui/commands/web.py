@@ -30,6 +30,8 @@ COOKIE = "ctui_token"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from ctui.engine.actions import defaults  # plain constants: --help stays fast
+
     p = command(
         subparsers, "web", run,
         help="serve the TUI to a browser (loopback by default; reach it with ssh -L)",
@@ -44,9 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         raw=True,
     )
     p.add_argument("path", nargs="?", default=None, help="what `ctui open` would open (default: the sample series)")
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
-    p.add_argument("--port", type=number("--port", 0, 65535, integer=True), default=8000,
-                   help="port (default 8000; 0: any free port, printed)")
+    p.add_argument("--host", default=defaults.WEB_HOST, help="address to bind (default %(default)s: this machine only)")
+    p.add_argument("--port", type=number("--port", 0, 65535, integer=True), default=defaults.WEB_PORT,
+                   help="port (default %(default)s; 0: any free port, printed)")
     p.add_argument("--token", default=None,
                    help="required by the page when bound beyond loopback (default: CTUI_WEB_TOKEN, else made now)")
 

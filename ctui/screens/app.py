@@ -8,11 +8,12 @@ import threading
 import time
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual import events, on, work
 from textual.app import App, SystemCommand
 from textual.binding import Binding
+from textual.notifications import SeverityLevel
 from textual.screen import Screen
 from textual.worker import get_current_worker
 
@@ -31,6 +32,9 @@ from ctui.screens.loading import LoadingScreen, PreviewReady
 from ctui.screens.messages import JobProgress, LoadFailed, SessionReady
 from ctui.screens.projects import project_from_session, session_from_project
 from ctui.screens.session import Session, load_volume, safe_cwd, sample_source
+
+if TYPE_CHECKING:  # annotations only: the workspace is imported when a series opens (startup time)
+    from ctui.screens.workspace import WorkspaceScreen
 
 __all__ = ["AUTOSAVE_SECONDS", "CtuiApp", "LoadingScreen", "project_from_session", "session_from_project"]
 
@@ -75,7 +79,7 @@ class CtuiApp(App):
                 use_graphics("halfblock", unless_chosen=True)
         self.load_options = load_options
         self.session: Session | None = session
-        self.workspace = None
+        self.workspace: WorkspaceScreen | None = None
         self.autosave_s = autosave_s
         self._last_autosave = time.monotonic()
         self._colour_warned = False
@@ -124,7 +128,7 @@ class CtuiApp(App):
             self._colour_warned = True
             self.notify(advice, title="Colours", severity="warning", timeout=15)
 
-    def notify(self, message: str, *, title: str = "", severity: str = "information", timeout: float | None = None, markup: bool = False) -> None:  # type: ignore[override]
+    def notify(self, message: str, *, title: str = "", severity: SeverityLevel = "information", timeout: float | None = None, markup: bool = False) -> None:
         if severity == "error":
             self.errors.append(str(message))
         super().notify(str(message), title=title, severity=severity, timeout=timeout, markup=markup)
@@ -189,7 +193,7 @@ class CtuiApp(App):
             return
         if worker.is_cancelled:
             return
-        z = pv.z if pv is not None and pv.depth == vol.shape[0] else None  # on the slice the preview showed
+        z = pv.z if pv is not None and pv.depth == vol.shape[0] else vol.shape[0] // 2  # on the slice the preview showed
         self.post_message(SessionReady(Session(vol, source_path=str(src or ""), source_options=options, z=z)))
 
     @on(JobProgress)
@@ -329,7 +333,7 @@ class CtuiApp(App):
                 from ctui.screens.dialogs import ConfirmScreen
 
                 self.push_screen(ConfirmScreen("Discard unsaved work and open another series?", "Discard", "Keep"),
-                                 lambda ok: ok and self.open_path(path, series))
+                                 lambda ok: self.open_path(path, series) if ok else None)
             else:
                 self.open_path(path, series)
 
@@ -338,7 +342,7 @@ class CtuiApp(App):
     def action_help(self) -> None:
         from ctui.screens.dialogs import TextScreen, bindings_help
 
-        from ctui.screens.help import task_help
+        from ctui.screens.keyhelp import task_help
 
         screen = self.screen
         cols = int(self.size.width * 0.9) - 6  # the help box's text width: groups side by side when it fits
@@ -380,6 +384,8 @@ class CtuiApp(App):
         """Save the project to ``path``; ``asked``: the path came from a dialog (False: a
         second Ctrl+S, saved where the first one did)."""
         s = self.session
+        if s is None:
+            return
         try:
             p = Path(path).expanduser()
             if not p.is_absolute():  # relative to where ctui started (the folder may be gone: then home)
@@ -427,6 +433,8 @@ class CtuiApp(App):
     @work(thread=True, exclusive=True, group="autosave")
     def autosave_worker(self) -> None:
         s = self.session
+        if s is None:
+            return
         key = s.project_path or s.source_path
         try:
             proj = project_from_session(s)
@@ -458,7 +466,7 @@ class CtuiApp(App):
             return
         self._exit_clean()
 
-    def _on_key(self, event: events.Key) -> None:  # type: ignore[override]
+    def _on_key(self, event: events.Key) -> None:  # type: ignore[override]  # Textual's private hook, overridden on purpose (textual pinned to the tested minor)
         """A key sent to a screen that is no longer on top (a burst after the key that
         opened a prompt, or closed one) goes to the screen on top, not to its bindings.
         (Textual then runs App._on_key, the bindings, unless the default is prevented.)"""
@@ -471,7 +479,7 @@ class CtuiApp(App):
             top.feed_key(event.key, event.character)
             return
         key = events.Key(event.key, event.character)
-        key.ctui_screen = top  # type: ignore[attr-defined]
+        key.ctui_screen = top  # type: ignore[attr-defined]  # ctui's mark on Textual's Key event: the screen it was typed at
         (top.focused or top)._forward_event(key)
 
     # ------------------------------------------------------------------ errors
@@ -484,7 +492,7 @@ class CtuiApp(App):
             return
         super()._handle_exception(error)
 
-    async def _dispatch_action(self, namespace, action_name, params):  # type: ignore[override]
+    async def _dispatch_action(self, namespace, action_name, params):
         try:
             return await super()._dispatch_action(namespace, action_name, params)
         except Exception as exc:
@@ -493,7 +501,7 @@ class CtuiApp(App):
             report_internal_error(self, exc)
             return True
 
-    def push_screen(self, screen, callback=None, wait_for_dismiss: bool = False):  # type: ignore[override]
+    def push_screen(self, screen, callback=None, wait_for_dismiss: bool = False):  # type: ignore[override]  # one signature for Textual's overloads: the callback is wrapped, nothing else changes
         if callback is not None:
             inner = callback
 
@@ -505,7 +513,7 @@ class CtuiApp(App):
 
                     report_internal_error(self, exc)
 
-        return super().push_screen(screen, callback, wait_for_dismiss=wait_for_dismiss)
+        return super().push_screen(screen, callback, wait_for_dismiss=wait_for_dismiss)  # type: ignore[call-overload]  # a pass-through: Textual's overloads split on a Literal wait_for_dismiss
 
     def action_last_error(self) -> None:
         from ctui.screens.dialogs import TextScreen
@@ -520,7 +528,8 @@ class CtuiApp(App):
         targets = [screen] + ([self.workspace] if self.workspace is not None and self.workspace is not screen else [])
         for node in targets:
             for b in node.BINDINGS:
-                key, action, desc = (b.key, b.action, b.description) if isinstance(b, Binding) else b
+                bb = b if isinstance(b, Binding) else Binding(*b)
+                key, action, desc = bb.key, bb.action, bb.description
                 if action in seen:
                     continue
                 seen.add(action)
@@ -535,14 +544,14 @@ class CtuiApp(App):
     def _method_commands(self) -> Iterable[SystemCommand]:
         """One command per segmentation method of the registry ("grow" finds "Segmentation
         method: grow"): it becomes the method S and p use, as in the G panel."""
-        ws = self.workspace
-        if ws is None or self.session is None:
+        ws, session = self.workspace, self.session
+        if ws is None or session is None:
             return
         from ctui.engine.actions.segment import METHODS  # the registry loads the segmentation with the palette
 
         for name, m in METHODS.items():
             def pick(_name=name) -> None:
-                self.session.segment_options["method"] = _name
+                session.segment_options["method"] = _name
                 ws.set_status(f"Segmentation method {_name}: S segments from the cursor (G shows every option)")
                 ws.update_panel()
 

@@ -7,6 +7,7 @@ from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.dom import DOMNode
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
@@ -207,7 +208,7 @@ class TextScreen(GuardMixin, ModalScreen[None]):
         self.dismiss(None)
 
 
-def bindings_help(screen) -> str:
+def bindings_help(screen: DOMNode) -> str:
     """Every binding of a screen (and the app) as help text."""
     lines = []
     seen = set()

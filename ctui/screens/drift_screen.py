@@ -14,6 +14,7 @@ from ctui.engine.actions.drift import drift_check
 from ctui.engine.actions.formats import output_name
 from ctui.engine.core.atomic import check_output
 from ctui.engine.core.colors import object_color
+from ctui.engine.core.errors import CtuiError
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
@@ -41,7 +42,7 @@ class DriftScreen(GuardMixin, Screen):
     def __init__(self, session) -> None:
         super().__init__()
         self.s = session
-        self.report = None
+        self.report: drift.DriftReport | None = None
         self.estimate = "centroid"
 
     def compose(self) -> ComposeResult:
@@ -149,7 +150,7 @@ class DriftScreen(GuardMixin, Screen):
         if not corr:
             self.app.notify("No correction applied", timeout=3)
             return
-        orig = getattr(s, "original_data", None)
+        orig = s.original_data
         s.volume.data = orig if orig is not None else drift.apply_corrections(s.volume.data, drift.invert_corrections(corr))
         s.original_data = None
         new_labels = drift.apply_corrections(s.seg.labels, drift.invert_corrections(corr), interpolation="nearest")
@@ -174,6 +175,8 @@ class DriftScreen(GuardMixin, Screen):
     def _save(self, path: str) -> None:
         try:
             check_output(path, inputs=[self.s.source_path, self.s.project_path], label="the plot")
+            if self.report is None:
+                raise CtuiError("no drift report yet")
             drift.plot_drift(self.report, path)
         except Exception as exc:
             self.app.notify(f"Plot not saved: {exc}", severity="error")

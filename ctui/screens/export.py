@@ -15,7 +15,7 @@ from ctui.engine.core.atomic import check_output, write_bytes
 from ctui.screens.cells import physical_image
 from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 from ctui.screens.projects import opened_of
-from ctui.screens.session import safe_cwd
+from ctui.screens.session import Session, safe_cwd
 from ctui.screens.ws_jobs import run_job
 
 #: Menu ids the screen adds to the engine's formats: a format's surfaces for the current
@@ -24,12 +24,13 @@ CURRENT = ":current"
 IMAGE = ("image", "Current slice view: PNG", ".png")
 
 
-def menu_items(session) -> tuple[list[tuple[str, str]], str]:
+def menu_items(session: Session) -> tuple[list[tuple[str, str]], str]:
     """The export menu for this session: (id, label) of every export it can write (each
     registered format the input supports, in registry order, its current-object variant
     when it writes surfaces, then the slice view PNG), and a note saying why the other
     formats are not offered ("" when all are)."""
-    items, missing = [], {}
+    items: list[tuple[str, str]] = []
+    missing: dict[str, list[str]] = {}
     for fmt, why in available_formats(opened_of(session)):
         if why:
             missing.setdefault(why, []).append(fmt.title)
@@ -42,7 +43,7 @@ def menu_items(session) -> tuple[list[tuple[str, str]], str]:
     return items, note
 
 
-def default_name(session, kind: str) -> str:
+def default_name(session: Session, kind: str) -> str:
     """Where an export goes by default: named from the input's stem in the folder ctui
     started from (``ct.nii.gz`` -> ``ct-labels.nii.gz``, ``ct-object2.stl``, ``ct-slice40.png``)."""
     source = session.project_path or session.source_path
@@ -56,7 +57,7 @@ def default_name(session, kind: str) -> str:
     return str(safe_cwd() / name)
 
 
-def export_session(session, kind: str, path: str, *, progress=None) -> ExportResult:
+def export_session(session: Session, kind: str, path: str, *, progress=None) -> ExportResult:
     """Write the session's objects (``kind``: a format name, or ``<format>:current`` for the
     current object only) through the export action ``ctui export`` calls."""
     name, current = (kind[: -len(CURRENT)], True) if kind.endswith(CURRENT) else (kind, False)

@@ -39,13 +39,13 @@ class GuardMixin:
     screen now on top instead of dropping them (see ``CtuiApp._on_key``).
     """
 
-    async def _dispatch_message(self, message) -> None:  # type: ignore[override]
+    async def _dispatch_message(self, message) -> None:
         if isinstance(message, events.Key) and isinstance(self, Screen) and getattr(message, "ctui_screen", None) is None:
-            message.ctui_screen = self  # type: ignore[attr-defined]
+            message.ctui_screen = self  # type: ignore[attr-defined]  # ctui's mark on Textual's Key event: the screen it was typed at
         try:
-            await super()._dispatch_message(message)  # type: ignore[misc]
+            await super()._dispatch_message(message)  # type: ignore[misc]  # a mixin: Textual's Screen follows it in the MRO
         except Exception as exc:
-            report_internal_error(self.app, exc)  # type: ignore[attr-defined]
+            report_internal_error(self.app, exc)  # type: ignore[attr-defined]  # a mixin: self is a Screen, whose app is the CtuiApp
 
     def on_call(self, message) -> None:
         """A :class:`ctui.screens.messages.Call` posted by a worker of this screen."""

@@ -12,10 +12,13 @@ works.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from textual.geometry import Size
 from textual.strip import Strip
+from textual.timer import Timer
 from textual.widget import Widget
 
 from ctui.screens import cells
@@ -43,15 +46,15 @@ class ImageView(Widget):
         self.zoom: float = 1.0
         self.center: tuple[float, float] | None = None
         self.cursor: tuple[float, float] | None = None
-        self.token: object = None
+        self.token: Any = None
         self.painted: tuple[object, float] = (None, 0.0)
         self.view_map: cells.ViewMap | None = None
-        self.overlay = None  # callable(grid, view_map) drawing marks in display pixels (seeds, box, brush)
+        self.overlay: Callable[[Any, Any], None] | None = None  # callable(grid, view_map) drawing marks in display pixels (seeds, box, brush)
         self._strips: list[Strip] | None = None
         self._strips_key: tuple | None = None
         self._tii = None  # textual-image child widget for sixel/kitty
         self._tii_key: tuple | None = None
-        self._tii_timer = None  # web mode: the pending (throttled) image update
+        self._tii_timer: Timer | None = None  # web mode: the pending (throttled) image update
         self._tii_sent = 0.0  # when the last image update went out
 
     # ----------------------------------------------------------------- public

@@ -8,7 +8,7 @@ from __future__ import annotations
 from textual.binding import Binding
 from textual.widgets import Static
 
-from ctui.screens.help import _esc, bold_key, key_name
+from ctui.screens.keyhelp import _esc, bold_key, key_name
 
 
 def shown_keys(nodes) -> list[tuple[str, str]]:

@@ -18,18 +18,18 @@ from __future__ import annotations
 
 import re
 
-from textual.binding import Binding
+from textual.binding import Binding, BindingType
 
 _COLUMNS = re.compile(r"\s{2,}")
 _FLAGS = {"hidden", "priority"}
 
 
-def keys(table: str) -> list[Binding]:
+def keys(table: str) -> list[BindingType]:
     """The bindings of a key table (see the module's docstring), in the table's order.
 
     Raises ValueError naming the row when a row has fewer than three columns or an
     unknown flag (a typing error in the source, found at import)."""
-    out = []
+    out: list[BindingType] = []
     for row in table.splitlines():
         row = row.strip()
         if not row or row.startswith("#"):

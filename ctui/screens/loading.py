@@ -79,7 +79,7 @@ class LoadingScreen(GuardMixin, Screen):
             return
         opts = {**self.options, "downsample": int(factor)}
         self.reading = True
-        self.app.load_worker(self.path, opts)
+        self.app.load_worker(self.path, opts)  # type: ignore[attr-defined]  # CtuiApp's (app.py imports this screen)
         self.query_one("#load-title", Label).update(f"Loading [b]{self.what}[/b] downsampled x{factor} ...")
         self.query_one("#load-progress").display = True
         self.query_one("#load-reasons", Static).update("")
@@ -100,7 +100,7 @@ class LoadingScreen(GuardMixin, Screen):
                 self.app.notify("Crop: six integers z0,z1,y0,y1,x0,x1", severity="error")
                 return
             self.reading = True
-            self.app.load_worker(self.path, {**self.options, "crop": crop})
+            self.app.load_worker(self.path, {**self.options, "crop": crop})  # type: ignore[attr-defined]  # as above
             self.query_one("#load-progress").display = True
 
         self.app.push_screen(PromptScreen("Crop z0,z1,y0,y1,x0,x1 (voxel indices)", ""), done)
@@ -114,7 +114,7 @@ class LoadingScreen(GuardMixin, Screen):
 
     def action_back(self) -> None:
         if self.reading:
-            self.app.cancel_load()
+            self.app.cancel_load()  # type: ignore[attr-defined]  # CtuiApp's (app.py imports this screen)
             self._hide_preview()
             self.query_one("#load-progress").display = False
             self.query_one("#load-title", Label).update(f"Loading [b]{self.what}[/b] cancelled")

@@ -18,7 +18,8 @@ from textual.widgets import DataTable, Static
 
 from ctui.engine.actions.defaults import SECTION_STEP_MM
 from ctui.engine.actions.formats import output_name
-from ctui.engine.actions.measure import LINE_AXES, find_steps, line_through, measure_object, save_sections
+from ctui.engine.actions.measure import (LINE_AXES, MeasureResult, find_steps, line_through, measure_object,
+                                         save_sections)
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
 from ctui.screens.dialogs import ChoiceScreen, PromptScreen
@@ -40,6 +41,7 @@ def is_tubular(stats: dict) -> bool:
 
 COLUMNS = ("obj", "name", "voxels", "vol ml", "PV ml", "PV-vox %", "area mm²", "closed", "axes mm", "slices")
 NARROW_COLUMNS = ("obj", "name", "vol ml", "PV ml", "PV-vox %", "area mm²", "axes mm", "slices")
+_YES_NO: dict[object, str] = {True: "yes", False: "no"}  # a mesh's "closed" (None: not meshed)
 
 
 def no_sections_reason(res, stats: dict | None = None) -> str:
@@ -93,8 +95,8 @@ class MeasureScreen(GuardMixin, Screen):
         self.sections: list[dict] | None = None
         self.sections_obj: int | None = None
         self.grey = False  # sections on the partial-volume fraction from the grey levels
-        self.result = None  # MeasureResult of the sections shown
-        self.columns = COLUMNS
+        self.result: MeasureResult | None = None  # the sections shown
+        self.columns: tuple[str, ...] = COLUMNS
         self.sections_pending: int | None = None  # object whose sections are being computed
 
     def compose(self) -> ComposeResult:
@@ -197,7 +199,7 @@ class MeasureScreen(GuardMixin, Screen):
         cells = {"obj": f"[rgb({c[0]},{c[1]},{c[2]})]██[/] {oid}", "name": name[:8] if narrow else name[:12],
                  "voxels": str(st.get("voxels")), "vol ml": f("volume_voxels_ml"), "PV ml": f("volume_pv_ml"),
                  "PV-vox %": pv_diff, "area mm²": f("area_mm2", "{:.0f}"),
-                 "closed": {True: "yes", False: "no"}.get(st.get("mesh_closed"), "-"), "axes mm": axes,
+                 "closed": _YES_NO.get(st.get("mesh_closed"), "-"), "axes mm": axes,
                  "slices": f"{rng[0]}..{rng[1]}" if rng else "-"}
         self.query_one(DataTable).add_row(*(cells[k] for k in self.columns), key=str(oid))
         warn = list(st.get("warnings") or [])
@@ -209,7 +211,7 @@ class MeasureScreen(GuardMixin, Screen):
         if not self.stats:
             return
         try:
-            oid = int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value)
+            oid = int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value or "")
         except Exception:
             oid = min(self.stats)
         self.sections_worker(oid)
@@ -218,7 +220,7 @@ class MeasureScreen(GuardMixin, Screen):
         """The object of the table's selected row (else the workspace's current one)."""
         t = self.query_one(DataTable)
         try:
-            return int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value)
+            return int(t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value or "")
         except Exception:
             return self.s.current if self.s.seg is not None and self.s.current in self.s.seg.objects else None
 
@@ -231,14 +233,17 @@ class MeasureScreen(GuardMixin, Screen):
             return
         words = {"object": "the object's longest axis", "z": "the slices' axis (an axial section)",
                  "y": "the y axis (a coronal section)", "x": "the x axis (a sagittal section)"}
+        def chosen(axis: str | None) -> None:
+            if axis:
+                self.cursor_section_worker(oid, axis, s.zyx)
+
         self.app.push_screen(ChoiceScreen(f"Section of object {oid} through the cursor, normal to",
-                                          [(a, words.get(a, a)) for a in LINE_AXES]),
-                             lambda axis: axis and self.cursor_section_worker(oid, axis, s.zyx))
+                                          [(a, words.get(a, a)) for a in LINE_AXES]), chosen)
 
     def action_section_line(self) -> None:
         """l: sections along the line between the first two points of the workspace's polygon
         (P, then a click) on its slice: a two-click line, no coordinates typed."""
-        ws = self.app.workspace
+        ws = self.app.workspace  # type: ignore[attr-defined]  # the CtuiApp's (app.py imports this screen: no annotation without a circle)
         pts = list(ws.edit_tools.polygon)[:2] if ws is not None else []
         oid = self._selected()
         if len(pts) < 2 or oid is None:
@@ -368,6 +373,8 @@ class MeasureScreen(GuardMixin, Screen):
     def _save(self, path: str) -> None:
         png = path.rsplit(".", 1)[0] + ".png"
         try:
+            if self.result is None:
+                raise CtuiError("no sections shown")
             save_sections(self.result, csv=path, plot=png,
                           inputs=[str(p) for p in (self.s.source_path, self.s.project_path) if p])
         except Exception as exc:

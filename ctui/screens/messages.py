@@ -9,7 +9,7 @@ of updating widgets that are gone (the NoMatches '#ms-status' / '#v3-status' rac
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar, dataclass_transform
 
 from textual.message import Message
 
@@ -28,7 +28,14 @@ class JobProgress(Message):
 # The messages below are dataclasses: their fields are the constructor's arguments, in
 # order (Textual's Message finishes its set-up in __post_init__); eq=False keeps each
 # message equal only to itself, as Textual expects.
-event = dataclass(eq=False)
+_M = TypeVar("_M", bound=type)
+
+
+@dataclass_transform(eq_default=False)
+def event(cls: _M) -> _M:
+    """``@dataclass(eq=False)``, spelt so that type checkers see the generated constructor."""
+    dataclass(eq=False)(cls)  # in place: the class itself, with its __init__
+    return cls
 
 
 @event

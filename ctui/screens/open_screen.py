@@ -153,7 +153,7 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
         if self.current is None:
             return
-        s = self.series[int(event.option.id)]
+        s = self.series[int(event.option.id or 0)]  # every option has its index as id
         uid = s.get("uid") if len(self.series) > 1 else None
         self.dismiss((str(self.current), uid))
 

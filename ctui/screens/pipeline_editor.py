@@ -56,7 +56,7 @@ class KernelEditor(GuardMixin, ModalScreen[list | None]):
     down,j            mv(0,1)     Down         hidden
     left,h            mv(-1,0)    Left         hidden
     right,l           mv(1,0)     Right        hidden
-    space             toggle      Toggle cell
+    space             toggle_cell  Toggle cell
     plus,equals_sign  resize(2)   Bigger
     minus             resize(-2)  Smaller
     f                 fill(1)     All on
@@ -98,7 +98,7 @@ class KernelEditor(GuardMixin, ModalScreen[list | None]):
         self.cy = min(max(self.cy + dy, 0), self.k.shape[0] - 1)
         self._draw()
 
-    def action_toggle(self) -> None:
+    def action_toggle_cell(self) -> None:
         self.k[self.cy, self.cx] ^= 1
         self._draw()
 
@@ -155,7 +155,7 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
     e             edit       Params
     K             kernel     Kernel editor
     s             stage      Stage 1/2
-    space         toggle     On/off
+    space         toggle_step  On/off
     shift+up,U    move(-1)   Move up
     shift+down,D  move(1)    Move down
     m             domain     HU/8-bit       hidden
@@ -297,7 +297,7 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         st.stage = 2 if st.stage == 1 else 1
         self._changed(i)
 
-    def action_toggle(self) -> None:
+    def action_toggle_step(self) -> None:
         i = self._index()
         if i is None:
             return

@@ -81,7 +81,7 @@ def patient_axes(direction: np.ndarray) -> tuple[tuple[int, int, int], tuple[int
     signs = tuple(1 if cols[i][best[i]] >= 0 else -1 for i in range(3))
     cosines = [min(1.0, abs(cols[i][best[i]]) / max(np.linalg.norm(cols[i]), 1e-12)) for i in range(3)]
     worst = float(np.degrees(np.arccos(min(cosines))))
-    return tuple(best), signs, worst  # type: ignore[return-value]
+    return tuple(best), signs, worst  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def plane_view(volume, plane: str) -> PlaneView:

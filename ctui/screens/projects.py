@@ -3,13 +3,15 @@ for the actions the screens call (measure, export)."""
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.project import new_project, propagation_record
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.actions.series import Pipeline, Segmentation
-from ctui.engine.actions import edit as edittools
+from ctui.engine.actions import defaults, edit as edittools
 from ctui.screens.planes import PLANES
-from ctui.screens.session import Session
+from ctui.screens.session import PanelOptions, Session
 
 
 def opened_of(s: Session) -> Opened:
@@ -38,14 +40,14 @@ def _editing_from_meta(s: Session, meta: dict) -> None:
 
 
 #: The segmentation panel's options a project keeps (``Session.segment_options``) and the type of each.
-_OPTION_TYPES = {"method": str, "neck": (int, float), "fill_holes": bool, "keep_largest": bool,
+_OPTION_TYPES: dict[str, type | tuple[type, ...]] = {"method": str, "neck": (int, float), "fill_holes": bool, "keep_largest": bool,
                  "min_island": int, "interpolate": bool}
 
 
 def _setup_meta(s: Session) -> dict:
     """The set-up a project reopens with, beyond the labels: the G panel's options, background
     seeds, the ROI box and the zoom (all optional in ``meta``; older projects open without them)."""
-    opts = {k: v for k, v in (s.segment_options or {}).items() if k in _OPTION_TYPES or k == "range"}
+    opts: dict[str, Any] = {k: v for k, v in s.segment_options.items() if k in _OPTION_TYPES or k == "range"}
     if isinstance(opts.get("range"), tuple):
         opts["range"] = list(opts["range"])
     return {"segment_options": opts, "background_seeds": [list(map(int, p)) for p in s.background_seeds],
@@ -65,7 +67,7 @@ def _setup_from_meta(s: Session, meta: dict) -> None:
             kept["range"] = rng
         elif isinstance(rng, list) and len(rng) == 2 and all(isinstance(v, (int, float)) for v in rng) and rng[0] <= rng[1]:
             kept["range"] = (float(rng[0]), float(rng[1]))
-        s.segment_options = kept
+        s.segment_options = cast(PanelOptions, kept)  # each key checked against _OPTION_TYPES above
     shape = s.shape
     seeds = meta.get("background_seeds")
     if isinstance(seeds, list):
@@ -84,6 +86,12 @@ def _ints(v, n: int) -> bool:
     return isinstance(v, list) and len(v) == n and all(isinstance(u, int) and not isinstance(u, bool) for u in v)
 
 
+def _meta_int(meta: dict, key: str, default: int) -> int:
+    """``meta[key]`` as an int (a cursor coordinate the project recorded), else ``default``."""
+    v = meta.get(key)
+    return int(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else default
+
+
 def project_from_session(s: Session):
     """A ctui.engine.io.project.Project of the session's state (built by the one project
     constructor, :func:`ctui.engine.actions.project.new_project`)."""
@@ -91,14 +99,14 @@ def project_from_session(s: Session):
     prop = {"tolerance": s.tolerance, "range": list(s.range_) if s.range_ else None, "connectivity": s.connectivity}
     return new_project(
         s.volume, source_path=str(s.source_path or ""), source_options=dict(s.source_options or {}),
-        pipeline=s.pipeline.to_dict() if s.pipeline is not None else {},
-        labels=getattr(seg, "labels", None), objects=seg.object_list() if seg is not None else [],
+        pipeline=s.pipeline.to_dict(),
+        labels=seg.labels, objects=seg.object_list(),
         propagation=propagation_record([prop], current=s.current, mode=s.prop_mode),
         drift=dict(s.drift_info or {}), window=tuple(s.window),
         meta={"z": s.z, "x": s.x, "y": s.y, "view": s.view, "plane": s.plane, "edit_mode": s.edit_mode,
               "brush": s.brush, "limit_slices": list(s.limits.slices) if s.limits.slices else None,
               "limit_values": list(s.limits.values) if s.limits.values else None, **_setup_meta(s)},
-        data=getattr(s, "original_data", None),  # the voxels as loaded (before a drift correction)
+        data=s.original_data,  # the voxels as loaded (before a drift correction)
         identity=s.source_identity)  # labels only: the missing series' identity, not the stand-in's
 
 
@@ -112,13 +120,14 @@ def session_from_project(proj, volume, path: str) -> Session:
     meta = proj.meta or {}
     s = Session(volume, source_path=proj.source_path, source_options=dict(proj.source_options or {}),
                 pipeline=Pipeline.from_dict(proj.pipeline or {}), seg=seg,
-                z=meta.get("z"), x=meta.get("x"), y=meta.get("y"))
+                z=_meta_int(meta, "z", volume.shape[0] // 2), x=_meta_int(meta, "x", volume.shape[2] // 2),
+                y=_meta_int(meta, "y", volume.shape[1] // 2))
     if proj.window:
         s.window = (float(proj.window[0]), float(proj.window[1]))
     s.tolerance = float(prop.get("tolerance", s.tolerance))
     s.range_ = tuple(prop["range"]) if prop.get("range") else None
     s.connectivity = int(prop.get("connectivity", 8))
-    s.prop_mode = str(prop.get("mode", "slice")) if prop.get("mode") in ("slice", "3d") else "slice"
+    s.prop_mode = str(prop["mode"]) if prop.get("mode") in defaults.PROPAGATION_MODES else defaults.PROPAGATION_MODE
     s.current = int(prop.get("current", min(seg.objects) if seg.objects else 1))
     s.view = str(meta.get("view", s.view))
     _editing_from_meta(s, meta)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 from textual.worker import get_current_worker
 
@@ -20,6 +21,7 @@ from ctui.engine.segment import propagate
 from ctui.engine.segment.selection import Segmentation
 from ctui.screens.messages import JobProgress, ProposalReady, SegmentationFailed
 from ctui.screens.segpanel import describe, options_for
+from ctui.screens.session import Session
 
 
 class PropagationRun:
@@ -31,8 +33,8 @@ class PropagationRun:
         self.ws = ws
         self.direction = direction
         self.event = threading.Event()
-        self.proposal = None
-        self.report = None
+        self.proposal: propagate.Proposal | None = None
+        self.report: Any = None  # the segment action's ObjectResult (None: a propagation)
         self.seed: tuple[int, int, int] | None = None
         self.object_settings: dict = {}
         self.started = time.perf_counter()
@@ -43,7 +45,7 @@ class PropagationRun:
     def done(self, proposal, *, report=None, seed=None, object_settings: dict | None = None) -> None:
         """The worker's result, posted to the workspace (``ProposalReady``)."""
         self.proposal, self.report = proposal, report
-        self.seed = None if seed is None else tuple(int(v) for v in seed)
+        self.seed = None if seed is None else (int(seed[0]), int(seed[1]), int(seed[2]))
         self.object_settings = dict(object_settings or {})
         self.ws.post_message(ProposalReady(self))
 
@@ -65,7 +67,7 @@ class PropagationRun:
         return callback
 
 
-def settings_for(session, direction: str):
+def settings_for(session: Session, direction: str) -> propagate.PropagationSettings:
     """PropagationSettings from the current object's fill range (or the session's) and
     the session's slice limits (``s`` stops at a slice, ``i`` sets a range)."""
     s = session
@@ -77,7 +79,7 @@ def settings_for(session, direction: str):
         lo, hi = s.range_
     else:
         raise CtuiError(f"object {s.current} has no fill yet: press Enter on it first")
-    kw = {}
+    kw: dict[str, Any] = {}
     lim = s.limits.slices
     if lim is not None:
         if not lim[0] <= s.z <= lim[1]:
@@ -96,11 +98,13 @@ def clip_to_slices(proposal, limits: tuple[int, int] | None) -> None:
         proposal.areas.pop(z, None)
 
 
-def object_seed(session) -> tuple[int, int, int] | None:
+def object_seed(session: Session) -> tuple[int, int, int] | None:
     """The current object's last seed (x, y, z) (set by Enter, S or ctui segment), or None."""
-    info = session.seg.objects.get(session.current) if session.seg is not None else None
-    seeds = list(getattr(info, "seeds", []) or [])
-    return tuple(int(v) for v in seeds[-1]) if seeds else None  # type: ignore[return-value]
+    info = session.seg.objects.get(session.current)
+    if info is None or not info.seeds:
+        return None
+    x, y, z = info.seeds[-1]
+    return int(x), int(y), int(z)
 
 
 def _idle(ws) -> bool:
@@ -144,7 +148,7 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
             if "prompts" not in METHODS[opts.method].options:  # a model's prompts refine the object as it is
                 labels[labels == oid] = 0
             scratch = Segmentation(s.seg.shape, labels=labels)
-            res = segment_action(s.volume, [seed], th, background=list(getattr(s, "background_seeds", []) or []),
+            res = segment_action(s.volume, [seed], th, background=list(s.background_seeds),
                                  options=opts, pipeline=s.pipeline, segmentation=scratch, progress=progress,
                                  object_ids=[oid])
         obj = res.objects[0]
@@ -219,6 +223,8 @@ def finished(ws, run: PropagationRun) -> None:
     ws.jobs.segmentation_ended()
     ws.show_progress(None)
     p = run.proposal
+    if p is None:  # done() always gives one; a run that ended without is a SegmentationFailed
+        return
     ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
     rng = p.slices
     secs = time.perf_counter() - run.started

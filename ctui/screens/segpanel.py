@@ -19,15 +19,14 @@ from textual.widgets import Button, Checkbox, Input, Label, Select
 
 from ctui.engine.actions.segment import METHODS, SegmentOptions
 from ctui.engine.core.errors import CtuiError
+from ctui.screens.session import Session
 from ctui.screens.ws_state import describe  # noqa: F401 - the panel's one-line summary, read with the panel
 
-DIRECTIONS = ("both", "forward", "backward")
 
-
-def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, list]:
+def options_for(session: Session, direction: str = "both") -> tuple[SegmentOptions, list]:
     """(SegmentOptions, thresholds) for the session: the panel's choices, the propagation mode (``m`` in the
     panel), the slice limits (``i``), the ROI box and the background seeds' owner is the caller."""
-    o = dict(getattr(session, "segment_options", {}) or {})
+    o = session.segment_options
     rng = o.get("range", "given")
     if rng == "given" and session.range_ is not None:  # the range the user typed (T); Enter's default
         th: list = [tuple(session.range_)]          # tolerance is no choice of theirs, so it does not count
@@ -38,7 +37,7 @@ def options_for(session: Any, direction: str = "both") -> tuple[SegmentOptions, 
     lim = session.limits.slices
     opts = SegmentOptions(method=o.get("method", "fill"), mode=session.prop_mode, direction=direction,
                           connectivity=int(session.connectivity), neck_mm=o.get("neck"),
-                          fill_holes=bool(o.get("fill_holes", True)), box=getattr(session, "roi_box", None),
+                          fill_holes=bool(o.get("fill_holes", True)), box=session.roi_box,
                           slices=None if lim is None else (int(lim[0]), int(lim[1])),
                           keep_largest=bool(o.get("keep_largest", False)), min_island=int(o.get("min_island", 0)),
                           interpolate=bool(o.get("interpolate", False)))
@@ -74,7 +73,7 @@ class SegmentPanel(ModalScreen):
         self.s = session
 
     def compose(self) -> ComposeResult:
-        o = dict(getattr(self.s, "segment_options", {}) or {})
+        o = dict(self.s.segment_options)
         rng = o.get("range", "given")
         rtxt = rng if isinstance(rng, str) else f"{rng[0]:g}:{rng[1]:g}"
         neck = o.get("neck")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -44,14 +44,28 @@ def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
     return loaders.load(path, progress=progress, **options)
 
 
+class PanelOptions(TypedDict, total=False):
+    """The segmentation panel's (G) choices (``Session.segment_options``; ctui.screens.segpanel.options_for
+    turns them into :class:`SegmentOptions`): absent keys take the engine's defaults."""
+
+    method: str  # a name of actions.segment.METHODS
+    neck: float | None  # mm; None: automatic
+    range: str | tuple[float, float]  # "auto" | "given" (T's range, else auto) | (lo, hi)
+    fill_holes: bool
+    keep_largest: bool
+    min_island: int
+    interpolate: bool
+
+
 @dataclass
 class Session:
     volume: Volume
     source_path: str = ""
-    source_options: dict = field(default_factory=dict)
-    z: int | None = None  # None: the middle slice / centre pixel
-    x: int | None = None
-    y: int | None = None
+    source_options: dict[str, Any] = field(default_factory=dict)
+    # the cursor voxel; None given: the middle slice / centre pixel (__post_init__ sets an int)
+    z: int = None  # type: ignore[assignment]  # None given means "the middle"; always an int after __post_init__
+    x: int = None  # type: ignore[assignment]  # as z
+    y: int = None  # type: ignore[assignment]  # as z
     window: tuple[float, float] = (40.0, 400.0)
     view: str = "overlay"
     project_path: str | None = None
@@ -61,10 +75,11 @@ class Session:
     connectivity: int = 8
     prop_mode: str = "slice"  # or "3d" (engine's one-pass 3D flood fill)
     current: int = 1
-    pipeline: Any = None
-    seg: Any = None
-    drift_info: dict | None = None
-    original_data: Any = None  # volume data before a drift correction
+    pipeline: Pipeline = field(default_factory=Pipeline)
+    # the labels on the volume's grid; None given: an empty one (__post_init__)
+    seg: Segmentation = None  # type: ignore[assignment]  # its shape is the volume's: made in __post_init__
+    drift_info: dict[str, Any] | None = None
+    original_data: np.ndarray | None = None  # volume data before a drift correction
     plane: str = "axial"  # "axial" | "sagittal" | "coronal" (ctui.screens.planes)
     edit_mode: str = "add"  # fill/paint mode: "add" | "replace" | "subtract"
     brush: float | None = None  # brush/eraser radius in mm (None: 3 pixels of the finest in-plane spacing)
@@ -73,14 +88,15 @@ class Session:
     background_seeds: list[tuple[int, int, int]] = field(default_factory=list)
     # the segmentation panel's options (G): method, neck (None = auto), range ("auto" | "given" | (lo, hi)),
     # fill_holes, keep_largest, min_island, interpolate; see ctui.screens.segpanel.options_for
-    segment_options: dict = field(default_factory=dict)
+    segment_options: PanelOptions = field(default_factory=lambda: PanelOptions())
     # ((z0, z1), (y0, y1), (x0, x1)) inclusive voxel ranges: fills, propagation, painting and edits stay inside
     roi_box: tuple[tuple[int, int], tuple[int, int], tuple[int, int]] | None = None
     zoom: float = 1.0  # the slice view's zoom (1: the whole plane; the workspace's ViewState changes it)
     # a project opened without its series (labels only): the series' recorded identity,
     # kept when the project is saved (the stand-in zeros must not replace it)
-    source_identity: dict | None = None
-    _lock: Any = field(default_factory=threading.RLock)
+    source_identity: dict[str, Any] | None = None
+    # held while a worker thread and the UI share the pipeline's cache or the labels
+    _lock: threading.RLock = field(default_factory=threading.RLock)
 
     def __post_init__(self) -> None:
         nz, ny, nx = self.volume.shape
@@ -88,12 +104,10 @@ class Session:
         self.x = nx // 2 if self.x is None else int(self.x)
         self.y = ny // 2 if self.y is None else int(self.y)
         self.clamp()
-        if self.brush is None:
-            self.brush = 3.0 * float(min(self.volume.spacing[1:]))
+        self.brush_px()  # sets the default brush
         if self.volume.window:
-            self.window = tuple(float(v) for v in self.volume.window)  # type: ignore[assignment]
-        if self.pipeline is None:
-            self.pipeline = Pipeline()
+            lo, hi = self.volume.window
+            self.window = (float(lo), float(hi))
         if self.seg is None:
             self.seg = Segmentation(self.volume.shape)
 
@@ -122,7 +136,7 @@ class Session:
     def filtered_value(self) -> float | None:
         """The value the fill uses at the cursor (the pipeline's final image of the slice,
         in its domain: HU or 0..255), or None when no pipeline step is active."""
-        if self.pipeline is None or not (getattr(self.pipeline, "steps", None) or []):
+        if not self.pipeline.steps:
             return None
         with self._lock:
             image = self.pipeline.final_slice(self.volume, self.z)
@@ -130,6 +144,8 @@ class Session:
 
     def brush_px(self, axis: int = 0) -> float:
         """The brush radius in pixels of the finer in-plane spacing of the plane across ``axis``."""
+        if self.brush is None:  # None: 3 pixels of the finest in-plane spacing
+            self.brush = 3.0 * float(min(self.volume.spacing[1:]))
         return brush_radius_px(self.brush, self.volume.spacing, axis)
 
     def toggle_background_seed(self, zyx: tuple[int, int, int] | None = None) -> bool:
@@ -144,10 +160,9 @@ class Session:
         return True
 
     # ------------------------------------------------------------ images
-    def labels(self) -> np.ndarray | None:
-        if self.seg is None:
-            return None
-        return getattr(self.seg, "labels", None)
+    def labels(self) -> np.ndarray:
+        """The (z, y, x) uint8 label volume."""
+        return self.seg.labels
 
     def display(self, image: np.ndarray) -> np.ndarray:
         """A pipeline-domain image as uint8 through the user's display window."""
@@ -162,10 +177,8 @@ class Session:
             return self.pipeline.run_slice(self.volume, z)
 
     def pipeline_steps(self) -> list[str]:
-        if self.pipeline is None:
-            return []
         out = []
-        for i, st in enumerate(getattr(self.pipeline, "steps", []) or []):
+        for i, st in enumerate(self.pipeline.steps):
             d = st if isinstance(st, dict) else (st.to_dict() if hasattr(st, "to_dict") else vars(st))
             params = d.get("params") or {}
             ptxt = " ".join(f"{k}={v}" for k, v in params.items() if v is not None and k != "kernel")
@@ -175,11 +188,12 @@ class Session:
         return out
 
     def window_presets(self) -> list[tuple[str, tuple[float, float]]]:
-        items = []
+        items: list[tuple[str, tuple[float, float]]] = []
         if self.volume.window:
-            items.append(("default", tuple(self.volume.window)))
+            lo, hi = self.volume.window
+            items.append(("default", (float(lo), float(hi))))
         if self.volume.modality == "CT":
             items += list(CT_PRESETS.items())
         else:
             items.append(("auto", auto_window(self.volume.data, modality=self.volume.modality)))
-        return items  # type: ignore[return-value]
+        return items

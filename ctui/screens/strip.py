@@ -99,11 +99,12 @@ class ReviewStrip(Widget):
     def render_line(self, y: int) -> Strip:
         cols = self._cols()
         width = self.size.width
-        if not cols or y > 1:
+        if not cols or y > 1 or self.profile is None:
             return Strip.blank(width)
         segs = []
+        profile = self.profile
         if y == 0:
-            for (a, b), h in zip(cols, bars(self.profile, cols)):
+            for (a, b), h in zip(cols, bars(profile, cols)):
                 style = _CURSOR if a <= self.cursor <= b else (_MARK if any(a <= z <= b for z in self.marked) else _BAR)
                 segs.append(Segment(BARS[h], style))
         else:
@@ -117,8 +118,8 @@ class ReviewStrip(Widget):
                 else:
                     segs.append(Segment(" ", _DIM))
         free = width - len(segs) - 2
-        text = self.hint if y == 1 else (f"slice {self.cursor}: {int(self.profile[self.cursor])} px"
-                                         if 0 <= self.cursor < len(self.profile) else "")
+        text = self.hint if y == 1 else (f"slice {self.cursor}: {int(profile[self.cursor])} px"
+                                         if 0 <= self.cursor < len(profile) else "")
         if text and free >= 12:
             segs.append(Segment("  " + text[:free], _DIM))
         strip = Strip(segs)

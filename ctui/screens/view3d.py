@@ -27,6 +27,7 @@ from ctui.engine.actions.render import centreline  # the function the fly-throug
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
+from ctui.screens.session import Session
 from ctui.screens.keybar import KeyBar
 from ctui.screens.keytable import keys
 from ctui.screens.messages import FlyFrame, FrameReady, JobFailed, MeshesReady, Saved, Status
@@ -35,7 +36,7 @@ from ctui.screens.session import safe_cwd
 METHODS = defaults.MESH_METHODS  # the surface methods the c key cycles through
 
 
-def build_meshes(session, method: str, *, progress=None) -> dict:
+def build_meshes(session: Session, method: str, *, progress=None) -> dict:
     """{object_id: Mesh} of the session's objects with the chosen surface method, by
     :func:`ctui.engine.actions.mesh.label_meshes` (what ``ctui mesh`` of a project does)."""
     labels = session.labels()
@@ -82,7 +83,7 @@ class View3DScreen(GuardMixin, Screen):
         self.mode = "surface"
         self.method = METHODS[0]
         self.meshes: dict | None = None
-        self.scene = None
+        self.scene: render.Scene | None = None
         self.fixed_image = image
         self._req = 0
         self.last_image = None

@@ -113,7 +113,7 @@ class EditMixin:
         n = 0
         try:
             for p in dict.fromkeys(pts):
-                n += self.dab(self.edit_tools.pen, p)  # type: ignore[arg-type]
+                n += self.dab(self.edit_tools.pen, p)  # type: ignore[arg-type]  # the pen is down while a stroke runs (never None here)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
         if n:

@@ -275,6 +275,8 @@ class MouseMixin(ToolsMixin):
         self.refresh_view()
 
     def _pan_drag(self, event) -> None:
+        if self._drag is None:
+            return
         _kind, iv, sx0, sy0, c0 = self._drag
         vm = iv.view_map
         if vm is None or self.viewstate.zoom <= 1:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ctui.engine.actions.series import label_counts
 from ctui.screens import planes
+from ctui.screens.session import Session
 
 
 class ViewState:
@@ -197,7 +198,7 @@ class ProposalState:
     settings its object keeps when it is accepted, and its full-volume mask."""
 
     def __init__(self) -> None:
-        self.proposal = None
+        self.proposal: Any = None  # a Proposal (engine.segment.proposal; the screens reach it through actions only)
         self.notes: list[str] = []
         self.seed: tuple[int, int, int] | None = None
         self.object_settings: dict = {}
@@ -209,7 +210,7 @@ class ProposalState:
         self.proposal = proposal
         self.seed = seed
         self.object_settings = dict(object_settings or {})
-        self.notes: list[str] = []  # the run's warnings: shown in the side panel while it waits
+        self.notes = []  # the run's warnings: shown in the side panel while it waits
 
     def replace(self, proposal) -> None:
         """A cut or shortened version of the pending proposal takes its place (same seed and settings)."""
@@ -260,13 +261,13 @@ class ProposalState:
         return n, p
 
 
-def describe(session: Any) -> str:
+def describe(session: Session) -> str:
     """One line of the current segmentation settings, for the side panel and messages."""
-    o = getattr(session, "segment_options", {}) or {}
+    o = session.segment_options
     neck = o.get("neck")
     rng = o.get("range", "given")
     rtxt = "auto" if rng == "auto" else ("T's, else auto" if rng == "given" else f"{rng[0]:g}:{rng[1]:g}")
-    bg = len(getattr(session, "background_seeds", []) or [])
+    bg = len(session.background_seeds)
     return (f"{o.get('method', 'fill')} {session.prop_mode}, neck {'auto' if neck is None else f'{neck:g} mm'}, "
             f"range {rtxt}{', holes filled' if o.get('fill_holes', True) else ''}"
             + (f", {bg} background seed{'s' if bg != 1 else ''}" if bg else ""))
@@ -362,7 +363,7 @@ def mm(v: float) -> str:
     return f"{float(v):.1f}".removesuffix(".0")
 
 
-def value_unit(s) -> str:
+def value_unit(s: Session) -> str:
     """The unit of the values a range or tolerance is in: HU on CT, the signal on MR and
     other modalities, 0..255 after a pipeline that leaves the HU domain."""
     if s.pipeline is not None and s.pipeline.domain != "hu":

@@ -107,8 +107,8 @@ class ToolsMixin:
                 "The box was drawn on one slice: cut on", [
                     ("drawn", f"slice {drawn} only (where it was drawn)"),
                     ("box", f"its slices {z0}..{z1} ({z1 - z0 + 1} slices)")]),
-                lambda got: got and self._cut(inside, (drawn, drawn) if got == "drawn" else (z0, z1), None,
-                                              f"slice {drawn}" if got == "drawn" else "box"))
+                lambda got: None if not got else self._cut(inside, (drawn, drawn) if got == "drawn" else (z0, z1), None,
+                                                           f"slice {drawn}" if got == "drawn" else "box"))
             return
         nz = s.shape[0]
         slices = {"slice": (s.z, s.z), "box": None if poly is None else s.limits.slices, "all": (0, nz - 1)}[where]

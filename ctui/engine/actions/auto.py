@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.core.colors import object_color
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
@@ -66,8 +67,8 @@ class AutoResult:
     objects: list[dict[str, Any]]
     added: list[dict[str, Any]] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
-    engine: str = "totalsegmentator"
-    task: str = "total"
+    engine: str = defaults.AUTO_ENGINE
+    task: str = defaults.AUTO_TASK
     command: list[str] = field(default_factory=list)
     seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
@@ -79,9 +80,9 @@ class AutoResult:
                             *self.command[5:]] if self.command else []}
 
 
-def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "total",
-                 roi_subset: Sequence[str] = (), fast: bool = False, device: str = "cpu",
-                 labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = "add",
+def auto_segment(volume: Any, *, engine: str = defaults.AUTO_ENGINE, task: str = defaults.AUTO_TASK,
+                 roi_subset: Sequence[str] = (), fast: bool = False, device: str = defaults.AUTO_DEVICE,
+                 labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = defaults.AUTO_MERGE,
                  max_id: int = MAX_ID, progress: Progress | None = None) -> AutoResult:
     """Run ``engine`` on ``volume`` (data (nz, ny, nx), spacing (dz, dy, dx) mm) and merge its classes into
     ``labels``/``objects`` (the caller's, default none) by ``merge``; see the module docstring.
@@ -117,7 +118,7 @@ def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "
         placed = place_on_grid(got.labels, Geometry.of(got.volume), Geometry.of(volume), path="TotalSegmentator's output")
     report(progress, 95, 100, "merging the classes")
     res = merge_classes(placed, got.names, got.colours, labels=labels, objects=objects, merge=merge,
-                        spacing=tuple(float(v) for v in volume.spacing), source=f"TotalSegmentator {task}",
+                        spacing=_spacing3(volume.spacing), source=f"TotalSegmentator {task}",
                         max_id=max_id)
     res.engine, res.task, res.command, res.seconds = engine, task, cmd, time.perf_counter() - t0
     if task in totalseg.LICENSED_TASKS:
@@ -126,7 +127,7 @@ def auto_segment(volume: Any, *, engine: str = "totalsegmentator", task: str = "
     return res
 
 
-def missing(task: str = "total", *, engine: str = "totalsegmentator") -> str:
+def missing(task: str = defaults.AUTO_TASK, *, engine: str = defaults.AUTO_ENGINE) -> str:
     """One line saying what is missing to run ``engine``'s ``task`` (the executable, its weights, a licence
     and how to install them), or "" when it can run."""
     try:
@@ -153,8 +154,13 @@ def _lines(progress: Progress | None) -> Any:
     return line
 
 
+def _spacing3(spacing: Sequence[float]) -> tuple[float, float, float]:
+    dz, dy, dx = (float(v) for v in spacing)
+    return dz, dy, dx
+
+
 def merge_classes(classes: np.ndarray, names: dict[int, str], colours: dict[int, Any], *,
-                  labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = "add",
+                  labels: np.ndarray | None = None, objects: Sequence[dict[str, Any]] = (), merge: str = defaults.AUTO_MERGE,
                   spacing: tuple[float, float, float] = (1.0, 1.0, 1.0), source: str = "",
                   max_id: int = MAX_ID) -> AutoResult:
     """Merge the label map ``classes`` (uint8 on the series' grid, values named by ``names``) into

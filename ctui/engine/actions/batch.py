@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.measure import measure_object
 from ctui.engine.actions.opened import Opened, existing_path
 from ctui.engine.actions.options import parse_pair
@@ -65,7 +66,7 @@ RESULT_COLUMNS = ("job", "name", "series", "seed", "range", "method", "status", 
                   "slices", "project", "mesh", "seconds", "cpu_seconds")
 #: thread-count variables set to 1 in local worker processes: N workers use N cores, not N x all
 SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
-MODES = ("slice", "3d")
+MODES = defaults.PROPAGATION_MODES
 
 
 @dataclass
@@ -262,8 +263,12 @@ def _segment(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
 
 def _vessel(volume: Any, job: Job) -> tuple[np.ndarray, dict, dict]:
     """(labels uint8, pipeline dict, propagation dict) of a vessel row (the vessel action, ``ctui vessel``)."""
+    if job.vessel is None:
+        raise CtuiError(f"row {job.name!r} is not a vessel row")
     start, ends, vias = job.vessel
     res = vessel(volume, start=start, ends=ends, vias=vias, value_range=job.range)
+    if res.mask is None:
+        raise CtuiError("the vessel action returned no mask")
     return res.mask.astype(np.uint8), {}, propagation_record([])
 
 
@@ -336,7 +341,9 @@ def write_results(path: str | os.PathLike, rows: list[dict]) -> None:
 
 
 def _done(row: dict | None) -> bool:
-    return bool(row) and row.get("status") == "ok" and all(
+    if not row:
+        return False
+    return row.get("status") == "ok" and all(
         row.get(k) and os.path.exists(row[k]) for k in ("project", "mesh"))
 
 
@@ -427,7 +434,10 @@ def run_batch(manifest: str | os.PathLike, *, out: str | os.PathLike, scheduler:
         else:
             todo.append(j)
     res = BatchResult(out_s, [], skipped=len(rows))
-    order = lambda: [rows[j.row] for j in jobs if j.row in rows]
+
+    def order() -> list[dict]:
+        return [rows[j.row] for j in jobs if j.row in rows]
+
     write_results(out_s, order())
     report(progress, len(rows), len(jobs), f"{len(rows)} done before")
     last_write = time.perf_counter()

@@ -86,7 +86,8 @@ def _objects(labels: np.ndarray, recorded: Sequence[dict] | None) -> list[dict]:
 
 
 def _load_series(series: str, series_uid: str | None) -> Any:
-    return load(existing_path(series, "series folder or file"), **({"series": series_uid} if series_uid else {}))
+    kw: dict[str, Any] = {"series": series_uid} if series_uid else {}
+    return load(existing_path(series, "series folder or file"), **kw)
 
 
 def export_source(source: str | os.PathLike | Opened, *, series: str | os.PathLike | None = None,

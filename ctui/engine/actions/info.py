@@ -54,6 +54,7 @@ def memory_plans(shape: Sequence[int], memory: Any = None) -> dict:
     out: dict[str, Any] = {"limit_bytes": limit, "limit_source": source}
     if len(shape) == 3:
         for cmd in ("open", "segment", "mesh", "render"):
-            p = memplan.decide(cmd, tuple(int(v) for v in shape), limit=limit, source=source)
+            nz, ny, nx = (int(v) for v in shape)
+            p = memplan.decide(cmd, (nz, ny, nx), limit=limit, source=source)
             out[cmd] = {"mode": p.mode, "need_bytes": p.need_bytes, "reason": p.reason}
     return out

@@ -16,8 +16,8 @@ from ctui.engine.core.atomic import check_outputs
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.measure import stats, summary
 from ctui.engine.measure.report import path_table, plot_sections, write_path_csv, write_sections_csv
-from ctui.engine.measure.sections import find_steps  # re-exported: the measure screen marks steps in the profile
-from ctui.engine.measure.paths import LINE_AXES, line_through  # re-exported: the measure screen's section at the cursor
+from ctui.engine.measure.sections import find_steps  # noqa: F401 - re-exported: the measure screen marks steps in the profile
+from ctui.engine.measure.paths import LINE_AXES, line_through  # noqa: F401 - re-exported: the measure screen's section at the cursor
 
 
 @dataclass
@@ -137,7 +137,7 @@ def measure_object(source: str | os.PathLike | Opened, *, object: int | None = N
     labels = opened.mask(oid) if oid in opened.masks else opened.labels  # overlapping imported segments
     res = summary.measure_object(labels, oid, spacing=g.spacing, origin=g.origin, direction=g.direction,
                                  path=path, path_voxels=path_voxels, step_mm=step_mm,
-                                 between=tuple(between) if between is not None else None, mesh=mesh, area=area,
+                                 between=(float(between[0]), float(between[1])) if between is not None else None, mesh=mesh, area=area,
                                  average_mm=average_mm, image=image)
     pv = res.get("partial_volume")
     vol = opened.volume

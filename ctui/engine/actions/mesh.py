@@ -15,12 +15,12 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.progress import Progress, report
-from ctui.engine.io.meshes import FORMATS as MESH_SUFFIXES  # re-exported with save_mesh for ctui mesh --out
-from ctui.engine.io.meshes import save_mesh
+from ctui.engine.io.meshes import FORMATS as MESH_SUFFIXES  # noqa: F401 - re-exported with save_mesh for ctui mesh --out
+from ctui.engine.io.meshes import save_mesh  # noqa: F401 - re-exported (above)
 from ctui.engine.io.mric import read_mric, require_spacing
 from ctui.engine.mesh import meshtools
 from ctui.engine.mesh.surface import isosurface, label_surfaces
-from ctui.engine.mesh.warm import warm_up  # re-exported: the TUI compiles the mesh kernels while the user looks
+from ctui.engine.mesh.warm import warm_up  # noqa: F401 - re-exported: the TUI compiles the mesh kernels while the user looks
 
 
 def _contour_tools() -> tuple:

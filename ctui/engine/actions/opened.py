@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -82,7 +82,7 @@ class Opened:
         ids = {int(i) for i in np.flatnonzero(counts[1:]) + 1}
         return sorted(ids | {int(k) for k, m in self.masks.items() if m.any()})  # + segments hidden by overlaps
 
-    def pick_objects(self, requested: int | list[int] | None = None) -> list[int]:
+    def pick_objects(self, requested: int | Sequence[int] | None = None) -> list[int]:
         """The requested ids (all present when None); CtuiError naming the file otherwise."""
         present = self.object_ids
         if not present:

@@ -115,8 +115,8 @@ def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, 
     if crop not in (None, ""):
         kw["crop"] = parse_ints(crop, "crop", n=(6,), minimum=None, allow_empty=True)
     if downsample not in (None, ""):
-        vals = parse_ints(downsample, "downsample", n=(1, 3))
-        kw["downsample"] = vals[0] if len(vals) == 1 else vals
+        steps = parse_ints(downsample, "downsample", n=(1, 3))
+        kw["downsample"] = steps[0] if len(steps) == 1 else steps
     if not resample:
         kw["resample"] = False
     if memory not in (None, ""):

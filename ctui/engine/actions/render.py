@@ -64,7 +64,7 @@ def _open(src: str, *, need_volume: bool, load_options: dict) -> Opened:
 
 def _colour(c: Any) -> tuple[float, float, float] | None:
     if isinstance(c, (list, tuple)) and len(c) == 3:
-        return tuple(float(v) / 255.0 if max(c) > 1 else float(v) for v in c)  # type: ignore[return-value]
+        return tuple(float(v) / 255.0 if max(c) > 1 else float(v) for v in c)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
     return None
 
 
@@ -79,6 +79,8 @@ def scene_meshes(opened: Opened, *, mode: str, objects: Sequence[int] | None = N
         return [m for _, m in sorted(label_meshes(opened.labels, opened.geometry, ids).items())]
     if mode in SURFACE_MODES:
         vol = opened.volume
+        if vol is None:
+            raise CtuiError(f"mode {mode} needs a series", path=opened.path, option="mode")
         if iso is None:
             raise CtuiError(f"mode {mode} on a series needs an iso value (e.g. 300 HU for bone)", path=opened.path,
                            option="iso")
@@ -108,11 +110,11 @@ def _wire_budget(meshes: list, opened: Opened) -> list:
 
 def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[int] | None = None,
                 iso: float | None = None, opacity: float | None = None, azimuth: float = defaults.RENDER_AZIMUTH,
-                elevation: float = defaults.RENDER_ELEVATION, roll: float = 0.0, zoom: float = 1.0,
+                elevation: float = defaults.RENDER_ELEVATION, roll: float = defaults.RENDER_ROLL, zoom: float = defaults.RENDER_ZOOM,
                 perspective: bool = False, light: Sequence[float] | None = None, shadows: bool = False,
-                antialias: str = "fxaa", wire_overlay: bool = False, window: Sequence[float] | None = None,
+                antialias: str = defaults.RENDER_ANTIALIAS, wire_overlay: bool = False, window: Sequence[float] | None = None,
                 background: Sequence[float] | None = None, slice_plane: str | None = None,
-                preset: str | None = None, frame: str = "auto") -> tuple[Scene, str]:
+                preset: str | None = None, frame: str = defaults.RENDER_FRAME) -> tuple[Scene, str]:
     """(Scene, mode) for ``opened``; colours from the project's objects."""
     kind = opened.kind
     mode = mode or ("dvr" if kind == "series" and iso is None else "surface")
@@ -147,9 +149,10 @@ def build_scene(opened: Opened, *, mode: str | None = None, objects: Sequence[in
     o.shadows, o.antialias, o.wireframe_overlay = bool(shadows), antialias, bool(wire_overlay)
     o.frame = frame  # "auto": the objects in surface modes (not the whole series), the volume in volume modes
     if window is not None:
-        o.window = tuple(window)
+        o.window = (float(window[0]), float(window[1]))
     if background is not None:
-        o.background = tuple(v / 255.0 for v in background)
+        r, g, b = (v / 255.0 for v in background)
+        o.background = (r, g, b)
     if slice_plane:
         if volume is None:
             raise CtuiError("a slice plane needs a series or a project whose source series loads", path=opened.path,
@@ -182,7 +185,7 @@ def flythrough_path(spec: str, opened: Opened, objects: Sequence[int] | None = N
         ids = list(objects or [])
         if opened.kind == "project" and not ids and len(opened.object_ids) == 1:
             ids = opened.object_ids  # the project's only object
-        if opened.kind != "project" or opened.geometry is None or len(ids) != 1:
+        if opened.kind != "project" or opened.geometry is None or opened.labels is None or len(ids) != 1:
             raise CtuiError("an automatic fly-through path needs a .ctui project and one object (a tubular one)",
                             path=opened.path, option="objects")
         g = opened.geometry

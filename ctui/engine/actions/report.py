@@ -147,7 +147,7 @@ def _seg_segments(seg_path: str, opened: Opened, ids: Sequence[int], sources: Se
         for o in imp.objects:
             theirs = imp.mask(o["id"])
             inter = np.count_nonzero(mine & theirs)
-            dice = 2.0 * inter / max(1, np.count_nonzero(mine) + np.count_nonzero(theirs))
+            dice = 2.0 * inter / max(1, int(np.count_nonzero(mine) + np.count_nonzero(theirs)))
             if dice > score:
                 best, score = o, dice
         if best is None or score < SEG_MATCH_DICE:
@@ -211,7 +211,7 @@ def _is_seg(path: str) -> bool:
     return label_kind(path) == "dicom-seg"
 
 
-def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, format: str = "sr",
+def write_report(source: str | os.PathLike | Opened, *, out: str | os.PathLike, format: str = defaults.REPORT_FORMAT,
                  series: str | os.PathLike | None = None, seg: str | os.PathLike | None = None,
                  objects: int | Sequence[int] | None = None, path: Any = None,
                  step_mm: float = defaults.SECTION_STEP_MM, sections: str = "extremes",

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
 from ctui.engine.actions.segment_checks import body_check, check_background, leak_check, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
@@ -67,21 +68,21 @@ Box = tuple[tuple[int, int], tuple[int, int], tuple[int, int]]
 class SegmentOptions:
     """How to segment (keyword defaults = the CLI's defaults)."""
 
-    method: str = "fill"
-    mode: str = "slice"
-    direction: str = "both"
-    connectivity: int = 8
-    neighbourhood: int = 2
-    min_area: int = 5
-    leak_factor: float | None = 2.5
+    method: str = defaults.SEGMENT_METHOD
+    mode: str = defaults.PROPAGATION_MODE
+    direction: str = defaults.DIRECTION
+    connectivity: int = defaults.CONNECTIVITY
+    neighbourhood: int = defaults.NEIGHBOURHOOD
+    min_area: int = defaults.MIN_AREA
+    leak_factor: float | None = defaults.LEAK_FACTOR
     neck_mm: float | None = None  # None: chosen from the data (autoneck); a number forces it; 0: off
     fill_holes: bool = True  # holes enclosed in each slice of the object are part of it (renal sinus, vessels)
     box: Box | None = None  # fills, propagation and growing stay inside this box
     slices: tuple[int, int] | None = None
     keep_largest: bool = False
-    min_island: int = 0
+    min_island: int = defaults.MIN_ISLAND_VOXELS
     interpolate: bool = False
-    curvature: float = 0.5  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
+    curvature: float = defaults.LEVELSET_CURVATURE_MM  # level set: mm; smooths corners sharper than this, blocks necks under ~2x
     overwrite: bool = False
     server: str = ""  # nninteractive: the server's URL (else CTUI_NNI_SERVER); never saved
     api_key: str = field(default="", repr=False)  # nninteractive: the server's key (else CTUI_NNI_KEY); never saved
@@ -96,7 +97,8 @@ class SegmentOptions:
         if self.neck_mm is not None and (not np.isfinite(self.neck_mm) or not 0 <= self.neck_mm <= 1000):
             raise CtuiError("the neck width must be a number of mm between 0 and 1000, or automatic")
         if self.box is not None:
-            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+            (z0, z1), (y0, y1), (x0, x1) = self.box
+            self.box = ((int(z0), int(z1)), (int(y0), int(y1)), (int(x0), int(x1)))
             if any(a > b for a, b in self.box):
                 raise CtuiError("the box is empty: each of its ranges needs first <= last")
         if self.min_island < 0:
@@ -214,7 +216,7 @@ class _Start:
 def _limit(opts: SegmentOptions, shape: tuple[int, ...]) -> tuple[slice, slice, slice] | None:
     if opts.box is None:
         return None
-    return tuple(slice(max(a, 0), min(b, n - 1) + 1) for (a, b), n in zip(opts.box, shape))  # type: ignore[return-value]
+    return tuple(slice(max(a, 0), min(b, n - 1) + 1) for (a, b), n in zip(opts.box, shape))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, th: Threshold,
@@ -299,7 +301,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     medulla in its cortex, an arterial phase) is tried once more with the range that holds both; that result is
     kept when it carries no warning of its own (but the values' shift, which the shell makes) and is at most ``SHELL_GROWTH`` times the first (the shell was
     the rest of the organ, not a neighbour), else the first stays with its warning."""
-    seg = segmentation if segmentation is not None else Segmentation(tuple(volume.data.shape))  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(tuple(volume.data.shape))
     before = len(seg.undo_labels())
     known = set(seg.objects)
     res = _segment(volume, seeds, thresholds, background=background, options=options, pipeline=pipeline,
@@ -307,7 +309,7 @@ def segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[Th
     r = res.objects[0]
     if len(res.objects) != 1 or r.auto_range is None or r.shell_range is None:
         return res
-    trial = Segmentation(seg.labels.shape)  # type: ignore[arg-type]
+    trial = Segmentation(seg.labels.shape)
     trial.labels[:] = np.where(seg.labels == r.id, 0, seg.labels)
     try:
         got = _segment(volume, [r.seed], [r.shell_range], background=background, options=options, pipeline=pipeline,
@@ -372,7 +374,7 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
     fg = [_check_seed(s, shape, "seed") for s in seeds]
     bg = [_check_seed(s, shape, "background seed") for s in background]
     ths = _ranges(thresholds, len(fg))
-    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(shape)
     free = [i for i in range(1, 11) if i not in seg.objects] if object_ids is None else [int(i) for i in object_ids]
     if len(fg) > len(free):
         raise CtuiError(f"at most 10 objects: {len(fg)} seeds but {len(free)} free object ids")
@@ -419,6 +421,13 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
     return SegmentResult(segmentation=seg, pipeline=pipe, settings=settings, objects=results, method=opts.method)
 
 
+def _clip_box(box: Box, shape: Sequence[int]) -> Box:
+    """``box`` ((z0, z1), (y0, y1), (x0, x1)) voxels, clipped to a volume of ``shape``."""
+    (z0, z1), (y0, y1), (x0, x1) = box
+    nz, ny, nx = (int(n) for n in shape)
+    return (max(z0, 0), min(z1, nz - 1)), (max(y0, 0), min(y1, ny - 1)), (max(x0, 0), min(x1, nx - 1))
+
+
 def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[Sequence[int]],
               opts: SegmentOptions, pipe: Pipeline, segmentation: Segmentation | None, names: Sequence[str] | None,
               progress: Progress | None, object_ids: Sequence[int] | None) -> SegmentResult:
@@ -427,12 +436,12 @@ def _prompted(volume: Any, seeds: Sequence[Sequence[int]], background: Sequence[
     shape = tuple(volume.data.shape)
     fg = [_check_seed(s, shape, "seed") for s in seeds]
     bg = [_check_seed(s, shape, "background seed") for s in background]
-    seg = segmentation if segmentation is not None else Segmentation(shape)  # type: ignore[arg-type]
+    seg = segmentation if segmentation is not None else Segmentation(shape)
     oid = int(object_ids[0]) if object_ids else next((i for i in range(1, 11) if i not in seg.objects), 0)
     if not oid:
         raise CtuiError("at most 10 objects: no free object id")
     seg.add_object(names[0] if names else f"object {oid}", object_id=oid)
-    roi = None if opts.box is None else tuple((max(a, 0), min(b, n - 1)) for (a, b), n in zip(opts.box, shape))
+    roi = None if opts.box is None else _clip_box(opts.box, shape)
     if roi is not None and any(a > b for a, b in roi):
         raise CtuiError(f"the box {box_text(opts.box)} lies outside the volume", option="box")
     rep = nninteractive.run_prompts(volume, seg, oid, nninteractive.Prompts(fg, bg, roi), server=opts.server,
@@ -493,7 +502,8 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
                        auto_range=None if start.auto_range is None else start.auto_range.to_dict(),
                        denoise=start.denoise)
     s = _settings(opts, start, volume.data.shape)
-    spacing = tuple(float(v) for v in volume.spacing)
+    dz, dy, dx = (float(v) for v in volume.spacing)
+    spacing = (dz, dy, dx)
     info = seg.objects[oid]
     info.seeds.append(seed)
     info.settings.update({"low": start.rng[0], "high": start.rng[1], "connectivity": opts.connectivity,
@@ -510,7 +520,7 @@ def _one(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: Seed, s
     if job.neck_status == "thin" and start.width > 0:
         res.warnings.append(f"the neck width {start.width:g} mm is wider than the object around the seed, so "
                             "the leak guard cut nothing: use the automatic width or a smaller one")
-    _clean(seg, oid, opts, spacing)  # type: ignore[arg-type]
+    _clean(seg, oid, opts, spacing)
     info.settings["propagation"] = res.stops
     return res, s.to_dict()
 

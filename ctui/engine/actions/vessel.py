@@ -15,6 +15,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ctui.engine.actions import defaults
 from ctui.engine.actions.export import export
 from ctui.engine.actions.formats import format_for_path
 from ctui.engine.actions.opened import Opened
@@ -76,7 +77,7 @@ def _zyx(p: Sequence[int], what: str) -> tuple[int, int, int]:
 
 
 def vessel(volume: Any, *, start: Sequence[int], ends: Sequence[Sequence[int]], vias: Sequence[Sequence[int]] = (),
-           value_range: tuple[float, float] | None = None, lumen: str = "contrast", step_mm: float = SECTION_STEP_MM,
+           value_range: tuple[float, float] | None = None, lumen: str = defaults.VESSEL_LUMEN, step_mm: float = SECTION_STEP_MM,
            source: str = "", progress: Progress | None = None) -> VesselResult:
     """Extract one vessel from ``volume`` (a :class:`~ctui.engine.core.volume.Volume`).
 
@@ -110,6 +111,13 @@ def _xyz(zyx: Sequence[int]) -> str:
     return f"{int(zyx[2])},{int(zyx[1])},{int(zyx[0])}"
 
 
+def _mask(result: VesselResult) -> np.ndarray:
+    """The vessel's (z, y, x) bool mask (a result read back from JSON has none)."""
+    if result.mask is None:
+        raise CtuiError("this vessel result carries no mask (results read back from JSON keep only the figures)")
+    return result.mask
+
+
 def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", project: str | None = None,
                 mask: str | None = None, csv: str | None = None, plot: str | None = None,
                 source_options: dict | None = None) -> list[str]:
@@ -119,7 +127,7 @@ def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", pro
 
     inputs = [source_path] if source_path else []
     check_outputs({"--project": project, "--mask": mask, "--csv": csv, "--plot": plot}, inputs=inputs)
-    labels = result.mask.astype(np.uint8)
+    labels = _mask(result).astype(np.uint8)
     objects = Segmentation(labels.shape, labels=labels, objects=[{"id": 1, "name": "vessel"}]).object_list()
     proj = new_project(volume, source_path=source_path, source_options=source_options, labels=labels,
                        objects=objects, meta={"vessel": {k: to_jsonable(getattr(result, k)) for k in
@@ -150,6 +158,6 @@ def vessel_proposal(result: VesselResult, object_id: int) -> Any:
     from ctui.engine.segment.proposal import Proposal  # the TUI's proposal type (the workspace reviews it)
 
     start_slice = int(result.start[2])
-    return Proposal.of_mask(int(object_id), start_slice, result.mask,
+    return Proposal.of_mask(int(object_id), start_slice, _mask(result),
                             settings={"vessel": {k: to_jsonable(getattr(result, k)) for k in
                                                  ("start", "ends", "vias", "lumen", "range")}})

@@ -35,7 +35,7 @@ def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, floa
         raise CtuiError(f"{name}: every value must be at least {MIN_SPACING_MM:g} mm, got {list(vals)}")
     if max(abs(v) for v in vals) > MAX_MM:  # 1e308 mm is finite but overflows every product (fuzz finding)
         raise CtuiError(f"{name}: values beyond {MAX_MM:g} mm in {list(vals)}")
-    return vals  # type: ignore[return-value]
+    return vals[0], vals[1], vals[2]
 
 
 def _direction(value: Any, *, orthonormal: bool = False) -> np.ndarray:
@@ -86,7 +86,7 @@ class Geometry:
         if isinstance(obj, Geometry):
             return obj
         shape = getattr(obj, "shape", None)
-        if shape is None and hasattr(obj, "data"):
+        if shape is None:
             shape = obj.data.shape
         return cls(tuple(shape), obj.spacing, obj.origin, obj.direction)
 
@@ -96,7 +96,7 @@ class Geometry:
         if not isinstance(d, dict):
             raise CtuiError("geometry: expected an object")
         direction = _direction(d.get("direction"), orthonormal=True)  # files: strict
-        return cls(d.get("shape_zyx"), d.get("spacing_zyx_mm", (1.0, 1.0, 1.0)),  # type: ignore[arg-type]
+        return cls(d.get("shape_zyx"), d.get("spacing_zyx_mm", (1.0, 1.0, 1.0)),  # type: ignore[arg-type]  # a file's fields: __post_init__ checks each one and raises CtuiError
                    d.get("origin_xyz_mm", (0.0, 0.0, 0.0)), direction)
 
     def to_dict(self) -> dict:

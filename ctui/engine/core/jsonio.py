@@ -19,7 +19,7 @@ import numpy as np
 NDIGITS = 6
 
 
-def _float(x: float, ndigits: int | None) -> float | None:
+def _float(x: float | np.floating, ndigits: int | None) -> float | None:
     x = float(x)
     if not math.isfinite(x):
         return None
@@ -32,7 +32,7 @@ def to_jsonable(obj: Any, *, ndigits: int | None = NDIGITS, strict: bool = False
     ``ndigits=None`` keeps floats exact (files that must round-trip); ``strict`` raises
     TypeError for a value with no JSON form instead of storing its ``str()``.
     """
-    kw = {"ndigits": ndigits, "strict": strict}
+    kw: dict[str, Any] = {"ndigits": ndigits, "strict": strict}
     if obj is None or isinstance(obj, (bool, str)):
         return obj
     if isinstance(obj, (bool, np.bool_)):

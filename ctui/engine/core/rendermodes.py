@@ -17,3 +17,8 @@ RENDER_MODES: dict[str, tuple[str, str]] = {
 MODES: tuple[str, ...] = tuple(RENDER_MODES)
 VOLUME_MODES: tuple[str, ...] = tuple(m for m, (kind, _) in RENDER_MODES.items() if kind == "volume")
 SURFACE_MODES: tuple[str, ...] = tuple(m for m, (kind, _) in RENDER_MODES.items() if kind == "surface")
+#: anti-aliasing of the rendered image: fast approximate, multisampled, or none
+ANTIALIAS: tuple[str, ...] = ("fxaa", "msaa", "none")
+#: what the camera frames: "auto" (the objects in surface modes, the volume in volume modes), the objects,
+#: or the whole series
+FRAMES: tuple[str, ...] = ("auto", "objects", "series")

@@ -79,8 +79,8 @@ class Volume:
     def __post_init__(self) -> None:
         if self.data.ndim != 3:
             raise ValueError(f"Volume data must be 3D (z, y, x), got shape {self.data.shape}")
-        self.spacing = tuple(float(s) for s in self.spacing)  # type: ignore[assignment]
-        self.origin = tuple(float(o) for o in self.origin)  # type: ignore[assignment]
+        self.spacing = tuple(float(s) for s in self.spacing)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
+        self.origin = tuple(float(o) for o in self.origin)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         self.direction = np.asarray(self.direction, dtype=np.float64).reshape(3, 3)
         for s in self.spacing:
             if not (np.isfinite(s) and s > 0):  # a loader's bug or a header it let through: never NaN in JSON
@@ -94,7 +94,8 @@ class Volume:
     @property
     def shape(self) -> tuple[int, int, int]:
         """(nz, ny, nx)."""
-        return tuple(self.data.shape)  # type: ignore[return-value]
+        nz, ny, nx = self.data.shape
+        return int(nz), int(ny), int(nx)
 
     @property
     def spacing_xyz(self) -> np.ndarray:
@@ -138,7 +139,7 @@ class Volume:
 
     def extent_mm(self) -> tuple[float, float, float]:
         """Physical size (z, y, x) of the voxel grid in mm (n * spacing)."""
-        return tuple(n * s for n, s in zip(self.shape, self.spacing))  # type: ignore[return-value]
+        return tuple(n * s for n, s in zip(self.shape, self.spacing))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
     def value_range(self) -> tuple[float, float]:
         """(min, max) of the voxel values (``meta["value_range"]`` for a headers-only

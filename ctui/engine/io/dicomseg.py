@@ -76,7 +76,7 @@ def import_pydicom() -> Any:
 
 
 def _read_headers(path: Path) -> list[Any]:
-    pydicom = import_pydicom()
+    import_pydicom()  # a CtuiError naming the missing package
     from pydicom.errors import InvalidDicomError
 
     files = sorted(f for f in path.rglob("*") if f.is_file()) if path.is_dir() else [path]
@@ -426,7 +426,7 @@ def _crop(mask: np.ndarray) -> tuple[tuple[slice, slice, slice] | None, np.ndarr
     box = tuple(slice(int(ix[0]), int(ix[-1]) + 1) for ix in
                 (np.flatnonzero(mask.any(axis=(1, 2))), np.flatnonzero(mask.any(axis=(0, 2))),
                  np.flatnonzero(mask.any(axis=(0, 1)))))
-    return box, mask[box].copy()  # type: ignore[return-value]
+    return box, mask[box].copy()  # type: ignore[return-value]  # box: tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _orphan_frames(seg: Any, numbers: set[int]) -> list[str]:

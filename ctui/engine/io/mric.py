@@ -219,7 +219,7 @@ def _finite3(v, what: str, path, *, positive: bool = False) -> tuple[float, floa
         raise FormatError(f"{path}: {what} must be three numbers, got {v!r}") from None
     if len(out) != 3 or not all(math.isfinite(x) for x in out) or (positive and min(out) <= 0):
         raise FormatError(f"{path}: {what} must be three {'positive ' if positive else ''}finite numbers, got {v!r}")
-    return out  # type: ignore[return-value]
+    return out
 
 
 def _sidecar_json(path, nz: int, ny: int, nx: int, spacing, origin, direction) -> str:

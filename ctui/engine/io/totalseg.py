@@ -206,7 +206,7 @@ def class_map(path: Path) -> tuple[dict[int, str], dict[int, tuple[int, int, int
         for key, attrs, name in _LABEL.findall(text):
             names[int(key)] = name.strip()
             rgb = dict(_COLOUR.findall(attrs))
-            colours[int(key)] = (tuple(int(round(float(rgb[c]) * 255)) for c in ("Red", "Green", "Blue"))  # type: ignore[misc]
+            colours[int(key)] = (tuple(int(round(float(rgb[c]) * 255)) for c in ("Red", "Green", "Blue"))
                                  if len(rgb) == 3 else None)
     return names, colours
 
@@ -227,4 +227,4 @@ def _read_folder(path: Path) -> Classes:
             raise CtuiError(f"{p.name}: shape {m.shape} differs from the other classes' {labels.shape}", path=path)
         labels[m != 0] = k
         names[k] = p.name.split(".nii")[0]
-    return Classes(labels, vol, names, {k: None for k in names})  # type: ignore[arg-type]
+    return Classes(labels, vol, names, {k: None for k in names})  # type: ignore[arg-type]  # no colours in TotalSegmentator's output: None takes the registry's colour

@@ -27,7 +27,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.jsonio import to_jsonable
-from ctui.engine.core.meshdata import Mesh, face_areas, signed_volume_mm3
+from ctui.engine.core.meshdata import Mesh, face_areas
 from ctui.engine.measure.fields import partial_volume_field, partial_volume_fraction  # noqa: F401  (re-exported)
 from ctui.engine.measure.paths import index_matrix, index_to_mm
 from ctui.engine.mesh.meshtools import face_components

@@ -61,6 +61,7 @@ import numpy as np
 
 from ctui.engine.core.borders import object_borders
 from ctui.engine.core.meshdata import Mesh
+from ctui.engine.mesh import CONTOUR_TILINGS
 from ctui.engine.mesh.contour_tiling import tile_dp, tile_greedy, tile_many
 from ctui.engine.mesh.meshtools import drop_opposite_twins, edge_counts, split_non_manifold, vertex_normals
 from ctui.engine.mesh.surface import _fix_handedness, affine_from
@@ -160,7 +161,7 @@ def _as_loops(items: Sequence[Any], z: int) -> list[_Loop]:
     for it in items:
         if hasattr(it, "points"):
             pts, hole = np.asarray(it.points, np.float64), bool(getattr(it, "hole", False))
-        elif isinstance(it, tuple) and len(it) == 2 and not np.isscalar(it[1]) is False:
+        elif isinstance(it, tuple) and len(it) == 2 and np.isscalar(it[1]):  # (points, hole flag)
             pts, hole = np.asarray(it[0], np.float64), bool(it[1])
         else:
             pts = np.asarray(it, np.float64)
@@ -439,7 +440,7 @@ def connect_contours(
     Mesh
         Closed, welded, outward-oriented triangle mesh in patient mm (object_id 0).
     """
-    if method not in ("dp", "greedy"):
+    if method not in CONTOUR_TILINGS:
         raise ValueError(f"unknown tiling method {method!r} (use 'dp' or 'greedy')")
     aff = affine_from(spacing, origin, direction)
     builder = _Builder()

@@ -31,10 +31,9 @@ from ctui.engine.core.colors import object_color_float
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.jsonio import to_jsonable
 from ctui.engine.core.meshdata import Mesh
-from ctui.engine.core.rendermodes import MODES, VOLUME_MODES
+from ctui.engine.core.rendermodes import ANTIALIAS, FRAMES, MODES, VOLUME_MODES  # noqa: F401 - re-exported (ctui.engine.render)
 
 PROJECTIONS = ("orthographic", "perspective")
-ANTIALIAS = ("fxaa", "msaa", "none")
 
 
 @dataclass
@@ -168,10 +167,9 @@ class RenderOptions:
     frame: str = "auto"
 
 
-#: what the camera frames (``RenderOptions.frame``): "auto" = the visible meshes in the
-#: surface modes and the volume box in the volume modes (or when there is no mesh);
-#: "objects" = the meshes; "series" = the volume box and the meshes
-FRAMES = ("auto", "objects", "series")
+# FRAMES (core.rendermodes): what the camera frames (``RenderOptions.frame``): "auto" = the visible meshes
+# in the surface modes and the volume box in the volume modes (or when there is no mesh);
+# "objects" = the meshes; "series" = the volume box and the meshes
 
 
 @dataclass
@@ -191,7 +189,7 @@ class SceneMesh:
 
     def rgb(self) -> tuple[float, float, float]:
         if self.color is not None:
-            return tuple(float(c) for c in self.color)  # type: ignore[return-value]
+            return tuple(float(c) for c in self.color)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         if self.mesh.object_id:
             return object_color_float(self.mesh.object_id)
         return (0.89, 0.85, 0.77)
@@ -222,7 +220,7 @@ class SceneVolume:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return tuple(self.data.shape)  # type: ignore[return-value]
+        return tuple(self.data.shape)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
     def affine(self) -> np.ndarray:
         """4x4: homogeneous (x, y, z) voxel indices -> patient mm."""

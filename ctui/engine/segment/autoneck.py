@@ -95,7 +95,7 @@ def resample_factors(spacing: tuple[float, float, float], shape: tuple[int, ...]
     while True:
         f = tuple(max(1, int(round(target / s))) if s < target else 1 for s in spacing)
         if shape is None or np.prod([-(-n // k) for n, k in zip(shape, f)]) <= SWEEP_VOXELS or target > 8:
-            return f  # type: ignore[return-value]
+            return f  # type: ignore[return-value]  # f: tuple() of a generator: mypy sees any length, the length is fixed by construction
         target *= 1.25
 
 
@@ -160,7 +160,7 @@ def choose_width(candidate: np.ndarray, seeds_zyx: np.ndarray, spacing: tuple[fl
     vols: list[int | None] = [None] * len(used)
     vols[0] = int(np.count_nonzero(cand))  # the unopened region: on a noisy series the first opening cuts bridges
     opened: dict[int, np.ndarray] = {}
-    for i in sorted({k for i in splits_at for k in (i - 1, i)} - {0}):
+    for i in sorted({k for j in splits_at for k in (j - 1, j)} - {0}):
         got = _opened(cand, dt, cs, used[i], sp)
         opened[i] = got
         vols[i] = int(np.count_nonzero(got))
@@ -297,7 +297,7 @@ def _opened(cand: np.ndarray, dt: np.ndarray, seeds: np.ndarray, r: float,
 def _grown_box(m: np.ndarray, r: float, sp: tuple[float, float, float]) -> tuple[slice, slice, slice]:
     b = _bbox3(m)
     k = [int(math.ceil(r / s)) + 1 for s in sp]
-    return tuple(slice(max(x.start - kk, 0), min(x.stop + kk, n)) for x, kk, n in zip(b, k, m.shape))  # type: ignore[return-value]
+    return tuple(slice(max(x.start - kk, 0), min(x.stop + kk, n)) for x, kk, n in zip(b, k, m.shape))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _core_seeds(core: np.ndarray, dt: np.ndarray, seeds: np.ndarray, r: float,
@@ -327,7 +327,7 @@ def sweep_box(shape: tuple[int, int, int], seed_zyx: tuple[int, int, int],
     for c, n, s in zip(seed_zyx, shape, spacing):
         h = max(2, int(math.ceil(BOX_MM / float(s))))
         out.append(slice(max(int(c) - h, 0), min(int(c) + h + 1, int(n))))
-    return tuple(out)  # type: ignore[return-value]
+    return tuple(out)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def cut_3d(candidate: np.ndarray, seeds_zyx: np.ndarray, *, width_mm: float, spacing: tuple[float, float, float],

@@ -63,7 +63,7 @@ def _box_values(volume: Any, pipe: Any, seed: tuple[int, int, int]) -> tuple[np.
     the seed's index in it; the volume (mL) of one coarse voxel."""
     x, y, z = seed
     sp = tuple(float(s) for s in volume.spacing)
-    f = resample_factors(sp)  # type: ignore[arg-type]
+    f = resample_factors(sp)  # type: ignore[arg-type]  # sp: tuple() of a generator: mypy sees any length, the length is fixed by construction
     shape = volume.data.shape
     half = [max(2, int(math.ceil(BOX_MM / s))) for s in sp]
     lo = [max(c - h, 0) for c, h in zip((z, y, x), half)]
@@ -76,7 +76,7 @@ def _box_values(volume: Any, pipe: Any, seed: tuple[int, int, int]) -> tuple[np.
         vals = np.stack([np.asarray(pipe.final_region(volume, zz, lo[1], hi[1], lo[2], hi[2], window=window),
                                     np.float32)[::f[1], ::f[2]] for zz in range(lo[0], hi[0], f[0])])
     local = tuple((c - a) // k for c, a, k in zip((z, y, x), lo, f))
-    return vals, local, float(np.prod([s * k for s, k in zip(sp, f)])) / 1000.0  # type: ignore[return-value]
+    return vals, local, float(np.prod([s * k for s, k in zip(sp, f)])) / 1000.0  # type: ignore[return-value]  # sp, f: tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def _joined(vals: np.ndarray, seed: np.ndarray, lo: float, hi: float) -> int:

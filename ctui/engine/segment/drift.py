@@ -187,7 +187,7 @@ def analyze_drift(labels: np.ndarray, volume: Any = None, *, spacing: tuple[floa
     confirm : flag only candidates that look like a jolt (see the module docstring)
     """
     if volume is not None:
-        spacing = tuple(volume.spacing)  # type: ignore[assignment]
+        spacing = tuple(volume.spacing)
     if spacing is None:
         spacing = (1.0, 1.0, 1.0)
     dz, dy, dx = (float(s) for s in spacing)

@@ -182,10 +182,10 @@ class EditMixin:
         box = (slice(oz + bb[0].start, oz + bb[0].stop), slice(oy + bb[1].start, oy + bb[1].stop),
                slice(ox + bb[2].start, ox + bb[2].stop))
         if mode == "replace":  # widen the box to the object's extent on the planes the mask touches
-            ob = self.object_bbox(object_id)  # type: ignore[attr-defined]
+            ob = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
             if ob is not None:
                 box = tuple(box[a] if a == axis else slice(min(box[a].start, ob[a].start), max(box[a].stop, ob[a].stop))
-                            for a in range(3))  # type: ignore[assignment]
+                            for a in range(3))  # type: ignore[assignment]  # box: tuple() of a generator: mypy sees any length, the length is fixed by construction
         full = np.zeros(tuple(b.stop - b.start for b in box), bool)
         rel = tuple(slice(o + b.start - bx.start, o + b.stop - bx.start) for o, b, bx in zip(offset, bb, box))
         full[rel] = m[bb]
@@ -242,7 +242,7 @@ class EditMixin:
     def _islands(self, object_id: int, connectivity: int) -> tuple[Box, np.ndarray, np.ndarray] | None:
         from scipy import ndimage  # scipy is heavy; only edits need it
 
-        box = self.object_bbox(object_id)  # type: ignore[attr-defined]
+        box = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
         if box is None:
             return None
         region = self.labels[box]
@@ -289,7 +289,7 @@ class EditMixin:
         the object on a key slice. ``slices`` limits the key slices used (A..B
         inclusive). One undo step; returns voxels added.
         """
-        box = self.object_bbox(object_id)  # type: ignore[attr-defined]
+        box = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
         if box is None:
             return 0
         sp = (1.0, 1.0, 1.0) if spacing is None else spacing
@@ -307,7 +307,7 @@ class EditMixin:
         for a, b in zip(keys, keys[1:]):
             if b - a < 2:
                 continue
-            da, db = _sdf(mine[a], sp[1:]), _sdf(mine[b], sp[1:])  # type: ignore[index]
+            da, db = _sdf(mine[a], sp[1:]), _sdf(mine[b], sp[1:])
             for k in range(a + 1, b):
                 t = (k - a) / (b - a)
                 fill = ((1.0 - t) * da + t * db) > 0
@@ -339,7 +339,7 @@ class EditMixin:
             lab, _n = ndimage.label(self.labels[z] == object_id)
             lab = lab[None]
         else:
-            bb = self.object_bbox(object_id)  # type: ignore[attr-defined]
+            bb = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
             st = ndimage.generate_binary_structure(3, 1 if connectivity == 6 else (2 if connectivity == 18 else 3))
             lab, _n = ndimage.label(self.labels[bb] == object_id, structure=st)
         this = lab == lab[z - bb[0].start, y - bb[1].start, x - bb[2].start]
@@ -377,7 +377,7 @@ class EditMixin:
         if z0 > z1:
             raise CtuiError(f"slices {zr[0]}..{zr[1]} lie outside the volume (slices 0..{nz - 1})")
         cut = region if inside else ~region
-        ob = self.object_bbox(object_id)  # type: ignore[attr-defined]
+        ob = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
         if ob is None or z1 < ob[0].start or z0 >= ob[0].stop:
             return 0
         # the undo step stores only the object's box on these slices
@@ -402,13 +402,13 @@ class EditMixin:
 
         if method not in SMOOTHING:
             raise CtuiError(f"smoothing method must be one of {', '.join(SMOOTHING)}, got {method!r}")
-        ob = self.object_bbox(object_id)  # type: ignore[attr-defined]
+        ob = self.object_bbox(object_id)  # type: ignore[attr-defined]  # EditMixin: Segmentation, which it is mixed into, defines object_bbox
         if ob is None:
             raise CtuiError(f"object {object_id} is empty: nothing to smooth")
         k = ball(float(size_mm), spacing)
         pad = [n // 2 + 1 for n in k.shape]
         shape = self.labels.shape
-        bb: Box = tuple(slice(max(o.start - p, 0), min(o.stop + p, n)) for o, p, n in zip(ob, pad, shape))  # type: ignore[assignment]
+        bb: Box = tuple(slice(max(o.start - p, 0), min(o.stop + p, n)) for o, p, n in zip(ob, pad, shape))  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         region = self.labels[bb]
         mine = region == object_id
         if method == "median":

@@ -58,7 +58,7 @@ def _box(mask: np.ndarray, margin: tuple[int, int, int]) -> tuple[slice, slice, 
     for lo, hi, m, n in ((zs[0], zs[-1], margin[0], mask.shape[0]), (ys[0], ys[-1], margin[1], mask.shape[1]),
                          (xs[0], xs[-1], margin[2], mask.shape[2])):
         out.append(slice(max(int(lo) - m, 0), min(int(hi) + 1 + m, n)))
-    return tuple(out)  # type: ignore[return-value]
+    return tuple(out)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def compete(region: np.ndarray, foreground: np.ndarray, background: np.ndarray, *,
@@ -175,7 +175,7 @@ def grow(inrange: np.ndarray, foreground: np.ndarray, background: np.ndarray, *,
     report(progress, 1, 3, "competition")
     share = compete(region, fg - off, inside_seeds(bg - off, region.shape), spacing=spacing, connectivity=connectivity)
     report(progress, 3, 3, "")
-    return tight(tuple(int(v) for v in off), share)  # type: ignore[arg-type]
+    return tight(tuple(int(v) for v in off), share)  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def inside_seeds(seeds: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -219,7 +219,7 @@ def levelset(image: np.ndarray, initial: np.ndarray, *, low: float, high: float,
     """
     report(progress, 0, 4, "level set")
     margin = tuple(max(1, int(np.ceil(margin_mm / float(s)))) for s in spacing)
-    box = _box(np.asarray(initial, bool), margin)  # type: ignore[arg-type]
+    box = _box(np.asarray(initial, bool), margin)  # type: ignore[arg-type]  # margin: tuple() of a generator: mypy sees any length, the length is fixed by construction
     if box is None:
         return (0, 0, 0), np.zeros((0, 0, 0), bool)
     off = np.array([b.start for b in box])
@@ -236,7 +236,7 @@ def levelset(image: np.ndarray, initial: np.ndarray, *, low: float, high: float,
         bg = inside_seeds(np.asarray(background, np.int64).reshape(-1, 3) - off, region.shape)
         inside &= compete(region | inside, np.argwhere(init), bg, spacing=spacing, connectivity=connectivity)
     report(progress, 4, 4, "")
-    return tight(tuple(int(v) for v in off), inside)  # type: ignore[arg-type]
+    return tight(tuple(int(v) for v in off), inside)  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def run_starts(mask: np.ndarray) -> np.ndarray:

@@ -62,7 +62,7 @@ class Job:
 
     @property
     def spacing(self) -> tuple[float, float, float]:
-        return tuple(float(v) for v in self.volume.spacing)  # type: ignore[return-value]
+        return tuple(float(v) for v in self.volume.spacing)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 @dataclass(frozen=True)
@@ -129,7 +129,7 @@ def grow(job: Job) -> None:
             job.stops["grow"] = "cut at the narrowest place between the seeds (the edges gave the background nothing)"
     else:
         share = fill3d_seeds(region, np.array([[z, y, x]]) - org, connectivity=job.settings.connectivity)
-    job.seg.apply_mask(share, job.oid, offset=tuple(int(v) for v in org), mode="replace",  # type: ignore[arg-type]
+    job.seg.apply_mask(share, job.oid, offset=tuple(int(v) for v in org), mode="replace",  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
                        overwrite=job.settings.overwrite, label=f"grow object {job.oid} from ({x}, {y}, {z})")
 
 
@@ -263,7 +263,7 @@ def split_background(job: Job) -> None:
     fgz = np.array([[z, y, x]]) - origin
     bgz = np.array([[b[2], b[1], b[0]] for b in inside]) - origin
     share = _grow.compete(region, fgz, bgz, spacing=job.spacing, connectivity=job.settings.connectivity)
-    seg.apply_mask(region & ~share, oid, offset=tuple(int(v) for v in origin), mode="subtract",  # type: ignore[arg-type]
+    seg.apply_mask(region & ~share, oid, offset=tuple(int(v) for v in origin), mode="subtract",  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
                    label=f"cut object {oid} at the background seeds")
 
 
@@ -280,7 +280,7 @@ def _levelset_object(job: Job) -> None:
     if not job.pipe.active_steps() and job.pipe.domain == "hu":
         image = job.volume.data[big]  # the series values themselves: a view, no copy
     else:
-        image = _values(job, big)  # type: ignore[arg-type]
+        image = _values(job, big)  # type: ignore[arg-type]  # big: the box's slices, tuple() of a generator: mypy sees any length, the length is fixed by construction
     init = seg.labels[big] == oid
     if (init.sum(axis=(1, 2)) > 0).sum() < 3:
         return  # the level set needs a body at least 3 slices thick
@@ -292,5 +292,5 @@ def _levelset_object(job: Job) -> None:
     if s.slices is not None:
         zs = np.arange(big[0].start, big[0].stop)
         full[(zs < s.slices[0]) | (zs > s.slices[1])] = init[(zs < s.slices[0]) | (zs > s.slices[1])]
-    seg.apply_mask(full, oid, offset=tuple(int(v) for v in origin), mode="replace", axis=0,  # type: ignore[arg-type]
+    seg.apply_mask(full, oid, offset=tuple(int(v) for v in origin), mode="replace", axis=0,  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
                    overwrite=s.overwrite, label=f"level set of object {oid}")

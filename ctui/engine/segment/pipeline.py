@@ -43,9 +43,8 @@ import numpy as np
 
 from ctui.engine.core.colors import MAX_OBJECTS, object_color
 from ctui.engine.core.windows import apply_window, auto_window
+from ctui.engine.segment import DOMAINS  # the registry, defined once in the package
 from ctui.engine.segment import filters as _filters
-
-DOMAINS = ("hu", "window8")
 
 
 @dataclass

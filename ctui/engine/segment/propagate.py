@@ -58,13 +58,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ctui.engine.segment import (CONNECTIVITY, DIRECTION, DIRECTIONS, LEAK_FACTOR, MIN_AREA,
+                                 NEIGHBOURHOOD, PROPAGATION_MODE, PROPAGATION_MODES)
 from ctui.engine.segment.autoneck import cut_2d, cut_3d, cut_faces
 from ctui.engine.segment.fill3d import fill3d
 from ctui.engine.segment.necks import DEFAULT_NECK_MM, cut_necks_2d, cut_necks_3d
 from ctui.engine.segment.proposal import Proposal, _bbox  # noqa: F401 - Proposal is part of this module's API
 from ctui.engine.segment.selection import Segmentation, in_range, seeded_components
-
-DIRECTIONS = ("both", "forward", "backward")
 
 
 @dataclass
@@ -73,15 +73,15 @@ class PropagationSettings:
 
     low: float
     high: float
-    direction: str = "both"
-    connectivity: int = 8
-    neighbourhood: int = 2
-    min_area: int = 5
-    leak_factor: float | None = 2.5  # slice mode's area guard (None: off); 3D mode uses it only with neck_mm=0
+    direction: str = DIRECTION
+    connectivity: int = CONNECTIVITY
+    neighbourhood: int = NEIGHBOURHOOD
+    min_area: int = MIN_AREA
+    leak_factor: float | None = LEAK_FACTOR  # slice mode's area guard (None: off); 3D mode uses it only with neck_mm=0
     leak_min_pixels: int = 64
     on_leak: str = "stop"  # "stop" | "confine"
     confine: bool = False  # always restrict each slice to the previous object grown by `neighbourhood`
-    mode: str = "slice"  # "slice" | "3d"
+    mode: str = PROPAGATION_MODE  # one of PROPAGATION_MODES
     overwrite: bool = False  # claim voxels of other objects
     max_slices: int | None = None  # per direction
     neck_mm: float = DEFAULT_NECK_MM  # follow the object only through necks at least this wide (0: off)
@@ -95,10 +95,10 @@ class PropagationSettings:
             raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {self.direction!r}")
         if self.connectivity not in (4, 8):
             raise ValueError(f"connectivity must be 4 or 8, got {self.connectivity}")
-        if self.mode not in ("slice", "3d"):
+        if self.mode not in PROPAGATION_MODES:
             raise ValueError(f"mode must be 'slice' or '3d', got {self.mode!r}")
         if self.box is not None:
-            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]
+            self.box = tuple((int(a), int(b)) for a, b in self.box)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         if self.neck_rule not in ("opening", "sweep"):
             raise ValueError(f"neck_rule must be 'opening' or 'sweep', got {self.neck_rule!r}")
         if not math.isfinite(float(self.neck_mm)) or not (math.isfinite(float(self.low)) and math.isfinite(float(self.high))):
@@ -537,7 +537,7 @@ def propagate(volume: Any, pipeline: Any, start_mask: np.ndarray, z: int, settin
     Returns the :class:`Proposal` (pending; call ``proposal.accept(segmentation)``).
     """
     own = _Either(cancel)
-    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own,  # type: ignore[arg-type]
+    gen = iter_propagation(volume, pipeline, start_mask, z, settings, object_id=object_id, labels=labels, cancel=own,  # type: ignore[arg-type]  # _Either is the callable cancel check that iter_propagation takes
                            region=region)
     try:
         while True:

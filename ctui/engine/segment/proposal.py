@@ -38,6 +38,8 @@ class Proposal:
     necks: list[int] = field(default_factory=list)  # slices where the neck cut removed something
     replace: bool = False  # accept() makes the object exactly this (a whole segmentation), not adds to it
     cuts: list[dict[str, Any]] = field(default_factory=list)  # where: {"slice", "y", "x", "voxels"} (the cut faces)
+    # where leaks enter (segment.leaks: {"slice", "voxel", "ml", ...}): the review strip's L marks
+    leak_entries: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def voxels(self) -> int:
@@ -129,5 +131,5 @@ def _replace_object(seg: Segmentation, oid: int, offset: tuple[int, int, int], m
     full[tuple(slice(n.start - b.start, n.stop - b.start) for n, b in zip(new, box))] = m
     vals[full & ((vals == 0) | overwrite)] = oid
     changed = int(np.count_nonzero(vals != cur))
-    seg.apply_region(box, vals, label=f"segment object {oid}")  # type: ignore[arg-type]
+    seg.apply_region(box, vals, label=f"segment object {oid}")  # type: ignore[arg-type]  # box: tuple() of a generator: mypy sees any length, the length is fixed by construction
     return changed

@@ -217,20 +217,20 @@ def auto_width(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, h
     (clipped to ``limit``, a (z, y, x) box of slices, when given)."""
     x, y, z = seed
     sp = tuple(float(s) for s in volume.spacing)
-    box = sweep_box(tuple(volume.data.shape), (z, y, x), sp)  # type: ignore[arg-type]
+    box = sweep_box(tuple(volume.data.shape), (z, y, x), sp)  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
     if limit is not None:
-        box = tuple(slice(max(b.start, lb.start), min(b.stop, lb.stop)) for b, lb in zip(box, limit))  # type: ignore[assignment]
+        box = tuple(slice(max(b.start, lb.start), min(b.stop, lb.stop)) for b, lb in zip(box, limit))  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
     inr = box_inrange(volume, pipe, low, high, box, labels=labels, object_id=object_id)
     org = np.array([b.start for b in box])
     local = (z - org[0], y - org[1], x - org[2])
     if not inr[local]:
         return NeckChoice(0.0, reason="the seed is outside the range")
-    seeds = seed_voxels(inr, local)  # type: ignore[arg-type]
+    seeds = seed_voxels(inr, local)
     cand = fill3d_seeds(inr, seeds, connectivity=8)
     del inr
-    choice = choose_width(cand, seeds, sp)  # type: ignore[arg-type]
+    choice = choose_width(cand, seeds, sp)  # type: ignore[arg-type]  # sp: tuple() of a generator: mypy sees any length, the length is fixed by construction
     if choice.region is not None:
-        choice.region.origin = tuple(int(v) for v in org)  # type: ignore[assignment]
+        choice.region.origin = tuple(int(v) for v in org)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
     return choice
 
 
@@ -256,4 +256,4 @@ def seed_depth(volume: Any, pipe: Any, seed: tuple[int, int, int], low: float, h
     sp = tuple(s * k for s, k in zip(sp, f))
     local = tuple(c // k for c, k in zip(local, f))
     dt = ndimage.distance_transform_edt(np.pad(inr, 1), sampling=sp)[1:-1, 1:-1, 1:-1]
-    return local_depth(dt, np.array([local]), sp)  # type: ignore[arg-type]
+    return local_depth(dt, np.array([local]), sp)  # type: ignore[arg-type]  # local: tuple() of a generator: mypy sees any length, the length is fixed by construction

@@ -49,8 +49,8 @@ class ObjectInfo:
     def from_dict(cls, d: dict[str, Any]) -> ObjectInfo:
         known = {"id", "name", "color", "seeds"}
         return cls(id=int(d["id"]), name=str(d.get("name", f"object {d['id']}")),
-                   color=tuple(int(c) for c in d.get("color", object_color(int(d["id"])))),  # type: ignore[arg-type]
-                   seeds=[tuple(int(v) for v in s) for s in d.get("seeds", [])],  # type: ignore[misc]
+                   color=tuple(int(c) for c in d.get("color", object_color(int(d["id"])))),  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
+                   seeds=[tuple(int(v) for v in s) for s in d.get("seeds", [])],  # type: ignore[misc]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
                    settings={k: v for k, v in d.items() if k not in known})
 
 
@@ -191,7 +191,7 @@ class Segmentation(EditMixin):
 
     def __init__(self, shape: tuple[int, int, int], *, labels: np.ndarray | None = None,
                  objects: list[ObjectInfo | dict[str, Any]] | None = None, max_undo_bytes: int = 512 * 2**20) -> None:
-        shape = tuple(int(s) for s in shape)  # type: ignore[assignment]
+        shape = tuple(int(s) for s in shape)  # type: ignore[assignment]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         if labels is None:
             labels = np.zeros(shape, dtype=np.uint8)
         if labels.shape != shape or labels.dtype != np.uint8:
@@ -209,7 +209,7 @@ class Segmentation(EditMixin):
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return self.labels.shape  # type: ignore[return-value]
+        return self.labels.shape
 
     # ------------------------------------------------------------- objects
     def add_object(self, name: str | None = None, *, color: tuple[int, int, int] | None = None,
@@ -224,7 +224,7 @@ class Segmentation(EditMixin):
             raise ValueError(f"object id must be 1..{MAX_OBJECTS}, got {object_id}")
         if object_id not in self.objects:
             self.objects[object_id] = ObjectInfo(id=object_id, name=name or f"object {object_id}",
-                                                 color=tuple(color or object_color(object_id)))  # type: ignore[arg-type]
+                                                 color=tuple(color or object_color(object_id)))  # type: ignore[arg-type]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
         return object_id
 
     def object_list(self) -> list[dict[str, Any]]:

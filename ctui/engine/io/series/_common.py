@@ -123,13 +123,13 @@ class Plan:
         return len(range(*(self.z, self.y, self.x)[axis].indices(n)))
 
     def out_shape(self, shape: Sequence[int]) -> tuple[int, int, int]:
-        return tuple(self.out_len(a, int(n)) for a, n in enumerate(shape))  # type: ignore[return-value]
+        return tuple(self.out_len(a, int(n)) for a, n in enumerate(shape))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
     def starts(self, shape: Sequence[int]) -> tuple[int, int, int]:
-        return tuple((self.z, self.y, self.x)[a].indices(int(n))[0] for a, n in enumerate(shape))  # type: ignore[return-value]
+        return tuple((self.z, self.y, self.x)[a].indices(int(n))[0] for a, n in enumerate(shape))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
     def steps(self) -> tuple[int, int, int]:
-        return tuple(s.step or 1 for s in (self.z, self.y, self.x))  # type: ignore[return-value]
+        return tuple(s.step or 1 for s in (self.z, self.y, self.x))  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
     def is_full(self, shape: Sequence[int]) -> bool:
         """True when the plan loads the whole (nz, ny, nx) grid."""

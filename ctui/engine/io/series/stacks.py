@@ -39,7 +39,7 @@ def parse_spacing(spacing: Any, path: Any) -> tuple[float, float, float] | None:
     if len(vals) != 3 or not all(np.isfinite(vals)) or min(vals) < 1e-3 or max(vals) > 1e5:
         raise CtuiError(f"spacing must be three numbers from 0.001 to 1e5 (dz, dy, dx) in mm, got {spacing!r}",
                         path=path)
-    return tuple(vals)  # type: ignore[return-value]
+    return tuple(vals)  # type: ignore[return-value]  # tuple() of a generator: mypy sees any length, the length is fixed by construction
 
 
 def parse_shape(shape: Any, path: Any) -> tuple[int, ...] | None:
