@@ -8,9 +8,9 @@ be created.
 from __future__ import annotations
 
 import contextlib
-import gc
 import io
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -61,36 +61,34 @@ def cli_streams(args: list[str]) -> tuple[int, str, str]:
     return rc, out.getvalue(), err.getvalue()
 
 
-_APPS_MADE = [0]
+class _Redirect:
+    """``contextlib.redirect_stdout``/``redirect_stderr`` for Textual's app loop, which puts the old stream
+    back only when the stream is still the one it set. A Textual app runs its message loop inside
+    ``redirect_stdout``/``redirect_stderr``; an app coroutine left pending when its test's event loop
+    closed (a worker still blocked under load) is closed whenever the garbage collector reaches it, and
+    its ``with`` blocks then put back the streams of *its* test in the middle of a later test, whose
+    capsys then reads nothing (CI: ``test_bad_input_gives_one_line_naming_the_file[info dir/missing-0]``,
+    ``test_failure_is_one_line``). A full collection after each test hid it at the cost of ten minutes
+    of the suite, and still missed a coroutine that became garbage only later."""
+
+    def __init__(self, name: str, new: object) -> None:
+        self._name, self._new, self._old = name, new, None
+
+    def __enter__(self) -> object:
+        self._old = getattr(sys, self._name)
+        setattr(sys, self._name, self._new)
+        return self._new
+
+    def __exit__(self, *exc: object) -> None:
+        if getattr(sys, self._name) is self._new:
+            setattr(sys, self._name, self._old)
 
 
-def _count_apps() -> None:
-    """Count every Textual app made, so that only the tests that made one pay for a full collection."""
-    from textual.app import App
+def _guard_textual_redirects() -> None:
+    import textual.app
 
-    init = App.__init__
-
-    def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
-        _APPS_MADE[0] += 1
-        init(self, *args, **kwargs)
-
-    App.__init__ = counting_init  # type: ignore[method-assign]
+    textual.app.redirect_stdout = lambda new: _Redirect("stdout", new)  # type: ignore[assignment]
+    textual.app.redirect_stderr = lambda new: _Redirect("stderr", new)  # type: ignore[assignment]
 
 
-_count_apps()
-
-
-@pytest.fixture(autouse=True)
-def _collect_leaked_coroutines():
-    """After every test that made a Textual app, collect what it left in reference cycles. A Textual app
-    runs its message loop inside ``redirect_stdout``/``redirect_stderr``; an app coroutine left pending
-    when a test's event loop closed (a worker still blocked under load) is closed whenever the garbage
-    collector reaches it, and its ``with`` blocks then put back the streams of *its* test: a later test's
-    capsys read nothing (CI: ``test_bad_input_gives_one_line_naming_the_file[info empty_dir]``,
-    ``test_failure_is_one_line``). Collected here, in the test that left it, pytest resets the streams
-    before the next test. Only tests that made an app can leave one (a full collection after each of the
-    1,100 tests cost about ten minutes)."""
-    made = _APPS_MADE[0]
-    yield
-    if _APPS_MADE[0] != made:
-        gc.collect()
+_guard_textual_redirects()
