@@ -113,14 +113,16 @@ def _xyz(zyx: Sequence[int]) -> str:
 def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", project: str | None = None,
                 mask: str | None = None, csv: str | None = None, plot: str | None = None,
                 source_options: dict | None = None) -> list[str]:
-    """Write the vessel as object 1 of a project (``project``: .ctui), a label map (``mask``:
+    """Write the vessel as object 1 of a project (``project``: .ctui; the object keeps its
+    :func:`vessel_record`, so the TUI draws its path and reports it), a label map (``mask``:
     .nii, .nii.gz, .nrrd, .seg.nrrd, as ``ctui export`` writes it), the section table (``csv``)
     and the equivalent diameter along the path (``plot``: PNG). Returns the paths written."""
 
     inputs = [source_path] if source_path else []
     check_outputs({"--project": project, "--mask": mask, "--csv": csv, "--plot": plot}, inputs=inputs)
     labels = result.mask.astype(np.uint8)
-    objects = Segmentation(labels.shape, labels=labels, objects=[{"id": 1, "name": "vessel"}]).object_list()
+    objects = Segmentation(labels.shape, labels=labels, objects=[{"id": 1, "name": "vessel",
+                                                                  "vessel": vessel_record(result, volume)}]).object_list()
     proj = new_project(volume, source_path=source_path, source_options=source_options, labels=labels,
                        objects=objects, meta={"vessel": {k: to_jsonable(getattr(result, k)) for k in
                                                          ("start", "ends", "vias", "lumen", "range", "band")}})
