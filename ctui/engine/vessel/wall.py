@@ -146,12 +146,12 @@ def wall_regions(lumens: np.ndarray, walls: list, *, h: float, half: float) -> n
     band = np.zeros_like(lumens)
     for k, i in enumerate(np.nonzero(ok)[0]):
         band[i] = _polygon(rhos[k], cs[k], a) & ~lumens[i]
-    for i in np.nonzero(band.any(axis=(1, 2)))[0]:  # a band thinner than this is the vessel's own wall
-        width = min(BAND_MM, BAND_SHARE * float(np.sqrt(lumens[i].sum() / np.pi)) * h)
-        r = int(np.floor(0.5 * width / h))
-        if r >= 1:
-            disc = np.hypot(*np.mgrid[-r:r + 1, -r:r + 1]) <= r
-            band[i] = ndi.binary_opening(band[i], structure=disc)
+    width = np.minimum(BAND_MM, BAND_SHARE * np.sqrt(lumens.reshape(len(lumens), -1).sum(axis=1) / np.pi) * h)
+    radius = np.floor(0.5 * width / h).astype(int)  # a band thinner than the width is the vessel's own wall
+    for r in np.unique(radius[radius >= 1]):  # one opening per disc size, plane by plane
+        k = np.nonzero(radius == r)[0]
+        disc = np.hypot(*np.mgrid[-r:r + 1, -r:r + 1]) <= r
+        band[k] = ndi.binary_opening(band[k], structure=disc[None])
     return out | band
 
 
