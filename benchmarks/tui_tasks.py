@@ -455,7 +455,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--structures", action="store_true", help="issue 37's liver and MR lateral ventricles "
                     "instead of the kidney and spleen")
     ap.add_argument("--mr", default=str(MR_BRAIN), help="the itksnap_brain_mr folder")
+    ap.add_argument("--vessel", action="store_true", help="issue 35: the aorta with the vessel tool in tmux "
+                    "(benchmarks/tui_vessel.py)")
     args = ap.parse_args(argv)
+    if args.vessel:
+        from tui_vessel import main as vessel_main
+
+        return vessel_main([f"--size={v}" for v in args.size or []])
     data = Path(args.data)
     image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
     if not image.exists():

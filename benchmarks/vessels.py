@@ -19,7 +19,10 @@ inside the aorta, Dice against the true lumen and the whole aorta, mL beyond the
 (the left ventricle side), seconds. Then diameters at the report's landmarks and a branch (left
 subclavian artery, brachiocephalic trunk) from its origin against its mask.
 
-Run: nice -n 10 python3 benchmarks/vessels.py [--no-peers]
+With ``--parts``: Dice, false positives and false negatives per 40 mm of path for the rows with the
+waypoint (where the errors are).
+
+Run: nice -n 10 python3 benchmarks/vessels.py [--no-peers] [--parts]
 """
 
 from __future__ import annotations
@@ -112,6 +115,25 @@ def row(name: str, mask, secs: float, refs: dict, *, path_mm=None, vol=None, cpu
     print(f"{name:34s} {length:7.1f} {100 * inside:6.1f}% {dice(mask, refs['true']):6.3f} "
           f"{dice(mask, refs['aorta']):6.3f} {beyond_annulus_ml(mask, refs['plane'], vol.spacing):7.2f} {secs:6.2f}"
           + ("" if cpu is None else f" {cpu:6.2f}"))
+
+
+def parts(name: str, res, ref: np.ndarray, vol, every_mm: float = 40.0) -> None:
+    """Where the errors are: Dice, false positives and false negatives (voxels) per ``every_mm``
+    of path (each voxel of the vessel or the reference goes to its nearest path point)."""
+    from scipy.spatial import cKDTree
+
+    path = res.path_mm
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    vox = np.argwhere(res.mask | ref)
+    _, j = cKDTree(vol.mm_to_index(path) * vol.spacing).query(vox * np.asarray(vol.spacing))
+    got, want = res.mask[tuple(vox.T)], ref[tuple(vox.T)]
+    print(f"\n{name}: per {every_mm:.0f} mm of path (s from the start)")
+    print(f"{'s mm':>9s} {'ref':>6s} {'ctui':>6s} {'Dice':>6s} {'FP':>6s} {'FN':>6s}")
+    for a in np.arange(0.0, s[-1], every_mm):
+        k = (s[j] >= a) & (s[j] < a + every_mm)
+        tp, fp, fn = (int((k & g & w).sum()) for g, w in ((got, want), (got, ~want), (~got, want)))
+        print(f"{a:4.0f}-{a + every_mm:<4.0f} {tp + fn:6d} {tp + fp:6d} {2 * tp / max(2 * tp + fp + fn, 1):6.3f} "
+              f"{fp:6d} {fn:6d}")
 
 
 def peer_core(vol, pts: dict) -> np.ndarray:
@@ -211,6 +233,7 @@ def branches(vol, aorta: np.ndarray, path: str) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-peers", action="store_true", help="ctui's rows only")
+    ap.add_argument("--parts", action="store_true", help="Dice, FP and FN along the path (contrast and wall rows)")
     args = ap.parse_args()
     path = DATA / "ct_aorta_1p5mm.nii.gz"
     shown = "../shared/data/totalseg_example/ct_aorta_1p5mm.nii.gz"
@@ -234,11 +257,15 @@ def main() -> int:
                                                                       "contrast"),
             ("ctui vessel wall + arch", [pts["via"]], "wall")]
     best = None
+    shown_parts: list = []
     for name, vias, lumen in runs:
         t, c = time.perf_counter(), time.process_time()
         res = vessel(vol, start=pts["start"], ends=[pts["end"]], vias=vias, lumen=lumen)
         row(name, res.mask, time.perf_counter() - t, refs, path_mm=res.path_mm, vol=vol, cpu=time.process_time() - c)
         best = res if vias and lumen == "wall" else best
+        if args.parts and vias:
+            shown_parts.append((f"{name} against the {'whole aorta' if lumen == 'wall' else 'true lumen'}", res,
+                                refs["aorta" if lumen == "wall" else "true"]))
         cmd = f"  ctui vessel {shown} --start {xyz['start']} --end {xyz['end']}"
         print(cmd + (f" --via {xyz['via']}" if vias else "") + f" --lumen {lumen}")
     if not args.no_peers:
@@ -253,6 +280,8 @@ def main() -> int:
               f"inside the true lumen, {100 * (core & refs['aorta']).sum() / max(core.sum(), 1):.1f}% inside the aorta)")
         t = time.perf_counter()
         row("sitk geodesic active contour", peer_levelset(vol, best.path_mm), time.perf_counter() - t, refs, vol=vol)
+    for name, res, ref in shown_parts:
+        parts(name, res, ref, vol)
     landmarks(vol, best)
     branches(vol, aorta, shown)
     return 0

@@ -30,6 +30,7 @@ from ctui.screens.keytable import keys
 from ctui.screens.messages import JobFailed, MeasuredRow, Saved, SectionsFailed, SectionsReady, Status
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
+from ctui.screens.vessel_tool import report_lines
 
 
 def is_tubular(stats: dict) -> bool:
@@ -175,7 +176,7 @@ class MeasureScreen(GuardMixin, Screen):
             measured[oid] = st
             self.post_message(MeasuredRow(oid, st))
         self.post_message(Status("c: sections along the centreline of the selected object; s saves"))
-        tub = [oid for oid, st in measured.items() if is_tubular(st)]
+        tub = [oid for oid, st in measured.items() if self._vessel(oid) or is_tubular(st)]
         if tub:
             self._sections_of(tub[0])
 
@@ -321,7 +322,8 @@ class MeasureScreen(GuardMixin, Screen):
         if not rows:
             iv.set_image(None, token=("sections", oid, 0))
             why = no_sections_reason(res, self.stats.get(oid))
-            self.query_one("#ms-info", Static).update(f"[b]Sections of object {oid}[/b]\n\n{why}")
+            self.query_one("#ms-info", Static).update("\n".join([*self._vessel(oid), f"[b]Sections of object {oid}[/b]",
+                                                                  "", why]))
             self._status(why)
             return
         sm = [r["s_mm"] for r in rows]
@@ -346,8 +348,14 @@ class MeasureScreen(GuardMixin, Screen):
         except Exception:
             pass
         lines += ["", "[dim]c sections of selected row, g mask / grey levels, s save CSV + PNG, Esc back[/dim]"]
-        self.query_one("#ms-info", Static).update("\n".join(lines))
+        self.query_one("#ms-info", Static).update("\n".join([*self._vessel(oid), *lines]))
         self._status(f"Sections of object {oid}: {len(rows)} along {length:.0f} mm")
+
+    def _vessel(self, oid: int) -> list[str]:
+        """A vessel object's report (``ctui vessel``, the vessel tool), then a blank line; else []."""
+        info = self.s.seg.objects.get(oid) if self.s.seg is not None else None
+        rec = (getattr(info, "settings", None) or {}).get("vessel") if info is not None else None
+        return [*report_lines(rec), ""] if rec else []
 
     def action_save(self) -> None:
         if not self.sections:

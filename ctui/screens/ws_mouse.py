@@ -38,6 +38,7 @@ from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_keys import panel_text
 from ctui.screens.ws_state import mm
+from ctui.screens.vessel_tool import draw_vessel
 from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
@@ -83,8 +84,8 @@ def _corner_box(a, b, normal: int, shape, slices=None):
 
 
 def draw_overlay(ws, plane: str, grid, vm) -> None:
-    """Background seeds (cyan crosses), the ROI box (orange) and, with the brush or eraser
-    down, its footprint (a circle of the brush radius in mm) on a display grid."""
+    """Background seeds (cyan crosses), the ROI box (orange), with the brush or eraser down its
+    footprint (a circle of the brush radius in mm), and the vessels' paths on a display grid."""
     s = ws.s
     pv = planes.plane_view(s.volume, plane)
     idx = s.zyx[pv.normal]
@@ -122,6 +123,7 @@ def draw_overlay(ws, plane: str, grid, vm) -> None:
               max(int(round((s.brush / pv.spacing_yx[0] + 0.5) * vm.sy)), 1))
         col = (80, 255, 80) if tools.pen == "brush" else (255, 80, 255)
         cv2.ellipse(grid, (int(xd), int(yd)), ax, 0, 0, 360, col, 1)
+    draw_vessel(ws, pv, idx, grid, disp)  # the vessels' paths and points
 
 
 class MouseMixin(ToolsMixin):

@@ -121,14 +121,16 @@ def _mask(result: VesselResult) -> np.ndarray:
 def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", project: str | None = None,
                 mask: str | None = None, csv: str | None = None, plot: str | None = None,
                 source_options: dict | None = None) -> list[str]:
-    """Write the vessel as object 1 of a project (``project``: .ctui), a label map (``mask``:
+    """Write the vessel as object 1 of a project (``project``: .ctui; the object keeps its
+    :func:`vessel_record`, so the TUI draws its path and reports it), a label map (``mask``:
     .nii, .nii.gz, .nrrd, .seg.nrrd, as ``ctui export`` writes it), the section table (``csv``)
     and the equivalent diameter along the path (``plot``: PNG). Returns the paths written."""
 
     inputs = [source_path] if source_path else []
     check_outputs({"--project": project, "--mask": mask, "--csv": csv, "--plot": plot}, inputs=inputs)
     labels = _mask(result).astype(np.uint8)
-    objects = Segmentation(labels.shape, labels=labels, objects=[{"id": 1, "name": "vessel"}]).object_list()
+    objects = Segmentation(labels.shape, labels=labels, objects=[{"id": 1, "name": "vessel",
+                                                                  "vessel": vessel_record(result, volume)}]).object_list()
     proj = new_project(volume, source_path=source_path, source_options=source_options, labels=labels,
                        objects=objects, meta={"vessel": {k: to_jsonable(getattr(result, k)) for k in
                                                          ("start", "ends", "vias", "lumen", "range", "band")}})
@@ -161,3 +163,38 @@ def vessel_proposal(result: VesselResult, object_id: int) -> Any:
     return Proposal.of_mask(int(object_id), start_slice, _mask(result),
                             settings={"vessel": {k: to_jsonable(getattr(result, k)) for k in
                                                  ("start", "ends", "vias", "lumen", "range")}})
+
+
+def vessel_record(result: VesselResult, volume: Any, *, every_mm: float = 1.0) -> dict:
+    """What a vessel object keeps (its settings' "vessel" entry; the TUI draws its path on the
+    views and shows its report in the measure screen): start, ends, vias (voxels x, y, z),
+    lumen, range; ``path`` (k, 3) voxel (z, y, x) float indices about every ``every_mm`` along
+    the path; ``report``: length_mm (per branch), volume_ml, sections, area_mm2 (min, max),
+    eq_diameter_mm (min, median, max), min_diameter_mm (the smallest), max_diameter_mm and
+    max_at_mm (the largest and its arc length), inscribed_diameter_mm (the largest) and
+    maxima (the largest max diameter per 50 mm of path and where, as ``maxima``)."""
+    rec = {k: to_jsonable(getattr(result, k)) for k in ("start", "ends", "vias", "lumen", "range")}
+    path = np.zeros((0, 3))
+    if result.path_mm is not None and len(result.path_mm):
+        pm = np.asarray(result.path_mm, dtype=float)
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pm, axis=0), axis=1))])
+        keep = np.unique(np.searchsorted(s, np.arange(0.0, s[-1] + 1e-9, every_mm)).clip(0, len(pm) - 1))
+        path = np.asarray(volume.mm_to_index(pm[keep]) if hasattr(volume, "mm_to_index") else pm[keep], dtype=float)
+    rec["path"] = np.round(path, 2).tolist()
+    rows = [r for r in result.sections if np.isfinite(r.get("area_mm2", np.nan))]
+
+    def col(k: str) -> np.ndarray:
+        return np.array([r[k] for r in rows], dtype=float)
+
+    rep: dict = {"length_mm": to_jsonable(result.path_length_mm), "volume_ml": float(result.volume_ml),
+                 "sections": len(rows), "maxima": to_jsonable(result.maxima)}
+    if rows:
+        area, eq, mx = col("area_mm2"), col("eq_diameter_mm"), col("max_diameter_mm")
+        j = int(np.nanargmax(mx))
+        rep |= {"area_mm2": [float(area.min()), float(area.max())],
+                "eq_diameter_mm": [float(eq.min()), float(np.median(eq)), float(eq.max())],
+                "min_diameter_mm": float(np.nanmin(col("min_diameter_mm"))), "max_diameter_mm": float(mx[j]),
+                "max_at_mm": float(rows[j]["s_mm"]), "max_branch": int(rows[j].get("branch", 0)),
+                "inscribed_diameter_mm": float(np.nanmax(col("inscribed_diameter_mm")))}
+    rec["report"] = rep
+    return rec

@@ -5,12 +5,13 @@ Works in the work box's own frame: positions ``q = index * spacing`` mm in (z, y
 sections ``step`` mm apart (default 1 mm), each a plane normal to the path carried by
 rotation-minimising frames. In each plane the image is sampled (trilinear, on a grid of half
 the smallest voxel side), and the vessel's section is the in-range region holding the path
-point or the core's pixels, holes filled. Continuity: the section may not reach further from
-the path than ``RADIUS_FACTOR`` times the lumen's inscribed radius there, or that radius plus
-``LIMIT_MARGIN_MM`` (the 3D distance to the range's border, running median over ``REF_MM`` of
-path, so a branch's origin or a
-neighbour touching the vessel is cut off), nor exceed ``AREA_JUMP`` times the running median of
-the areas around it (it is then cut back to 1.1 times the running median reach). Every voxel
+point or the core's pixels, parted at its neck from a neighbour touching it and peeled to the
+half maximum (:mod:`ctui.engine.vessel.neck`), holes filled. Continuity: the section may not
+reach further from the path than ``neck.HARD_FACTOR`` times the lumen's inscribed radius there,
+or that radius plus ``neck.HARD_MARGIN_MM`` (the larger of the 3D and the in-plane distance to
+the range's border, running median over ``REF_MM`` of path), nor exceed ``AREA_JUMP`` times the
+running median of the areas around it (it is then cut back to 1.1 times the running median
+reach). Every voxel
 takes the section of its nearest path point: it is in the vessel when it lies in that
 section's slab and region; voxels behind the first plane or beyond the last are never in it
 (the cut planes at both ends: the aortic root stops at the start, a branch at its origin).
@@ -24,16 +25,16 @@ import numpy as np
 
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.measure.paths import arc_length, path_points, rotation_minimising_frames
+from ctui.engine.vessel import neck
 from ctui.engine.vessel.wall import EXTRA_MM, wall_rays, wall_regions
 
-RADIUS_FACTOR = 1.3  # reach of a section / inscribed radius (a round vessel; a neighbour touching it is cut off)
-LIMIT_MARGIN_MM = 4.0  # ... and at least this much beyond it (a small vessel's rim, blurred below the range)
 REF_MM = 10.0  # running-median window of the inscribed radius
 AREA_JUMP = 1.5  # a section's area / the median of the previous ones beyond which it is clipped
 EDGE_PX = 1  # grid pixels the lumen's rim may add outside the range
 EDGE_SHARE = 0.3  # ... down to lo - EDGE_SHARE * |lo|
 END_CHORD_MM = 4.0  # the end planes are normal to the path's chord over this length (a spline's end bends)
 AREA_WINDOW_MM = 31.0  # the area rule's running median window (path mm)
+KEEP_BYTES = 64e6  # the planes' values are kept between the two passes up to this size, else sampled again
 
 
 @dataclass
@@ -101,25 +102,42 @@ def _seeded(mask: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return ndi.binary_fill_holes(np.isin(lab, keep)) if keep.size else np.zeros_like(mask)
 
 
-def _radius_limit(sec: Sections, dist: np.ndarray, spacing) -> np.ndarray:
-    """Per section: the reach allowed (mm) from the inscribed radius along the path."""
+def _radius_limit(sec: Sections, dist: np.ndarray, spacing, planar: np.ndarray | None = None) -> np.ndarray:
+    """Per section: the reach allowed (mm) from the inscribed radius along the path: the 3D
+    distance to the range's border at the path point, or the in-plane one (``planar``, mm) where
+    larger (near a cut end the valve or a flap closes the lumen along the path, not across it),
+    running median over ``REF_MM``."""
     from scipy import ndimage as ndi
 
     r = _sample(dist.astype(np.float32), sec.p, spacing, order=1, cval=0.0)
+    if planar is not None:
+        r = np.maximum(r, planar)
     step = float(sec.s[1] - sec.s[0]) if len(sec.s) > 1 else 1.0
     r = ndi.median_filter(r, size=max(3, int(round(REF_MM / step)) | 1), mode="nearest")
-    return np.maximum(RADIUS_FACTOR * r, r + LIMIT_MARGIN_MM)
+    return np.maximum(neck.HARD_FACTOR * r, r + neck.HARD_MARGIN_MM)
+
+
+def _planar_radius(val: np.ndarray, seeds: np.ndarray, lo: float, hi: float, rr: np.ndarray) -> float:
+    """The in-plane distance (mm) from the plane's centre (the path point) to the border of its
+    in-range region (``rr``: each grid pixel's distance from the centre, mm)."""
+    base = neck.component((val >= lo) & (val <= hi), seeds)
+    g = len(val)
+    if not base[g // 2, g // 2] or base.all():
+        return 0.0
+    return float(rr[~base].min())
 
 
 def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core: np.ndarray, dist: np.ndarray, *,
                   floor: float | None = None, progress: Progress | None = None) -> Sections:
     """Fill ``sec.regions``: in each plane, the pixels in the lumen's range (``ranges[0]``: (lo,
-    hi)) connected to the path point or the core's pixels, under the continuity rule (module
+    hi)) connected to the path point or the core's pixels, parted from touching neighbours at
+    their neck and peeled to the half maximum (:mod:`neck`), under the continuity rule (module
     docstring); with ``floor``, the wall region around it (:func:`wall.wall_rays`, :func:`wall.wall_regions`).
     ``dist``: distance (mm) to the border of the lumen's voxels (the inscribed radius)."""
     from scipy import ndimage as ndi
 
     n = len(sec.s)
+    lo, hi = ranges[0]
     limit = _radius_limit(sec, dist, spacing)
     if not sec.half:
         sec.half = float(limit.max()) + (EXTRA_MM if floor is not None else 0.0) + 2.0 * sec.h
@@ -130,25 +148,35 @@ def grow_sections(sec: Sections, image: np.ndarray, spacing, ranges: list, core:
     centre[g // 2, g // 2] = True
     regions = np.zeros((n, g, g), bool)
     seeds_all = np.zeros((n, g, g), bool)
-    walls: list = []
     img = np.asarray(image, dtype=np.float32)
+    planar = np.zeros(n)
+    vals = np.zeros((n, g, g), np.float32) if n * g * g * 4 <= KEEP_BYTES else None
+    for i in range(n):  # the in-plane radii first
+        if i % 32 == 0:
+            report(progress, i, 2 * n, "sections")
+        q = sec.grid(i)
+        seeds_all[i] = centre | _nearest(core, q, spacing)
+        val = _sample(img, q, spacing)
+        planar[i] = _planar_radius(val, seeds_all[i], lo, hi, rr)
+        if vals is not None:
+            vals[i] = val
+    limit = np.minimum(_radius_limit(sec, dist, spacing, planar), sec.half - 2.0 * sec.h)
+    walls: list = []
     for i in range(n):
         if i % 32 == 0:
-            report(progress, i, n, "sections")
-        q = sec.grid(i)
-        val = _sample(img, q, spacing)
-        seeds = centre | _nearest(core, q, spacing)
-        lo, hi = ranges[0]
-        lumen = (val >= lo) & (val <= hi) & (rr <= limit[i])
-        reg = _seeded(lumen, seeds)
+            report(progress, n + i, 2 * n, "sections")
+        val, seeds = vals[i] if vals is not None else _sample(img, sec.grid(i), spacing), seeds_all[i]
+        reg = neck.split(val, seeds, lo, hi, rr <= limit[i], sec.h)
+        reg = np.zeros((g, g), bool) if reg is None else neck.half_max(ndi.binary_fill_holes(reg), val, seeds, lo,
+                                                                         sec.h)
         if EDGE_PX and reg.any():  # the lumen's rim, blurred below the range by partial volume
-            rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & ~lumen
+            out = (val < lo) | (val > hi)
+            rim = ndi.binary_dilation(reg, iterations=EDGE_PX) & (val >= lo - EDGE_SHARE * abs(lo)) & out
             reg = reg | (rim & (rr <= limit[i]))
         if floor is not None:
             walls.append(wall_rays(reg, val, h=sec.h, half=sec.half, floor=floor, lo=lo, bright=lo + 0.25 * (hi - lo),
                                    inset=0.5 * float(max(spacing))))
         regions[i] = reg
-        seeds_all[i] = seeds
     if floor is not None:
         regions = wall_regions(regions, walls, h=sec.h, half=sec.half)
     sec.regions, sec.clipped = regions, _continuity(regions, seeds_all, rr, sec)

@@ -9,7 +9,10 @@ round; rays that ran on along an organ, the oesophagus, the spine, are cut at it
 inside the ray ends); each ray is capped at ``SPREAD`` times their median and smoothed over
 neighbouring rays, and the rays are re-cast from their polygon's centroid (``ITERATIONS``: the
 lumen is often off-centre in a dissection). The rays and centres are then smoothed along the path
-over ``ALONG`` planes, and each plane's wall region is its polygon joined with the lumen.
+over ``ALONG`` planes, and each plane's wall region is its polygon joined with the lumen where the
+band between them is thick enough (an opening by a disc of ``BAND_MM``, or ``BAND_SHARE`` of the
+lumen's radius if less): a thin ring is the vessel's own wall and the tissue on it, not a false
+lumen or a thrombus.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ EXTRA_MM = 15.0  # ... and at most this much beyond it
 ITERATIONS = 3  # rays cast from the lumen's centroid, then from their polygon's
 MIN_FOUND = 12  # rays that met fat or another lumen needed to fit the outline
 ALONG = 13  # planes (mm at the default step) the wall's rays are smoothed over along the path
+BAND_MM = 6.0  # the wall's band joins the lumen where it is at least this thick (an opening by this disc) ...
+BAND_SHARE = 0.5  # ... or this share of the lumen's equivalent radius, if less (a small vessel's thrombus)
 CT_FLOOR = -30.0  # HU: fat and lung lie below it, a thrombosed false lumen above
 
 
@@ -138,9 +143,16 @@ def wall_regions(lumens: np.ndarray, walls: list, *, h: float, half: float) -> n
     rhos = np.array([w[1] for w in walls if w is not None])
     cs = ndi.median_filter(cs, size=(ALONG, 1), mode="nearest")
     rhos = ndi.median_filter(rhos, size=(ALONG, 1), mode="nearest")
+    band = np.zeros_like(lumens)
     for k, i in enumerate(np.nonzero(ok)[0]):
-        out[i] |= _polygon(rhos[k], cs[k], a)
-    return out
+        band[i] = _polygon(rhos[k], cs[k], a) & ~lumens[i]
+    width = np.minimum(BAND_MM, BAND_SHARE * np.sqrt(lumens.reshape(len(lumens), -1).sum(axis=1) / np.pi) * h)
+    radius = np.floor(0.5 * width / h).astype(int)  # a band thinner than the width is the vessel's own wall
+    for r in np.unique(radius[radius >= 1]):  # one opening per disc size, plane by plane
+        k = np.nonzero(radius == r)[0]
+        disc = np.hypot(*np.mgrid[-r:r + 1, -r:r + 1]) <= r
+        band[k] = ndi.binary_opening(band[k], structure=disc[None])
+    return out | band
 
 
 def _centroid(rho: np.ndarray) -> np.ndarray:
