@@ -1,0 +1,97 @@
+"""Fewer events to an organ (issue 37: an organ in <= 8 events; issue 34: one background click
+fixes a leak), with Textual's Pilot on a synthetic volume whose answer is known: a double click
+on the image segments from there, and segmenting again (p, S) replaces a pending proposal (after
+a background seed in its leak) instead of asking for x first."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ctui.engine.core.volume import Volume
+from ctui.screens import graphics
+from ctui.screens.app import CtuiApp
+from ctui.screens.session import Session
+from ctui.screens.testing import cell_of_voxel, wait_for, wait_workspace
+
+
+@pytest.fixture(autouse=True)
+def _env(monkeypatch, tmp_path):
+    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    monkeypatch.chdir(tmp_path)
+    with graphics.using_graphics("halfblock"):
+        yield
+
+
+def _two_balls() -> tuple[Session, np.ndarray, np.ndarray]:
+    """Two 60 HU balls (r 12 voxels of 1 mm) in -100 HU fat, joined by an 11-voxel bridge: the one on the left
+    (the organ) and the one on the right (a neighbour of the same values that a fill reaches through the bridge)."""
+    nz, n = 28, 80
+    zz, yy, xx = np.mgrid[0:nz, 0:n, 0:n]
+    organ = (zz - 14) ** 2 + (yy - 32) ** 2 + (xx - 18) ** 2 <= 144
+    other = (zz - 14) ** 2 + (yy - 32) ** 2 + (xx - 58) ** 2 <= 144
+    bridge = (abs(zz - 14) <= 5) & (abs(yy - 32) <= 5) & (xx >= 18) & (xx <= 58)
+    rng = np.random.default_rng(0)
+    data = (rng.normal(-100, 5, (nz, n, n))).astype(np.int16)
+    data[organ | other | bridge] = (60 + rng.normal(0, 5, int((organ | other | bridge).sum()))).astype(np.int16)
+    s = Session(Volume(data, spacing=(1.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=14, y=32, x=38)
+    return s, organ, other
+
+
+async def _proposal(pilot, ws) -> np.ndarray:
+    await wait_for(pilot, lambda: not ws.jobs.segmenting and ws.pending.proposal is not None, timeout=60,
+                   what="the proposal")
+    p = ws.pending.proposal
+    full = np.zeros(ws.s.shape, bool)
+    for z in p.masks:
+        full[z] = p.slice_mask(z)
+    return full
+
+
+async def test_double_click_segments_and_a_background_click_then_p_replaces_the_leaky_proposal():
+    s, organ, other = _two_balls()
+    s.segment_options = {"method": "grow"}  # the fronts compete: a background seed in the neighbour takes it back
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.pause()
+        # a single click moves the cursor only
+        await pilot.click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        await pilot.pause(0.3)
+        at = s.zyx  # a cell is one voxel wide and two high (half blocks)
+        assert at[0] == 14 and abs(at[1] - 32) <= 1 and at[2] == 18
+        assert ws.pending.proposal is None and not ws.jobs.segmenting
+        # a double click on the organ: the segmentation from there, no key
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        got = await _proposal(pilot, ws)
+        assert got[organ].mean() > 0.9 and got[other].mean() > 0.5  # through the bridge into the neighbour
+        assert ws.pending.seed == (at[2], at[1], at[0])
+        # a background seed (right click) in the neighbour, then p: the pending proposal is replaced (no x first),
+        # from its own seed, and the neighbour is gone
+        await pilot.click("#main", offset=cell_of_voxel(app, (14, 32, 58)), button=3)
+        await pilot.pause()
+        assert [(x, z) for x, _y, z in s.background_seeds] == [(58, 14)]
+        assert s.zyx == at  # the right click leaves the cursor (the seed) where it was
+        first = ws.pending.proposal
+        await pilot.press("p")
+        await wait_for(pilot, lambda: ws.pending.proposal is not first, timeout=60, what="the new proposal")
+        got2 = await _proposal(pilot, ws)
+        assert got2[organ].mean() > 0.9 and got2[other].mean() < 0.1
+        assert not any(n.severity == "warning" and "pending" in n.message for n in app._notifications)
+        await pilot.press("a")
+        await pilot.pause()
+        assert s.seg.voxels(s.current) == int(got2.sum())
+
+
+async def test_double_click_with_the_brush_down_paints_and_does_not_segment():
+    s, organ, _other = _two_balls()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("b")
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        await pilot.pause(0.3)
+        assert not ws.jobs.segmenting and ws.pending.proposal is None
+        assert s.seg.voxels(s.current) > 0  # the dabs
