@@ -96,6 +96,17 @@ class Counter:
         self.clicks += 1
         await self.pilot.click(widget, offset=offset)
 
+    async def double_click(self, widget: str, offset) -> None:
+        """Two clicks (counted as two events)."""
+        self.n += 2
+        self.clicks += 2
+        await self.pilot.double_click(widget, offset=offset)
+
+    async def right_click(self, widget: str, offset) -> None:
+        self.n += 1
+        self.clicks += 1
+        await self.pilot.click(widget, offset=offset, button=3)
+
     async def wheel(self, widget: str, up: bool) -> None:
         from ctui.screens.testing import wheel
 
@@ -152,13 +163,82 @@ async def _box(c: Counter, app, truth_mask: np.ndarray, z: int) -> None:
     await drag(c.pilot, "#main", [cell_of_voxel(app, a), cell_of_voxel(app, b)])
 
 
+def cell_mm(ws) -> float:
+    """The width in mm that one terminal cell of the main view covers (the larger of its two sides)."""
+    vm = ws.main_view.view_map
+    sp = ws.s.volume.spacing
+    return max(float(sp[2]) / vm.sx, 2.0 * float(sp[1]) / vm.sy)
+
+
+def in_slice_depth(mask2d: np.ndarray, spacing_yx) -> np.ndarray:
+    """mm from each pixel of ``mask2d`` to its outline on that slice."""
+    from scipy import ndimage
+
+    return ndimage.distance_transform_edt(np.pad(mask2d, 1), sampling=spacing_yx)[1:-1, 1:-1]
+
+
+def seen_target(mask: np.ndarray, z_now: int, spacing, min_mm: float) -> tuple[int, int, int]:
+    """What a person who sees the screen clicks: the nearest slice to ``z_now`` (the one shown first) where the
+    organ's section is at least ``min_mm`` deep, at its deepest point there (z, y, x); else its deepest voxel."""
+    zs = [z for z in np.flatnonzero(mask.any(axis=(1, 2)))]
+    for z in sorted(zs, key=lambda k: (abs(int(k) - z_now), k)):
+        dt = in_slice_depth(mask[z], spacing[1:])
+        if dt.max() >= min_mm:
+            y, x = np.unravel_index(int(np.argmax(dt)), dt.shape)
+            return int(z), int(y), int(x)
+    return deepest(mask, spacing)
+
+
+async def _to_target(c: Counter, app, target, truth_mask: np.ndarray | None, *, exact: bool) -> tuple[int, int]:
+    """Wheel notches to the target's slice and Ctrl+wheel notches on it until a click lands where it should:
+    ``exact`` (a given voxel) until a cell spans under 1.5 voxels; else until the cell is under half the
+    organ's depth there (a click anywhere in the cell is inside). Returns the cell to click."""
+    from ctui.screens.testing import cell_of_voxel
+
+    ws, s, pilot = app.workspace, app.session, c.pilot
+    z, y, x = target
+    last = s.shape[0] - 1
+    if min(z, last - z) + 1 < abs(z - s.z):  # Home / End, then the wheel: fewer events than the wheel alone
+        await c.press("home" if z < last - z else "end")
+    while s.z != z:
+        await c.wheel("#main", up=z > s.z)
+    await pilot.pause()
+
+    def off_view() -> bool:
+        col, row = cell_of_voxel(app, (z, y, x))
+        region = ws.main_view.content_region
+        return not (0 <= col < region.width and 0 <= row < region.height)
+    while ws.viewstate.zoom > 1 and off_view():  # zoomed in elsewhere: out until the target shows
+        await c.press("minus")
+        await pilot.pause()
+    if exact:
+        def fine() -> bool:
+            vm = ws.main_view.view_map
+            return max(1.0 / vm.sx, 2.0 / vm.sy) <= 1.5
+    else:
+        depth = float(in_slice_depth(truth_mask[z], s.volume.spacing[1:])[y, x])
+
+        def fine() -> bool:
+            return cell_mm(ws) <= depth / 2
+    for _ in range(4):
+        if fine():
+            break
+        await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
+        await pilot.pause()
+    return cell_of_voxel(app, (z, y, x))
+
+
 async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, first: bool, review: bool,
-                 rng: tuple[float, float] | None, box: bool = False) -> dict:
-    from ctui.screens.testing import answer_prompt, cell_of_voxel
+                 rng: tuple[float, float] | None, box: bool = False, exact: bool = False,
+                 accept: bool = True) -> dict:
+    """One organ: (``n``), (``T`` + its range), to a slice where the organ shows and a double click on it (the
+    segmentation from there), ``a``. ``exact``: the click is on ``seed`` itself (issue 34's least uniform seed),
+    else where a person sees the organ (:func:`seen_target`)."""
+    from ctui.screens.testing import answer_prompt
 
     ws, s = app.workspace, app.session
     pilot = c.pilot
-    n0, t0 = c.n, time.perf_counter()
+    n0, k0, y0, t0 = c.n, c.clicks, c.typed, time.perf_counter()
     if not first:
         await c.press("n")
     if rng is not None:
@@ -166,58 +246,36 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         c.n += len(f"{rng[0]:g}:{rng[1]:g}") + 1  # typed into the prompt, then Enter
         c.typed += len(f"{rng[0]:g}:{rng[1]:g}")
         await answer_prompt(pilot, f"{rng[0]:g}:{rng[1]:g}")
-    z, y, x = seed
-    typed = f"{x},{y},{z}"
-    vm = ws.main_view.view_map
-    zooms = 0  # Ctrl+wheel notches (x2 each) until a cell spans under 1.5 voxels: the click lands on the seed
-    while vm is not None and max(1.0 / vm.sx, 2.0 / vm.sy) / 2 ** zooms > 1.5:
-        zooms += 1
-    mouse_cost = abs(z - s.z) + zooms + 1 + (0 if ws.edit_tools.click_fills else 1)
-    if vm is not None and mouse_cost <= len(typed) + 3:  # wheel to the slice, zoom on the seed, click (fills)
-        if not ws.edit_tools.click_fills:
-            await c.press("z")
+    target = tuple(seed) if exact else seen_target(truth_mask, s.z, s.volume.spacing, 8.0)
+    z, y, x = target
+    if box:
         while s.z != z:
             await c.wheel("#main", up=z > s.z)
-        await pilot.pause()
-        if box:
-            await _box(c, app, truth_mask, z)
-        for _ in range(zooms):
-            await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
-            await pilot.pause()
-        await c.click("#main", cell_of_voxel(app, (z, y, x)))
-        if not ws.edit_tools.click_fills:
-            await c.press("enter")
-    else:
-        await c.press("g")
-        c.n += len(typed) + 1
-        c.typed += len(typed)
-        await answer_prompt(pilot, typed)
-        if box:  # the box drag leaves the cursor on the seed
-            await _box(c, app, truth_mask, z)
-        await c.press("enter")
-    filled = s.seg.voxels(s.current)
-    await c.press("p")
+        await _box(c, app, truth_mask, z)
+    cell = await _to_target(c, app, target, truth_mask, exact=exact)
+    await c.double_click("#main", cell)  # the cursor there and the segmentation from it
     got = await _wait_proposal(pilot, ws)
+    filled = 0
     if got and review and any(m.kind == "seed" for m in ws.review_marks()):
-        # the strip marks the seed slice itself: the fill leaked there. Reject, box the organ,
-        # segment again (the box confines the fill and the propagation)
-        await c.press("x")
+        # the strip marks the seed slice itself: the fill leaked there. Box the organ, segment again (p: the
+        # proposal's own seed; the box confines the fill and the propagation)
         await _box(c, app, truth_mask, z)
         await c.press("p")
         got = await _wait_proposal(pilot, ws)
     if got and review:
         await _review(c, ws, truth_mask)
     failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
-    if got:
+    if got and accept:
         await c.press("a")
-    while app.workspace.viewstate.zoom > 1:  # back to the whole slice for the next organ
-        await c.press("minus")
+        while app.workspace.viewstate.zoom > 1:  # back to the whole slice for the next organ
+            await c.press("minus")
     await pilot.pause()
     info = s.seg.objects.get(s.current)
-    used = tuple(info.seeds[-1]) if info is not None and info.seeds else None
+    used = tuple(info.seeds[-1]) if info is not None and info.seeds else (ws.pending.seed if not accept else None)
     return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": used, "seed_fill": filled, "proposal": got,
             "failed": failed,
-            "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx}
+            "events": c.n - n0, "clicks": c.clicks - k0, "typed": c.typed - y0,
+            "seconds": time.perf_counter() - t0, "cursor": s.zyx}
 
 
 async def session(size: tuple[int, int], image: Path, labels: Path, *, review: bool, use_range: bool,
@@ -472,13 +530,16 @@ def main(argv: list[str] | None = None) -> int:
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"
           "defaults otherwise")
-    print(f"{'size':>7} {'organ':<12} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z")
+    print(f"{'size':>7} {'organ':<12} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
+          f"{'vol ratio':>9}  clicked x,y,z")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
             res = asyncio.run(session(size, image, labels, review=args.review, use_range=args.range, out_dir=Path(tmp),
                                       box=args.box))
         for r in res["organs"]:
-            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+            keys = r["events"] - r["clicks"] - r["typed"]
+            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {keys:>5} {r['clicks']:>6} {r['typed']:>5} "
+                  f"{r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}"
                   f"{'' if r['seed_used'] in (None, r['seed_xyz']) else ' (clicked ' + ','.join(map(str, r['seed_used'])) + ')'}"
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:120] + ')'}")
@@ -521,6 +582,14 @@ def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int,
     return tuple(int(v) for v in np.unravel_index(int(np.argmax(np.where(deep, sd, -1))), ref.shape))
 
 
+def _full_mask(p, shape) -> np.ndarray:
+    """The pending proposal ``p`` as a (z, y, x) mask."""
+    full = np.zeros(shape, bool)
+    for z in p.masks:
+        full[z] = p.slice_mask(z)
+    return full
+
+
 def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int] | None:
     """The background click (x, y, z): the first leak flag's voxel (``entries``: the object's settings["leaks"]),
     else (the person's eye, played by the reference) the deepest point of the result's largest piece outside the
@@ -542,13 +611,13 @@ def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spaci
 
 async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int | None, *,
                        out_dir: Path) -> dict:
-    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: to the
-    seed, fill, ``p``, ``a``); when the result leaks, ``g`` + the leak's voxel, ``B`` (a background seed), ``p``
-    again and ``a``. Events counted."""
+    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: wheel to
+    the seed's slice, zoom on it, a double click); when the proposal leaks, a right click in the leak (a background
+    seed: wheel to its slice first), ``p`` again (the pending proposal's seed, no ``x`` first) and ``a``."""
     from ctui.engine.actions.opened import open_input
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import answer_prompt, wait_workspace
+    from ctui.screens.testing import wait_workspace
 
     graphics._chosen = "halfblock"
     os.chdir(out_dir)
@@ -563,29 +632,24 @@ async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int
         organ = truth == label if label is not None else truth > 0
         z, y, x = least_uniform_seed(s.volume.data, organ, s.volume.spacing)
         c = Counter(pilot)
-
-        async def goto(xyz) -> None:
-            text = ",".join(map(str, xyz))
-            await c.press("g")
-            c.n += len(text) + 1
-            await answer_prompt(pilot, text)
-
-        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None)
+        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None, exact=True,
+                           accept=False)
         got = row["proposal"]
-        info = s.seg.objects.get(s.current)
-        clicked = _leak_voxel((info.settings.get("leaks") or []) if info is not None else [],
-                              s.seg.labels == s.current, organ, s.volume.spacing) if got else None
-        if clicked is not None:  # the leak: a background seed in it (B at the voxel), p again, a
-            await goto(clicked)
-            await c.press("B")
+        p = ws.pending.proposal
+        clicked = _leak_voxel(list(getattr(p, "leak_entries", None) or []), _full_mask(p, s.shape), organ,
+                              s.volume.spacing) if got else None
+        if clicked is not None:  # the leak: a right click in it (a background seed), p again (the proposal's seed)
+            lx, ly, lz = clicked
+            cell = await _to_target(c, app, (lz, ly, lx), None, exact=True)
+            await c.right_click("#main", cell)
             await c.press("p")
             got = await _wait_proposal(pilot, ws)
-            if got:
-                await c.press("a")
+        if got:
+            await c.press("a")
         await pilot.pause()
         result = s.seg.labels == s.current
         errors = list(getattr(app, "internal_errors", []))
-    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "dice": dice(result, organ),
+    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "clicks": c.clicks, "typed": c.typed, "dice": dice(result, organ),
             "volume_ratio": float(result.sum()) / max(int(organ.sum()), 1), "seconds": time.perf_counter() - t0,
             "proposal": got, "failed": row["failed"], "errors": errors}
 
@@ -593,7 +657,8 @@ async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int
 def print_hard(sizes, shared: Path) -> int:
     print("ctui TUI tasks (issue 34): one organ from the seed in its least uniform part (largest 10 mm sd, >= 6 mm "
           "deep); a background click (the leak flag's voxel, else the leak's deepest point) when the proposal leaks")
-    print(f"{'size':>7} {'organ':<13} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z; click")
+    print(f"{'size':>7} {'organ':<13} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
+          f"{'vol ratio':>9}  seed x,y,z; background click")
     for name, img, lab, label in HARD:
         if not (shared / img).exists():
             print(f"skipped {name}: {shared / img} is missing")
@@ -601,7 +666,8 @@ def print_hard(sizes, shared: Path) -> int:
         for size in sizes:
             with tempfile.TemporaryDirectory() as tmp:
                 r = asyncio.run(hard_session(size, shared / img, shared / lab, label, out_dir=Path(tmp)))
-            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} "
+                  f"{r['clicks']:>6} {r['typed']:>5} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}; "
                   f"{'none' if r['clicked'] is None else ','.join(map(str, r['clicked']))}"
                   f"{'' if r['proposal'] else ' (no proposal: ' + r['failed'][:150] + ')'}{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
