@@ -48,6 +48,7 @@ from pathlib import Path
 
 os.environ.setdefault("TEXTUAL_COLOR_SYSTEM", "truecolor")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # screen_capture
 
 import numpy as np  # noqa: E402
 
@@ -332,56 +333,81 @@ async def _choose_by_keys(c: Counter, option_id: str) -> None:
     await c.press(*(["down"] * ids.index(option_id)), "enter")
 
 
-async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path) -> dict:
-    """Issue 37's whole workflow (the TUI's own task, apart from the organs'): the kidney as in
-    :func:`session`, a section through it at the seed (``M``, ``x``, the object's axis), the
-    kidney's surface as STL (``e``), the project saved and reopened with its set-up.
-    Events split by kind: keys, clicks (and wheel notches, drags), typed characters."""
+async def _dialog(c: Counter, app, step: str, shots: dict, png: Path | None) -> None:
+    """The screen shown now, captured (``shots[step]``: the problems with its dialog's buttons, [] when none)."""
+    from screen_capture import capture, dialog_problems
+
+    await c.pilot.pause()
+    w, h = app.size
+    text = capture(app, f"{w}x{h}-{step}", png)
+    shots[step] = dialog_problems(app, text) if app.screen is not app.workspace else []
+
+
+async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path, png: Path | None = None) -> dict:
+    """Issue 37's whole workflow on the abdomen CT written as a DICOM series (a SEG needs its source images):
+    the kidney as in :func:`session`, a section through it at the cursor (``M``, ``x``, the object's axis), the 3D
+    view (``r``, Escape), the DICOM-SEG and the kidney's STL (``e``), the project saved and reopened with its
+    set-up. Events split by kind: keys, clicks (and wheel notches, drags), typed characters. Every dialog is
+    captured (``png``: its PNG written there) and its buttons checked in view."""
+    from ctui.engine.io.phantom import write_series
+    from ctui.engine.io.series import load
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
+    from ctui.screens.imageview import ImageView
     from ctui.screens.measure_screen import MeasureScreen
     from ctui.screens.testing import wait_for, wait_workspace
+    from ctui.screens.view3d import View3DScreen
 
     graphics.use_graphics("halfblock")
     os.chdir(out_dir)
     os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
-    app = CtuiApp(str(image), autosave_s=1e9)
+    series = out_dir / "series"
+    write_series(series, load(str(image)), description="abdomen CT")  # the same grid (values below -1024 clipped)
+    app = CtuiApp(str(series), autosave_s=1e9)
     out: dict = {"size": size}
+    shots: dict = {}
     async with app.run_test(size=size) as pilot:
         await wait_workspace(pilot, app)
         await pilot.pause()
         s, ws = app.session, app.workspace
         truth, seeds = seeds_and_truth(labels, s.volume.spacing)
         c = Counter(pilot)
-        keys0 = c.n
+        await _dialog(c, app, "workspace", shots, png)
         organ = await _organ(c, app, "kidney_left", seeds["kidney_left"], truth == 3, first=True, review=False,
                              rng=None)
         out["organ_events"] = organ["events"]
-        z, y, x = seeds["kidney_left"]
-        s.z, s.y, s.x = z, y, x  # (the cursor is on the seed already: the click put it there)
-        await c.press("M")
+        await _dialog(c, app, "kidney", shots, png)
+        await c.press("M")  # the section through the cursor, which the double click left in the kidney
         await wait_for(pilot, lambda: isinstance(app.screen, MeasureScreen) and app.screen.stats, timeout=120,
                        what="the measures")
         ms = app.screen
         await c.press("x")
-        await pilot.pause()
+        await _dialog(c, app, "section-menu", shots, png)
         await _choose_by_keys(c, "object")
         await wait_for(pilot, lambda: "at x" in str(ms.query_one("#ms-status").render()), timeout=120,
                        what="the section")
         out["section"] = str(ms.query_one("#ms-status").render())
+        await _dialog(c, app, "measure", shots, png)
         await c.press("escape")
-        await c.press("e")
-        await pilot.pause()
-        await _choose_by_keys(c, "stl")
-        await pilot.pause()
-        await c.press("enter")  # the default name
-        await wait_for(pilot, lambda: any(out_dir.glob("*.stl")), timeout=120, what="the STL")
+        await c.press("r")
+        await wait_for(pilot, lambda: isinstance(app.screen, View3DScreen)
+                       and app.screen.query_one(ImageView).rgb is not None, timeout=180, what="the 3D view")
+        out["view3d"] = tuple(app.screen.query_one(ImageView).rgb.shape[:2])
+        await _dialog(c, app, "3d", shots, png)
+        await c.press("escape")
+        for kind, pattern in (("dicom-seg", "*.dcm"), ("stl", "*.stl")):
+            await c.press("e")
+            await _dialog(c, app, f"export-{kind}", shots, png)
+            await _choose_by_keys(c, kind)
+            await _dialog(c, app, f"export-{kind}-name", shots, png)
+            await c.press("enter")  # the default name
+            await wait_for(pilot, lambda p=pattern: any(out_dir.glob(p)), timeout=120, what=kind)
         await c.press("ctrl+s")
-        await pilot.pause()
+        await _dialog(c, app, "save", shots, png)
         await c.press("enter")
         await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
                        what="the saved project")
-        out["events"] = c.n - keys0
+        out["events"] = c.n
         out["clicks"] = c.clicks
         out["typed"] = c.typed
         out["errors"] = list(app.internal_errors)
@@ -391,7 +417,8 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
         await wait_workspace(pilot, app2)
         got = app2.session.seg.labels == organ["object"]
         out["reopened_dice"] = dice(got, truth == 3)
-    out["stl"] = sorted(p.name for p in out_dir.glob("*.stl"))
+    out["files"] = sorted(p.name for p in out_dir.iterdir() if p.suffix in (".stl", ".dcm"))
+    out["dialogs"] = shots
     return out
 
 
@@ -407,7 +434,7 @@ def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
 
 
 async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarray, name: str, *,
-                        out_dir: Path, use_range: bool = False) -> dict:
+                        out_dir: Path, use_range: bool = False, png: Path | None = None) -> dict:
     """One structure as :func:`session` does an organ (its deepest voxel as the seed, the TUI's defaults;
     ``use_range``: its 5-95th percentile range typed first), then Ctrl+S and Enter; Dice of the saved
     object, events split by kind (keys, clicks, typed)."""
@@ -427,8 +454,11 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
         c = Counter(pilot)
         vals = s.volume.data[truth_mask]
         rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95))) if use_range else None
-        row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
-                           review=False, rng=rng)
+        if name == "lateral_ventricles" and not use_range:
+            row = await _dark_structure(c, app, name, truth_mask, png)
+        else:
+            row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
+                               review=False, rng=rng)
         n_save = c.n
         await c.press("ctrl+s")
         await pilot.pause()
@@ -443,6 +473,90 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
     return row
 
 
+def _histogram_bars(rc) -> tuple[int, int]:
+    """The two bars of the side panel's histogram a person picks for a dark structure in brighter tissue: from
+    the first bar that shows (>= 5% of the tallest) to the bar before the valley that follows the dark peak."""
+    h = np.asarray(rc.hist, float)
+    first = int(np.flatnonzero(h >= 0.05 * h.max())[0])
+    peak = first
+    while peak + 1 < len(h) and h[peak + 1] >= h[peak]:
+        peak += 1
+    valley = peak
+    while valley + 1 < len(h) and h[valley + 1] <= h[valley]:
+        valley += 1
+    return first, max(first, valley - 1)
+
+
+async def _panel_bar_click(c: Counter, app, bar: int) -> bool:
+    """A click on bar ``bar`` of the side panel's "Seed range here" histogram (where the screen shows it);
+    False when the line is not on screen."""
+    from ctui.screens.ws_keys import panel_text
+
+    ws = app.workspace
+    panel = ws.query_one("#panel")
+    lines = panel_text(ws).plain.split("\n")
+    row = next((i for i, line in enumerate(lines) if line.startswith("Seed range here ") and ".." in line), None)
+    if row is None or panel.has_class("hidden"):
+        return False
+    line = lines[row]
+    col = line.index(" ", len("Seed range here ")) + 1 + bar
+    cr, r = panel.content_region, panel.region
+    y = row - int(panel.scroll_offset.y)
+    if not 0 <= y < cr.height or col >= cr.width:
+        return False
+    await c.click("#panel", (col + cr.x - r.x, y + cr.y - r.y))
+    return True
+
+
+async def _dark_structure(c: Counter, app, name: str, truth_mask: np.ndarray, png: Path | None = None) -> dict:
+    """The MR lateral ventricles: a click where they show (the side panel's histogram of the neighbourhood there),
+    the range picked on it with two clicks (the dark peak up to the valley), ``m`` (3D: the two ventricles join
+    across slices), the neck guard off in ``G`` (Tab, Tab, ``0``, Enter: their horns join through narrow
+    necks), ``S`` from the cursor and ``a``."""
+    from ctui.screens.testing import wait_for
+
+    ws, s, pilot = app.workspace, app.session, c.pilot
+    n0, t0 = c.n, time.perf_counter()
+    target = seen_target(truth_mask, s.z, s.volume.spacing, 4.0)
+    cell = await _to_target(c, app, target, truth_mask, exact=False)
+    await c.click("#main", cell)
+    await wait_for(pilot, lambda: ws.seed_range.result is not None, timeout=60, what="the seed range")
+    await pilot.pause()
+    lo_bar, hi_bar = _histogram_bars(ws.seed_range.result)
+    picked = await _panel_bar_click(c, app, lo_bar) and await _panel_bar_click(c, app, hi_bar)
+    if not picked:  # no panel on screen: typed
+        rc = ws.seed_range.result
+        text = f"{rc.edges[lo_bar]:.0f}:{rc.edges[hi_bar + 1]:.0f}"
+        from ctui.screens.testing import answer_prompt
+
+        await c.press("T")
+        c.n += len(text) + 1
+        c.typed += len(text)
+        await answer_prompt(pilot, text)
+    await c.press("m")
+    await c.press("G")
+    await wait_for(pilot, lambda: type(app.screen).__name__ == "SegmentPanel" and bool(app.screen.query("#neck")),
+                   what="the G panel")
+    shots: dict = {}
+    await _dialog(c, app, "mr-G-panel", shots, png)
+    while app.screen.focused is None or app.screen.focused.id != "neck":
+        await c.press("tab")
+    await c.type("0")
+    c.typed += 1
+    await c.press("enter")
+    await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+    await c.press("S")
+    got = await _wait_proposal(pilot, ws)
+    await _dialog(c, app, "mr-proposal", shots, png)
+    if got:
+        await c.press("a")
+    failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
+    z, y, x = target
+    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": None, "proposal": got,
+            "failed": failed, "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx,
+            "range": s.range_, "options": dict(s.segment_options), "mode": s.prop_mode, "dialogs": shots}
+
+
 def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
     """The liver (label 5) of ``ct_abdomen_3mm.nii.gz``; a string says why it was skipped."""
     from ctui.engine.actions.opened import open_input
@@ -454,7 +568,8 @@ def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool
     return asyncio.run(one_structure(size, image, truth, "liver", out_dir=out_dir, use_range=use_range))
 
 
-def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
+def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False,
+                    png: Path | None = None) -> dict | str:
     """The lateral ventricles (label 1, "vent-lat") of ITK-SNAP's MR brain sample. ctui reads no GIPL:
     the image and its labels are written as NIfTI into ``out_dir`` (SimpleITK) first."""
     orig, seg = data / "MRIcrop-orig.gipl.gz", data / "MRIcrop-seg.gipl.gz"
@@ -473,10 +588,10 @@ def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range:
 
     truth = open_input(str(labels)).labels == 1
     return asyncio.run(one_structure(size, image, truth, "lateral_ventricles", out_dir=out_dir,
-                                     use_range=use_range))
+                                     use_range=use_range, png=png))
 
 
-def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) -> int:
+def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, png: Path | None = None) -> int:
     """Issue 37's liver and MR lateral ventricles at each size: events by kind and Dice."""
     print("ctui TUI tasks: liver (ct_abdomen_3mm, label 5), lateral ventricles (ITK-SNAP MR brain, label 1); "
           f"deepest voxel as the seed, {'typed 5-95% range, ' if use_range else ''}the TUI's defaults")
@@ -485,7 +600,7 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) ->
     for size in sizes:
         for task, folder in ((liver_task, data), (ventricles_task, mr)):
             with tempfile.TemporaryDirectory() as tmp:
-                r = task(size, folder, Path(tmp), use_range)
+                r = task(size, folder, Path(tmp), use_range, **({"png": png} if task is ventricles_task else {}))
             if isinstance(r, str):
                 print(f"{size[0]:>3}x{size[1]:<3} skipped: {r}")
                 continue
@@ -494,7 +609,8 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) ->
                   f"{r['typed']:>5} {r['save_events']:>4} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}"
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
-                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}"
+                  f"{'' if r.get('range') is None else '  range %g..%g picked, %s, neck %s' % (*r['range'], r['mode'], r['options'].get('neck'))}")
     print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
     return 0
 
@@ -513,6 +629,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--structures", action="store_true", help="issue 37's liver and MR lateral ventricles "
                     "instead of the kidney and spleen")
     ap.add_argument("--mr", default=str(MR_BRAIN), help="the itksnap_brain_mr folder")
+    ap.add_argument("--png", default=None, help="with --workflow or --structures: write a PNG (and SVG) of each "
+                    "screen there")
     args = ap.parse_args(argv)
     data = Path(args.data)
     image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
@@ -521,9 +639,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
     if args.workflow:
-        return print_workflow(sizes, image, labels)
+        return print_workflow(sizes, image, labels, None if args.png is None else Path(args.png).resolve())
     if args.structures:
-        return print_structures(sizes, data, Path(args.mr), use_range=args.range)
+        return print_structures(sizes, data, Path(args.mr), use_range=args.range,
+                                png=None if args.png is None else Path(args.png).resolve())
     if args.hard:
         return print_hard(sizes, data.parent)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
@@ -549,17 +668,23 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def print_workflow(sizes, image: Path, labels: Path) -> int:
-    print(f"ctui TUI workflow on {image.name}: left kidney, a section through it, its STL, save, reopen")
-    print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  section")
+def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) -> int:
+    print(f"ctui TUI workflow on {image.name} written as a DICOM series: left kidney, a section through it, the 3D "
+          "view, DICOM-SEG and STL, save, reopen")
+    print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  3D px   files; section")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
-            r = asyncio.run(workflow(size, image, labels, out_dir=Path(tmp)))
+            r = asyncio.run(workflow(size, image, labels, out_dir=Path(tmp), png=png))
         print(f"{size[0]:>3}x{size[1]:<3} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} {r['clicks']:>6} "
               f"{r['typed']:>5} "
-              f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['section'][:90]}"
+              f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['view3d'][1]}x{r['view3d'][0]}  "
+              f"{', '.join(r['files'])}; {r['section'][:70]}"
               f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
-    print("(DICOM-SEG needs a DICOM series: this input is NIfTI, so STL only; the 3D view needs EGL: left out)")
+        bad = {k: v for k, v in r["dialogs"].items() if v}
+        print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
+              + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
+    if png is not None:
+        print(f"(PNGs of the screens in {png})")
     return 0
 
 

@@ -95,3 +95,52 @@ async def test_double_click_with_the_brush_down_paints_and_does_not_segment():
         await pilot.pause(0.3)
         assert not ws.jobs.segmenting and ws.pending.proposal is None
         assert s.seg.voxels(s.current) > 0  # the dabs
+
+
+async def test_the_g_panel_opens_on_its_first_field_so_two_tabs_reach_the_neck():
+    from ctui.screens.segpanel import SegmentPanel
+
+    s, _organ, _other = _two_balls()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.press("G")
+        await wait_for(pilot, lambda: isinstance(app.screen, SegmentPanel), what="the G panel")
+        await pilot.pause()
+        assert app.screen.focused is not None and app.screen.focused.id == "method"
+        await pilot.press("tab", "tab")
+        assert app.screen.focused.id == "neck"
+        await pilot.press("0", "enter")  # the pre-filled "auto" is replaced by what is typed
+        await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+        assert s.segment_options["neck"] == 0.0
+
+
+async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
+    from ctui.screens.ws_keys import panel_text
+
+    s, _organ, _other = _two_balls()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        await _proposal(pilot, ws)
+        ws.pending.notes = ["the object is 34x the ball that fits at the seed: it probably leaked into a neighbour; "
+                            "add background seeds there, narrow the range, or draw a box"] * 3
+        ws.update_panel()
+        await pilot.pause()
+        lines = panel_text(ws).plain.split("\n")
+        obj = next(i for i, line in enumerate(lines) if "██" in line)
+        notes = next(i for i, line in enumerate(lines) if line.startswith("Notes on the proposal"))
+        assert obj < notes
+        assert "ml" in lines[obj] and obj < ws.query_one("#panel").size.height  # on screen, with its volume
+    app = CtuiApp(session=_two_balls()[0], autosave_s=1e9)
+    async with app.run_test(size=(160, 50)) as pilot:  # a tall panel: the notes under the settings, as before
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        await _proposal(pilot, ws)
+        ws.pending.notes = ["a note"]
+        lines = panel_text(ws).plain.split("\n")
+        assert lines.index("Notes on the proposal") < next(i for i, line in enumerate(lines) if "Objects" in line)
