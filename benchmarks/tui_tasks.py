@@ -622,6 +622,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
     ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
     ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
+    ap.add_argument("--only", action="append", default=None, help="with --hard: only these organs (repeatable)")
     ap.add_argument("--hard", action="store_true", help="issue 34: the msd spleen and the left kidney from the seed in "
                     "their least uniform part, with one background click where the proposal leaks")
     ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
@@ -644,7 +645,7 @@ def main(argv: list[str] | None = None) -> int:
         return print_structures(sizes, data, Path(args.mr), use_range=args.range,
                                 png=None if args.png is None else Path(args.png).resolve())
     if args.hard:
-        return print_hard(sizes, data.parent)
+        return print_hard(sizes, data.parent, args.only)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"
@@ -691,7 +692,9 @@ def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) ->
 # --------------------------------------------------------------- issue 34: a seed in the organ's least uniform part
 HARD = (("spleen (msd)", "msd_spleen_crop/sub-spleen2_ct.nii.gz", "msd_spleen_crop/sub-spleen2_ct_seg-manual.nii.gz", None),
         ("kidney_left", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 3),
-        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2))
+        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2),
+        ("spleen", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 1),
+        ("liver", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 5))
 
 
 def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int]:
@@ -779,12 +782,14 @@ async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int
             "proposal": got, "failed": row["failed"], "errors": errors}
 
 
-def print_hard(sizes, shared: Path) -> int:
+def print_hard(sizes, shared: Path, only: list[str] | None = None) -> int:
     print("ctui TUI tasks (issue 34): one organ from the seed in its least uniform part (largest 10 mm sd, >= 6 mm "
           "deep); a background click (the leak flag's voxel, else the leak's deepest point) when the proposal leaks")
     print(f"{'size':>7} {'organ':<13} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
           f"{'vol ratio':>9}  seed x,y,z; background click")
     for name, img, lab, label in HARD:
+        if only and name not in only:
+            continue
         if not (shared / img).exists():
             print(f"skipped {name}: {shared / img} is missing")
             continue
