@@ -10,29 +10,30 @@ person sends: keys, mouse clicks, wheel notches (a drag would count as one press
 organ, from the workspace at the middle slice:
 
 1. (second organ) ``n``: a new object;
-2. to the seed (the organ's deepest voxel, as issue 21's benchmark seeds): the cheaper of
-   wheel notches over the view to the seed's slice, Ctrl+wheel on the seed until a cell spans
-   under 1.5 voxels (a coarser click lands 1-2 voxels off, and a seed at an organ's edge
-   changes the result) and a click on it, or ``g`` + typed ``x,y,z`` + Enter (then Enter
-   fills); zoomed out again (``-``) after the organ; with ``z`` (click fills, pressed once for the
-   session) the click fills as Enter does;
-   with ``--box``, before the fill: ``y`` and one mouse drag on the seed's slice draw the ROI
-   box around the organ (its reference extent in the slice plane + 2 voxels, as a person
-   draws it by eye; the box spans every slice), which confines the fill and the propagation;
-3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
-4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): ``x``,
-   the ROI box (``y`` + a drag; the cursor stays on the seed) and ``p`` again; then ``}`` to each
-   marked slice and ``C`` where the proposal leaves the reference there (the person's eye,
-   played by the reference);
-5. ``a``: accept.
+2. to the organ as a person who sees the screen does it: on the slice shown (else the nearest slice
+   where the organ's section is at least 8 mm deep; Home/End and wheel notches to it), at the
+   deepest point of its section there; Ctrl+wheel notches on it only while a cell is wider than
+   half the organ's depth there (a click anywhere in the cell must be inside); ``--hard``: the
+   given voxel itself, zoomed until a cell spans under 1.5 voxels;
+   with ``--box``, before it: ``y`` and one mouse drag on that slice draw the ROI box around the
+   organ (its reference extent in the slice plane + 2 voxels, as a person draws it by eye);
+3. a double click there (counted as two clicks): the segmentation from that point (``S`` at the
+   click, the TUI's defaults), wait for the proposal;
+4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): the ROI box
+   (``y`` + a drag) and ``p`` again (it replaces the proposal); then ``}`` to each marked slice and
+   ``C`` where the proposal leaves the reference there (the person's eye, played by the reference);
+   ``--hard``: when the proposal leaks, a right click in the leak (a background seed) and ``p``;
+5. ``a``: accept (and ``-`` back to the whole slice when zoomed).
 
 Then Ctrl+S and Enter (the default name). Events are counted as the Pilot sends them.
-The seeds come from the reference labels (the deepest point); the seed positions and the
+The targets come from the reference labels (where the organ shows); the positions and the
 mouse cells go through ``ctui.screens.planes`` (the display is in the patient's frame).
+Every table splits the events into keys, clicks (wheel notches and drags too) and typed characters.
 
     python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
     python3 benchmarks/tui_tasks.py --structures   # issue 37: the liver and the MR brain's lateral ventricles
-    python3 benchmarks/tui_tasks.py --hard   (issue 34: the msd spleen and the left kidney from their least
+    python3 benchmarks/tui_tasks.py --workflow [--png DIR]   # issue 37: segment, section, 3D, SEG + STL, save, reopen
+    python3 benchmarks/tui_tasks.py --hard [--only liver]   (issue 34: the msd spleen, the abdomen's kidneys, spleen and liver from their least
         uniform part, one background click where the proposal leaks)
 """
 
@@ -369,7 +370,7 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
     async with app.run_test(size=size) as pilot:
         await wait_workspace(pilot, app)
         await pilot.pause()
-        s, ws = app.session, app.workspace
+        s = app.session
         truth, seeds = seeds_and_truth(labels, s.volume.spacing)
         c = Counter(pilot)
         await _dialog(c, app, "workspace", shots, png)
@@ -591,6 +592,14 @@ def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range:
                                      use_range=use_range, png=png))
 
 
+def _picked(r: dict) -> str:
+    """What the ventricles' task chose in the TUI (range, mode, neck), or ""."""
+    if r.get("range") is None:
+        return ""
+    lo, hi = r["range"]
+    return f"  range {lo:g}..{hi:g} picked, {r['mode']}, neck {r['options'].get('neck')}"
+
+
 def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, png: Path | None = None) -> int:
     """Issue 37's liver and MR lateral ventricles at each size: events by kind and Dice."""
     print("ctui TUI tasks: liver (ct_abdomen_3mm, label 5), lateral ventricles (ITK-SNAP MR brain, label 1); "
@@ -610,7 +619,7 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, pn
                   f"{r['volume_ratio']:>9.2f}"
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
                   f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}"
-                  f"{'' if r.get('range') is None else '  range %g..%g picked, %s, neck %s' % (*r['range'], r['mode'], r['options'].get('neck'))}")
+                  f"{_picked(r)}")
     print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
     return 0
 

@@ -85,7 +85,7 @@ async def test_double_click_segments_and_a_background_click_then_p_replaces_the_
 
 
 async def test_double_click_with_the_brush_down_paints_and_does_not_segment():
-    s, organ, _other = _two_balls()
+    s, _organ, _other = _two_balls()
     app = CtuiApp(session=s, autosave_s=1e9)
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_workspace(pilot, app)
@@ -126,8 +126,9 @@ async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
         ws = app.workspace
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         await _proposal(pilot, ws)
-        ws.pending.notes = ["the object is 34x the ball that fits at the seed: it probably leaked into a neighbour; "
-                            "add background seeds there, narrow the range, or draw a box"] * 3
+        note = ("the object is 34x the ball that fits at the seed: it probably leaked into a neighbour; "
+                "add background seeds there, narrow the range, or draw a box")
+        ws.pending.notes = [note] * 3
         ws.update_panel()
         await pilot.pause()
         lines = panel_text(ws).plain.split("\n")
