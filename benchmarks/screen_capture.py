@@ -36,13 +36,15 @@ def capture(app, name: str, out_dir: Path | None = None) -> str:
 
 
 def dialog_problems(app, text: str) -> list[str]:
-    """What a person could not reach on the dialog shown (the app's top screen): each Button, Input and
-    OptionList must lie inside the screen, and each button's label must be drawn (in ``text``, the capture)."""
+    """What a person could not reach on the dialog shown (the app's top screen): each Button and OptionList must
+    lie inside the screen and each button's label be drawn (in ``text``, the capture); a prompt's one Input must
+    be inside with the focus (the fields of a form that scrolls, as ``G``'s, are reached by scrolling)."""
     from textual.widgets import Button, Input, OptionList
 
     width, height = app.size
     out = []
-    for w in app.screen.query("Button, Input, OptionList"):
+    inputs = [w for w in app.screen.query(Input) if w.display]
+    for w in [*app.screen.query("Button, OptionList"), *(inputs if len(inputs) == 1 else [])]:
         if not w.display:
             continue
         r = w.region

@@ -620,6 +620,10 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, pn
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
                   f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}"
                   f"{_picked(r)}")
+            if r.get("dialogs"):
+                bad = {k: v for k, v in r["dialogs"].items() if v}
+                print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
+                      + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
     print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
     return 0
 
