@@ -145,3 +145,29 @@ async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
         ws.pending.notes = ["a note"]
         lines = panel_text(ws).plain.split("\n")
         assert lines.index("Notes on the proposal") < next(i for i, line in enumerate(lines) if "Objects" in line)
+
+
+async def test_a_leak_mark_puts_the_cursor_on_its_background_voxel_then_b_and_p_remove_the_leak():
+    s, organ, other = _two_balls()
+    s.segment_options = {"method": "grow"}
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        got = await _proposal(pilot, ws)
+        assert got[other].mean() > 0.5
+        # the leak flag as actions.segment reports it (where it enters, the voxel to click as background)
+        ws.pending.proposal.leak_entries = [{"slice": 17, "at": [40, 32, 17], "volume_ml": 7.0, "click": [58, 30, 17]}]
+        ws._marks_cache = None
+        for _ in range(6):  # } to the next marked slice until the leak's
+            await pilot.press("right_curly_bracket")
+            if s.z == 17:
+                break
+        assert s.zyx == (17, 30, 58)  # the cursor on the voxel to click, no coordinates typed
+        assert "B makes it a background seed" in str(ws.query_one("#status").render())
+        first = ws.pending.proposal
+        await pilot.press("B", "p")
+        await wait_for(pilot, lambda: ws.pending.proposal is not first, timeout=60, what="the new proposal")
+        got2 = await _proposal(pilot, ws)
+        assert got2[organ].mean() > 0.9 and got2[other].mean() < 0.1

@@ -550,7 +550,7 @@ class MouseMixin(ToolsMixin):
         self.refresh_view()
         why = {m.z: m.why for m in self.review_marks()}.get(s.z)
         if why and self.pending.proposal is not None:
-            self.set_status(f"Slice {s.z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks")
+            self.set_status(self._mark_status(s.z, why))  # at a leak's entry: the cursor on the voxel to click
         elif why:
             self.set_status(f"Slice {s.z}: {why}. t: keep the island / scissors on this slice; {{ }} other marks")
 
