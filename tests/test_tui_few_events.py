@@ -5,6 +5,8 @@ a background seed in its leak) instead of asking for x first."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -171,3 +173,24 @@ async def test_a_leak_mark_puts_the_cursor_on_its_background_voxel_then_b_and_p_
         await wait_for(pilot, lambda: ws.pending.proposal is not first, timeout=60, what="the new proposal")
         got2 = await _proposal(pilot, ws)
         assert got2[organ].mean() > 0.9 and got2[other].mean() < 0.1
+
+
+async def test_80x24_review_strip_says_a_shorter_whole_text_not_a_cut_one():
+    from ctui.screens.strip import ReviewStrip, fitted
+
+    assert fitted("proposal · 2 marks: } { marks, C cut, A accept to here", 20) == "2 marks: } { marks"
+    assert fitted("slice 16: 8242 px", 12) == "16: 8242 px"
+    s, _organ, _other = _two_balls()
+    app = CtuiApp(session=s, autosave_s=1e9)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_workspace(pilot, app)
+        ws = app.workspace
+        await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
+        await _proposal(pilot, ws)
+        await pilot.pause()
+        strip = ws.query_one("#strip", ReviewStrip)
+        lines = [strip.render_line(y).text.rstrip() for y in (0, 1)]
+        px = int(strip.profile[strip.cursor])
+        assert lines[0].endswith(f"{px} px")  # the area, whole (the "slice N:" dropped when it does not fit)
+        hint = lines[1][len(strip._cols()):].strip()  # the text right of the markers
+        assert hint and re.search(re.escape(hint) + r"(?![\w])", strip.hint)  # whole words only, not "2 mar"
