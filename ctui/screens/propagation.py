@@ -125,9 +125,12 @@ def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | N
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
-    ws.pending.clear()
+    replaced = ws.pending.clear() is not None
     ws.jobs.segmentation_started(run)
-    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})", 0, 100)
+    if replaced:
+        ws.refresh_view()  # the old proposal's hatching goes while the new one is computed
+    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})"
+                     f"{'; it replaces the pending proposal' if replaced else ''}", 0, 100)
     ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
                   name="segment")
 
