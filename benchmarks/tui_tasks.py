@@ -10,29 +10,30 @@ person sends: keys, mouse clicks, wheel notches (a drag would count as one press
 organ, from the workspace at the middle slice:
 
 1. (second organ) ``n``: a new object;
-2. to the seed (the organ's deepest voxel, as issue 21's benchmark seeds): the cheaper of
-   wheel notches over the view to the seed's slice, Ctrl+wheel on the seed until a cell spans
-   under 1.5 voxels (a coarser click lands 1-2 voxels off, and a seed at an organ's edge
-   changes the result) and a click on it, or ``g`` + typed ``x,y,z`` + Enter (then Enter
-   fills); zoomed out again (``-``) after the organ; with ``z`` (click fills, pressed once for the
-   session) the click fills as Enter does;
-   with ``--box``, before the fill: ``y`` and one mouse drag on the seed's slice draw the ROI
-   box around the organ (its reference extent in the slice plane + 2 voxels, as a person
-   draws it by eye; the box spans every slice), which confines the fill and the propagation;
-3. ``p``: segment / propagate from the seed (the TUI's defaults), wait for the proposal;
-4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): ``x``,
-   the ROI box (``y`` + a drag; the cursor stays on the seed) and ``p`` again; then ``}`` to each
-   marked slice and ``C`` where the proposal leaves the reference there (the person's eye,
-   played by the reference);
-5. ``a``: accept.
+2. to the organ as a person who sees the screen does it: on the slice shown (else the nearest slice
+   where the organ's section is at least 8 mm deep; Home/End and wheel notches to it), at the
+   deepest point of its section there; Ctrl+wheel notches on it only while a cell is wider than
+   half the organ's depth there (a click anywhere in the cell must be inside); ``--hard``: the
+   given voxel itself, zoomed until a cell spans under 1.5 voxels;
+   with ``--box``, before it: ``y`` and one mouse drag on that slice draw the ROI box around the
+   organ (its reference extent in the slice plane + 2 voxels, as a person draws it by eye);
+3. a double click there (counted as two clicks): the segmentation from that point (``S`` at the
+   click, the TUI's defaults), wait for the proposal;
+4. with ``--review``: when the strip marks the seed slice (the fill leaked on it): the ROI box
+   (``y`` + a drag) and ``p`` again (it replaces the proposal); then ``}`` to each marked slice and
+   ``C`` where the proposal leaves the reference there (the person's eye, played by the reference);
+   ``--hard``: when the proposal leaks, a right click in the leak (a background seed) and ``p``;
+5. ``a``: accept (and ``-`` back to the whole slice when zoomed).
 
 Then Ctrl+S and Enter (the default name). Events are counted as the Pilot sends them.
-The seeds come from the reference labels (the deepest point); the seed positions and the
+The targets come from the reference labels (where the organ shows); the positions and the
 mouse cells go through ``ctui.screens.planes`` (the display is in the patient's frame).
+Every table splits the events into keys, clicks (wheel notches and drags too) and typed characters.
 
     python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
     python3 benchmarks/tui_tasks.py --structures   # issue 37: the liver and the MR brain's lateral ventricles
-    python3 benchmarks/tui_tasks.py --hard   (issue 34: the msd spleen and the left kidney from their least
+    python3 benchmarks/tui_tasks.py --workflow [--png DIR]   # issue 37: segment, section, 3D, SEG + STL, save, reopen
+    python3 benchmarks/tui_tasks.py --hard [--only liver]   (issue 34: the msd spleen, the abdomen's kidneys, spleen and liver from their least
         uniform part, one background click where the proposal leaks)
 """
 
@@ -48,6 +49,7 @@ from pathlib import Path
 
 os.environ.setdefault("TEXTUAL_COLOR_SYSTEM", "truecolor")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # screen_capture
 
 import numpy as np  # noqa: E402
 
@@ -95,6 +97,17 @@ class Counter:
         self.n += 1
         self.clicks += 1
         await self.pilot.click(widget, offset=offset)
+
+    async def double_click(self, widget: str, offset) -> None:
+        """Two clicks (counted as two events)."""
+        self.n += 2
+        self.clicks += 2
+        await self.pilot.double_click(widget, offset=offset)
+
+    async def right_click(self, widget: str, offset) -> None:
+        self.n += 1
+        self.clicks += 1
+        await self.pilot.click(widget, offset=offset, button=3)
 
     async def wheel(self, widget: str, up: bool) -> None:
         from ctui.screens.testing import wheel
@@ -152,13 +165,82 @@ async def _box(c: Counter, app, truth_mask: np.ndarray, z: int) -> None:
     await drag(c.pilot, "#main", [cell_of_voxel(app, a), cell_of_voxel(app, b)])
 
 
+def cell_mm(ws) -> float:
+    """The width in mm that one terminal cell of the main view covers (the larger of its two sides)."""
+    vm = ws.main_view.view_map
+    sp = ws.s.volume.spacing
+    return max(float(sp[2]) / vm.sx, 2.0 * float(sp[1]) / vm.sy)
+
+
+def in_slice_depth(mask2d: np.ndarray, spacing_yx) -> np.ndarray:
+    """mm from each pixel of ``mask2d`` to its outline on that slice."""
+    from scipy import ndimage
+
+    return ndimage.distance_transform_edt(np.pad(mask2d, 1), sampling=spacing_yx)[1:-1, 1:-1]
+
+
+def seen_target(mask: np.ndarray, z_now: int, spacing, min_mm: float) -> tuple[int, int, int]:
+    """What a person who sees the screen clicks: the nearest slice to ``z_now`` (the one shown first) where the
+    organ's section is at least ``min_mm`` deep, at its deepest point there (z, y, x); else its deepest voxel."""
+    zs = [z for z in np.flatnonzero(mask.any(axis=(1, 2)))]
+    for z in sorted(zs, key=lambda k: (abs(int(k) - z_now), k)):
+        dt = in_slice_depth(mask[z], spacing[1:])
+        if dt.max() >= min_mm:
+            y, x = np.unravel_index(int(np.argmax(dt)), dt.shape)
+            return int(z), int(y), int(x)
+    return deepest(mask, spacing)
+
+
+async def _to_target(c: Counter, app, target, truth_mask: np.ndarray | None, *, exact: bool) -> tuple[int, int]:
+    """Wheel notches to the target's slice and Ctrl+wheel notches on it until a click lands where it should:
+    ``exact`` (a given voxel) until a cell spans under 1.5 voxels; else until the cell is under half the
+    organ's depth there (a click anywhere in the cell is inside). Returns the cell to click."""
+    from ctui.screens.testing import cell_of_voxel
+
+    ws, s, pilot = app.workspace, app.session, c.pilot
+    z, y, x = target
+    last = s.shape[0] - 1
+    if min(z, last - z) + 1 < abs(z - s.z):  # Home / End, then the wheel: fewer events than the wheel alone
+        await c.press("home" if z < last - z else "end")
+    while s.z != z:
+        await c.wheel("#main", up=z > s.z)
+    await pilot.pause()
+
+    def off_view() -> bool:
+        col, row = cell_of_voxel(app, (z, y, x))
+        region = ws.main_view.content_region
+        return not (0 <= col < region.width and 0 <= row < region.height)
+    while ws.viewstate.zoom > 1 and off_view():  # zoomed in elsewhere: out until the target shows
+        await c.press("minus")
+        await pilot.pause()
+    if exact:
+        def fine() -> bool:
+            vm = ws.main_view.view_map
+            return max(1.0 / vm.sx, 2.0 / vm.sy) <= 1.5
+    else:
+        depth = float(in_slice_depth(truth_mask[z], s.volume.spacing[1:])[y, x])
+
+        def fine() -> bool:
+            return cell_mm(ws) <= depth / 2
+    for _ in range(4):
+        if fine():
+            break
+        await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
+        await pilot.pause()
+    return cell_of_voxel(app, (z, y, x))
+
+
 async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, first: bool, review: bool,
-                 rng: tuple[float, float] | None, box: bool = False) -> dict:
-    from ctui.screens.testing import answer_prompt, cell_of_voxel
+                 rng: tuple[float, float] | None, box: bool = False, exact: bool = False,
+                 accept: bool = True) -> dict:
+    """One organ: (``n``), (``T`` + its range), to a slice where the organ shows and a double click on it (the
+    segmentation from there), ``a``. ``exact``: the click is on ``seed`` itself (issue 34's least uniform seed),
+    else where a person sees the organ (:func:`seen_target`)."""
+    from ctui.screens.testing import answer_prompt
 
     ws, s = app.workspace, app.session
     pilot = c.pilot
-    n0, t0 = c.n, time.perf_counter()
+    n0, k0, y0, t0 = c.n, c.clicks, c.typed, time.perf_counter()
     if not first:
         await c.press("n")
     if rng is not None:
@@ -166,58 +248,36 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
         c.n += len(f"{rng[0]:g}:{rng[1]:g}") + 1  # typed into the prompt, then Enter
         c.typed += len(f"{rng[0]:g}:{rng[1]:g}")
         await answer_prompt(pilot, f"{rng[0]:g}:{rng[1]:g}")
-    z, y, x = seed
-    typed = f"{x},{y},{z}"
-    vm = ws.main_view.view_map
-    zooms = 0  # Ctrl+wheel notches (x2 each) until a cell spans under 1.5 voxels: the click lands on the seed
-    while vm is not None and max(1.0 / vm.sx, 2.0 / vm.sy) / 2 ** zooms > 1.5:
-        zooms += 1
-    mouse_cost = abs(z - s.z) + zooms + 1 + (0 if ws.edit_tools.click_fills else 1)
-    if vm is not None and mouse_cost <= len(typed) + 3:  # wheel to the slice, zoom on the seed, click (fills)
-        if not ws.edit_tools.click_fills:
-            await c.press("z")
+    target = tuple(seed) if exact else seen_target(truth_mask, s.z, s.volume.spacing, 8.0)
+    z, y, x = target
+    if box:
         while s.z != z:
             await c.wheel("#main", up=z > s.z)
-        await pilot.pause()
-        if box:
-            await _box(c, app, truth_mask, z)
-        for _ in range(zooms):
-            await c.wheel_at("#main", cell_of_voxel(app, (z, y, x)), control=True)
-            await pilot.pause()
-        await c.click("#main", cell_of_voxel(app, (z, y, x)))
-        if not ws.edit_tools.click_fills:
-            await c.press("enter")
-    else:
-        await c.press("g")
-        c.n += len(typed) + 1
-        c.typed += len(typed)
-        await answer_prompt(pilot, typed)
-        if box:  # the box drag leaves the cursor on the seed
-            await _box(c, app, truth_mask, z)
-        await c.press("enter")
-    filled = s.seg.voxels(s.current)
-    await c.press("p")
+        await _box(c, app, truth_mask, z)
+    cell = await _to_target(c, app, target, truth_mask, exact=exact)
+    await c.double_click("#main", cell)  # the cursor there and the segmentation from it
     got = await _wait_proposal(pilot, ws)
+    filled = 0
     if got and review and any(m.kind == "seed" for m in ws.review_marks()):
-        # the strip marks the seed slice itself: the fill leaked there. Reject, box the organ,
-        # segment again (the box confines the fill and the propagation)
-        await c.press("x")
+        # the strip marks the seed slice itself: the fill leaked there. Box the organ, segment again (p: the
+        # proposal's own seed; the box confines the fill and the propagation)
         await _box(c, app, truth_mask, z)
         await c.press("p")
         got = await _wait_proposal(pilot, ws)
     if got and review:
         await _review(c, ws, truth_mask)
     failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
-    if got:
+    if got and accept:
         await c.press("a")
-    while app.workspace.viewstate.zoom > 1:  # back to the whole slice for the next organ
-        await c.press("minus")
+        while app.workspace.viewstate.zoom > 1:  # back to the whole slice for the next organ
+            await c.press("minus")
     await pilot.pause()
     info = s.seg.objects.get(s.current)
-    used = tuple(info.seeds[-1]) if info is not None and info.seeds else None
+    used = tuple(info.seeds[-1]) if info is not None and info.seeds else (ws.pending.seed if not accept else None)
     return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": used, "seed_fill": filled, "proposal": got,
             "failed": failed,
-            "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx}
+            "events": c.n - n0, "clicks": c.clicks - k0, "typed": c.typed - y0,
+            "seconds": time.perf_counter() - t0, "cursor": s.zyx}
 
 
 async def session(size: tuple[int, int], image: Path, labels: Path, *, review: bool, use_range: bool,
@@ -274,56 +334,81 @@ async def _choose_by_keys(c: Counter, option_id: str) -> None:
     await c.press(*(["down"] * ids.index(option_id)), "enter")
 
 
-async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path) -> dict:
-    """Issue 37's whole workflow (the TUI's own task, apart from the organs'): the kidney as in
-    :func:`session`, a section through it at the seed (``M``, ``x``, the object's axis), the
-    kidney's surface as STL (``e``), the project saved and reopened with its set-up.
-    Events split by kind: keys, clicks (and wheel notches, drags), typed characters."""
+async def _dialog(c: Counter, app, step: str, shots: dict, png: Path | None) -> None:
+    """The screen shown now, captured (``shots[step]``: the problems with its dialog's buttons, [] when none)."""
+    from screen_capture import capture, dialog_problems
+
+    await c.pilot.pause()
+    w, h = app.size
+    text = capture(app, f"{w}x{h}-{step}", png)
+    shots[step] = dialog_problems(app, text) if app.screen is not app.workspace else []
+
+
+async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path, png: Path | None = None) -> dict:
+    """Issue 37's whole workflow on the abdomen CT written as a DICOM series (a SEG needs its source images):
+    the kidney as in :func:`session`, a section through it at the cursor (``M``, ``x``, the object's axis), the 3D
+    view (``r``, Escape), the DICOM-SEG and the kidney's STL (``e``), the project saved and reopened with its
+    set-up. Events split by kind: keys, clicks (and wheel notches, drags), typed characters. Every dialog is
+    captured (``png``: its PNG written there) and its buttons checked in view."""
+    from ctui.engine.io.phantom import write_series
+    from ctui.engine.io.series import load
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
+    from ctui.screens.imageview import ImageView
     from ctui.screens.measure_screen import MeasureScreen
     from ctui.screens.testing import wait_for, wait_workspace
+    from ctui.screens.view3d import View3DScreen
 
     graphics.use_graphics("halfblock")
     os.chdir(out_dir)
     os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
-    app = CtuiApp(str(image), autosave_s=1e9)
+    series = out_dir / "series"
+    write_series(series, load(str(image)), description="abdomen CT")  # the same grid (values below -1024 clipped)
+    app = CtuiApp(str(series), autosave_s=1e9)
     out: dict = {"size": size}
+    shots: dict = {}
     async with app.run_test(size=size) as pilot:
         await wait_workspace(pilot, app)
         await pilot.pause()
-        s, ws = app.session, app.workspace
+        s = app.session
         truth, seeds = seeds_and_truth(labels, s.volume.spacing)
         c = Counter(pilot)
-        keys0 = c.n
+        await _dialog(c, app, "workspace", shots, png)
         organ = await _organ(c, app, "kidney_left", seeds["kidney_left"], truth == 3, first=True, review=False,
                              rng=None)
         out["organ_events"] = organ["events"]
-        z, y, x = seeds["kidney_left"]
-        s.z, s.y, s.x = z, y, x  # (the cursor is on the seed already: the click put it there)
-        await c.press("M")
+        await _dialog(c, app, "kidney", shots, png)
+        await c.press("M")  # the section through the cursor, which the double click left in the kidney
         await wait_for(pilot, lambda: isinstance(app.screen, MeasureScreen) and app.screen.stats, timeout=120,
                        what="the measures")
         ms = app.screen
         await c.press("x")
-        await pilot.pause()
+        await _dialog(c, app, "section-menu", shots, png)
         await _choose_by_keys(c, "object")
         await wait_for(pilot, lambda: "at x" in str(ms.query_one("#ms-status").render()), timeout=120,
                        what="the section")
         out["section"] = str(ms.query_one("#ms-status").render())
+        await _dialog(c, app, "measure", shots, png)
         await c.press("escape")
-        await c.press("e")
-        await pilot.pause()
-        await _choose_by_keys(c, "stl")
-        await pilot.pause()
-        await c.press("enter")  # the default name
-        await wait_for(pilot, lambda: any(out_dir.glob("*.stl")), timeout=120, what="the STL")
+        await c.press("r")
+        await wait_for(pilot, lambda: isinstance(app.screen, View3DScreen)
+                       and app.screen.query_one(ImageView).rgb is not None, timeout=180, what="the 3D view")
+        out["view3d"] = tuple(app.screen.query_one(ImageView).rgb.shape[:2])
+        await _dialog(c, app, "3d", shots, png)
+        await c.press("escape")
+        for kind, pattern in (("dicom-seg", "*.dcm"), ("stl", "*.stl")):
+            await c.press("e")
+            await _dialog(c, app, f"export-{kind}", shots, png)
+            await _choose_by_keys(c, kind)
+            await _dialog(c, app, f"export-{kind}-name", shots, png)
+            await c.press("enter")  # the default name
+            await wait_for(pilot, lambda p=pattern: any(out_dir.glob(p)), timeout=120, what=kind)
         await c.press("ctrl+s")
-        await pilot.pause()
+        await _dialog(c, app, "save", shots, png)
         await c.press("enter")
         await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
                        what="the saved project")
-        out["events"] = c.n - keys0
+        out["events"] = c.n
         out["clicks"] = c.clicks
         out["typed"] = c.typed
         out["errors"] = list(app.internal_errors)
@@ -333,7 +418,8 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
         await wait_workspace(pilot, app2)
         got = app2.session.seg.labels == organ["object"]
         out["reopened_dice"] = dice(got, truth == 3)
-    out["stl"] = sorted(p.name for p in out_dir.glob("*.stl"))
+    out["files"] = sorted(p.name for p in out_dir.iterdir() if p.suffix in (".stl", ".dcm"))
+    out["dialogs"] = shots
     return out
 
 
@@ -349,7 +435,7 @@ def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
 
 
 async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarray, name: str, *,
-                        out_dir: Path, use_range: bool = False) -> dict:
+                        out_dir: Path, use_range: bool = False, png: Path | None = None) -> dict:
     """One structure as :func:`session` does an organ (its deepest voxel as the seed, the TUI's defaults;
     ``use_range``: its 5-95th percentile range typed first), then Ctrl+S and Enter; Dice of the saved
     object, events split by kind (keys, clicks, typed)."""
@@ -369,8 +455,11 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
         c = Counter(pilot)
         vals = s.volume.data[truth_mask]
         rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95))) if use_range else None
-        row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
-                           review=False, rng=rng)
+        if name == "lateral_ventricles" and not use_range:
+            row = await _dark_structure(c, app, name, truth_mask, png)
+        else:
+            row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
+                               review=False, rng=rng)
         n_save = c.n
         await c.press("ctrl+s")
         await pilot.pause()
@@ -385,6 +474,90 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
     return row
 
 
+def _histogram_bars(rc) -> tuple[int, int]:
+    """The two bars of the side panel's histogram a person picks for a dark structure in brighter tissue: from
+    the first bar that shows (>= 5% of the tallest) to the bar before the valley that follows the dark peak."""
+    h = np.asarray(rc.hist, float)
+    first = int(np.flatnonzero(h >= 0.05 * h.max())[0])
+    peak = first
+    while peak + 1 < len(h) and h[peak + 1] >= h[peak]:
+        peak += 1
+    valley = peak
+    while valley + 1 < len(h) and h[valley + 1] <= h[valley]:
+        valley += 1
+    return first, max(first, valley - 1)
+
+
+async def _panel_bar_click(c: Counter, app, bar: int) -> bool:
+    """A click on bar ``bar`` of the side panel's "Seed range here" histogram (where the screen shows it);
+    False when the line is not on screen."""
+    from ctui.screens.ws_keys import panel_text
+
+    ws = app.workspace
+    panel = ws.query_one("#panel")
+    lines = panel_text(ws).plain.split("\n")
+    row = next((i for i, line in enumerate(lines) if line.startswith("Seed range here ") and ".." in line), None)
+    if row is None or panel.has_class("hidden"):
+        return False
+    line = lines[row]
+    col = line.index(" ", len("Seed range here ")) + 1 + bar
+    cr, r = panel.content_region, panel.region
+    y = row - int(panel.scroll_offset.y)
+    if not 0 <= y < cr.height or col >= cr.width:
+        return False
+    await c.click("#panel", (col + cr.x - r.x, y + cr.y - r.y))
+    return True
+
+
+async def _dark_structure(c: Counter, app, name: str, truth_mask: np.ndarray, png: Path | None = None) -> dict:
+    """The MR lateral ventricles: a click where they show (the side panel's histogram of the neighbourhood there),
+    the range picked on it with two clicks (the dark peak up to the valley), ``m`` (3D: the two ventricles join
+    across slices), the neck guard off in ``G`` (Tab, Tab, ``0``, Enter: their horns join through narrow
+    necks), ``S`` from the cursor and ``a``."""
+    from ctui.screens.testing import wait_for
+
+    ws, s, pilot = app.workspace, app.session, c.pilot
+    n0, t0 = c.n, time.perf_counter()
+    target = seen_target(truth_mask, s.z, s.volume.spacing, 4.0)
+    cell = await _to_target(c, app, target, truth_mask, exact=False)
+    await c.click("#main", cell)
+    await wait_for(pilot, lambda: ws.seed_range.result is not None, timeout=60, what="the seed range")
+    await pilot.pause()
+    lo_bar, hi_bar = _histogram_bars(ws.seed_range.result)
+    picked = await _panel_bar_click(c, app, lo_bar) and await _panel_bar_click(c, app, hi_bar)
+    if not picked:  # no panel on screen: typed
+        rc = ws.seed_range.result
+        text = f"{rc.edges[lo_bar]:.0f}:{rc.edges[hi_bar + 1]:.0f}"
+        from ctui.screens.testing import answer_prompt
+
+        await c.press("T")
+        c.n += len(text) + 1
+        c.typed += len(text)
+        await answer_prompt(pilot, text)
+    await c.press("m")
+    await c.press("G")
+    await wait_for(pilot, lambda: type(app.screen).__name__ == "SegmentPanel" and bool(app.screen.query("#neck")),
+                   what="the G panel")
+    shots: dict = {}
+    await _dialog(c, app, "mr-G-panel", shots, png)
+    while app.screen.focused is None or app.screen.focused.id != "neck":
+        await c.press("tab")
+    await c.type("0")
+    c.typed += 1
+    await c.press("enter")
+    await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
+    await c.press("S")
+    got = await _wait_proposal(pilot, ws)
+    await _dialog(c, app, "mr-proposal", shots, png)
+    if got:
+        await c.press("a")
+    failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
+    z, y, x = target
+    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": None, "proposal": got,
+            "failed": failed, "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx,
+            "range": s.range_, "options": dict(s.segment_options), "mode": s.prop_mode, "dialogs": shots}
+
+
 def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
     """The liver (label 5) of ``ct_abdomen_3mm.nii.gz``; a string says why it was skipped."""
     from ctui.engine.actions.opened import open_input
@@ -396,7 +569,8 @@ def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool
     return asyncio.run(one_structure(size, image, truth, "liver", out_dir=out_dir, use_range=use_range))
 
 
-def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
+def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False,
+                    png: Path | None = None) -> dict | str:
     """The lateral ventricles (label 1, "vent-lat") of ITK-SNAP's MR brain sample. ctui reads no GIPL:
     the image and its labels are written as NIfTI into ``out_dir`` (SimpleITK) first."""
     orig, seg = data / "MRIcrop-orig.gipl.gz", data / "MRIcrop-seg.gipl.gz"
@@ -415,10 +589,18 @@ def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range:
 
     truth = open_input(str(labels)).labels == 1
     return asyncio.run(one_structure(size, image, truth, "lateral_ventricles", out_dir=out_dir,
-                                     use_range=use_range))
+                                     use_range=use_range, png=png))
 
 
-def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) -> int:
+def _picked(r: dict) -> str:
+    """What the ventricles' task chose in the TUI (range, mode, neck), or ""."""
+    if r.get("range") is None:
+        return ""
+    lo, hi = r["range"]
+    return f"  range {lo:g}..{hi:g} picked, {r['mode']}, neck {r['options'].get('neck')}"
+
+
+def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, png: Path | None = None) -> int:
     """Issue 37's liver and MR lateral ventricles at each size: events by kind and Dice."""
     print("ctui TUI tasks: liver (ct_abdomen_3mm, label 5), lateral ventricles (ITK-SNAP MR brain, label 1); "
           f"deepest voxel as the seed, {'typed 5-95% range, ' if use_range else ''}the TUI's defaults")
@@ -427,7 +609,7 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) ->
     for size in sizes:
         for task, folder in ((liver_task, data), (ventricles_task, mr)):
             with tempfile.TemporaryDirectory() as tmp:
-                r = task(size, folder, Path(tmp), use_range)
+                r = task(size, folder, Path(tmp), use_range, **({"png": png} if task is ventricles_task else {}))
             if isinstance(r, str):
                 print(f"{size[0]:>3}x{size[1]:<3} skipped: {r}")
                 continue
@@ -436,7 +618,12 @@ def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False) ->
                   f"{r['typed']:>5} {r['save_events']:>4} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}"
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
-                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}"
+                  f"{_picked(r)}")
+            if r.get("dialogs"):
+                bad = {k: v for k, v in r["dialogs"].items() if v}
+                print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
+                      + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
     print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
     return 0
 
@@ -448,6 +635,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--review", action="store_true", help="review the proposal's marked slices and cut at a leak")
     ap.add_argument("--range", action="store_true", help="type the organ's 5-95th percentile range (T) first")
     ap.add_argument("--box", action="store_true", help="draw the ROI box around the organ (y + a drag) before the fill")
+    ap.add_argument("--only", action="append", default=None, help="with --hard: only these organs (repeatable)")
     ap.add_argument("--hard", action="store_true", help="issue 34: the msd spleen and the left kidney from the seed in "
                     "their least uniform part, with one background click where the proposal leaks")
     ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
@@ -457,6 +645,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mr", default=str(MR_BRAIN), help="the itksnap_brain_mr folder")
     ap.add_argument("--vessel", action="store_true", help="issue 35: the aorta with the vessel tool in tmux "
                     "(benchmarks/tui_vessel.py)")
+    ap.add_argument("--png", default=None, help="with --workflow or --structures: write a PNG (and SVG) of each "
+                    "screen there")
     args = ap.parse_args(argv)
     if args.vessel:
         from tui_vessel import main as vessel_main
@@ -469,22 +659,26 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in (args.size or ["160x50", "80x24"])]
     if args.workflow:
-        return print_workflow(sizes, image, labels)
+        return print_workflow(sizes, image, labels, None if args.png is None else Path(args.png).resolve())
     if args.structures:
-        return print_structures(sizes, data, Path(args.mr), use_range=args.range)
+        return print_structures(sizes, data, Path(args.mr), use_range=args.range,
+                                png=None if args.png is None else Path(args.png).resolve())
     if args.hard:
-        return print_hard(sizes, data.parent)
+        return print_hard(sizes, data.parent, args.only)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
           f"{'ROI box drawn; ' if args.box else ''}"
           "defaults otherwise")
-    print(f"{'size':>7} {'organ':<12} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z")
+    print(f"{'size':>7} {'organ':<12} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
+          f"{'vol ratio':>9}  clicked x,y,z")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
             res = asyncio.run(session(size, image, labels, review=args.review, use_range=args.range, out_dir=Path(tmp),
                                       box=args.box))
         for r in res["organs"]:
-            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+            keys = r["events"] - r["clicks"] - r["typed"]
+            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<12} {r['events']:>6} {keys:>5} {r['clicks']:>6} {r['typed']:>5} "
+                  f"{r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}"
                   f"{'' if r['seed_used'] in (None, r['seed_xyz']) else ' (clicked ' + ','.join(map(str, r['seed_used'])) + ')'}"
                   f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:120] + ')'}")
@@ -494,24 +688,32 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def print_workflow(sizes, image: Path, labels: Path) -> int:
-    print(f"ctui TUI workflow on {image.name}: left kidney, a section through it, its STL, save, reopen")
-    print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  section")
+def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) -> int:
+    print(f"ctui TUI workflow on {image.name} written as a DICOM series: left kidney, a section through it, the 3D "
+          "view, DICOM-SEG and STL, save, reopen")
+    print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  3D px   files; section")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
-            r = asyncio.run(workflow(size, image, labels, out_dir=Path(tmp)))
+            r = asyncio.run(workflow(size, image, labels, out_dir=Path(tmp), png=png))
         print(f"{size[0]:>3}x{size[1]:<3} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} {r['clicks']:>6} "
               f"{r['typed']:>5} "
-              f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['section'][:90]}"
+              f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['view3d'][1]}x{r['view3d'][0]}  "
+              f"{', '.join(r['files'])}; {r['section'][:70]}"
               f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
-    print("(DICOM-SEG needs a DICOM series: this input is NIfTI, so STL only; the 3D view needs EGL: left out)")
+        bad = {k: v for k, v in r["dialogs"].items() if v}
+        print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
+              + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
+    if png is not None:
+        print(f"(PNGs of the screens in {png})")
     return 0
 
 
 # --------------------------------------------------------------- issue 34: a seed in the organ's least uniform part
 HARD = (("spleen (msd)", "msd_spleen_crop/sub-spleen2_ct.nii.gz", "msd_spleen_crop/sub-spleen2_ct_seg-manual.nii.gz", None),
         ("kidney_left", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 3),
-        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2))
+        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2),
+        ("spleen", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 1),
+        ("liver", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 5))
 
 
 def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int]:
@@ -525,6 +727,14 @@ def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int,
     f = data.astype(np.float64)
     sd = np.sqrt(np.maximum(ndimage.uniform_filter(f * f, size) - ndimage.uniform_filter(f, size) ** 2, 0))
     return tuple(int(v) for v in np.unravel_index(int(np.argmax(np.where(deep, sd, -1))), ref.shape))
+
+
+def _full_mask(p, shape) -> np.ndarray:
+    """The pending proposal ``p`` as a (z, y, x) mask."""
+    full = np.zeros(shape, bool)
+    for z in p.masks:
+        full[z] = p.slice_mask(z)
+    return full
 
 
 def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int] | None:
@@ -548,13 +758,13 @@ def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spaci
 
 async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int | None, *,
                        out_dir: Path) -> dict:
-    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: to the
-    seed, fill, ``p``, ``a``); when the result leaks, ``g`` + the leak's voxel, ``B`` (a background seed), ``p``
-    again and ``a``. Events counted."""
+    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: wheel to
+    the seed's slice, zoom on it, a double click); when the proposal leaks, a right click in the leak (a background
+    seed: wheel to its slice first), ``p`` again (the pending proposal's seed, no ``x`` first) and ``a``."""
     from ctui.engine.actions.opened import open_input
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import answer_prompt, wait_workspace
+    from ctui.screens.testing import wait_workspace
 
     graphics._chosen = "halfblock"
     os.chdir(out_dir)
@@ -569,45 +779,44 @@ async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int
         organ = truth == label if label is not None else truth > 0
         z, y, x = least_uniform_seed(s.volume.data, organ, s.volume.spacing)
         c = Counter(pilot)
-
-        async def goto(xyz) -> None:
-            text = ",".join(map(str, xyz))
-            await c.press("g")
-            c.n += len(text) + 1
-            await answer_prompt(pilot, text)
-
-        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None)
+        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None, exact=True,
+                           accept=False)
         got = row["proposal"]
-        info = s.seg.objects.get(s.current)
-        clicked = _leak_voxel((info.settings.get("leaks") or []) if info is not None else [],
-                              s.seg.labels == s.current, organ, s.volume.spacing) if got else None
-        if clicked is not None:  # the leak: a background seed in it (B at the voxel), p again, a
-            await goto(clicked)
-            await c.press("B")
+        p = ws.pending.proposal
+        clicked = _leak_voxel(list(getattr(p, "leak_entries", None) or []), _full_mask(p, s.shape), organ,
+                              s.volume.spacing) if got else None
+        if clicked is not None:  # the leak: a right click in it (a background seed), p again (the proposal's seed)
+            lx, ly, lz = clicked
+            cell = await _to_target(c, app, (lz, ly, lx), None, exact=True)
+            await c.right_click("#main", cell)
             await c.press("p")
             got = await _wait_proposal(pilot, ws)
-            if got:
-                await c.press("a")
+        if got:
+            await c.press("a")
         await pilot.pause()
         result = s.seg.labels == s.current
         errors = list(getattr(app, "internal_errors", []))
-    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "dice": dice(result, organ),
+    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "clicks": c.clicks, "typed": c.typed, "dice": dice(result, organ),
             "volume_ratio": float(result.sum()) / max(int(organ.sum()), 1), "seconds": time.perf_counter() - t0,
             "proposal": got, "failed": row["failed"], "errors": errors}
 
 
-def print_hard(sizes, shared: Path) -> int:
+def print_hard(sizes, shared: Path, only: list[str] | None = None) -> int:
     print("ctui TUI tasks (issue 34): one organ from the seed in its least uniform part (largest 10 mm sd, >= 6 mm "
           "deep); a background click (the leak flag's voxel, else the leak's deepest point) when the proposal leaks")
-    print(f"{'size':>7} {'organ':<13} {'events':>6} {'seconds':>8} {'Dice':>6} {'vol ratio':>9}  seed x,y,z; click")
+    print(f"{'size':>7} {'organ':<13} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
+          f"{'vol ratio':>9}  seed x,y,z; background click")
     for name, img, lab, label in HARD:
+        if only and name not in only:
+            continue
         if not (shared / img).exists():
             print(f"skipped {name}: {shared / img} is missing")
             continue
         for size in sizes:
             with tempfile.TemporaryDirectory() as tmp:
                 r = asyncio.run(hard_session(size, shared / img, shared / lab, label, out_dir=Path(tmp)))
-            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
+            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} "
+                  f"{r['clicks']:>6} {r['typed']:>5} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
                   f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}; "
                   f"{'none' if r['clicked'] is None else ','.join(map(str, r['clicked']))}"
                   f"{'' if r['proposal'] else ' (no proposal: ' + r['failed'][:150] + ')'}{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")

@@ -108,12 +108,10 @@ def object_seed(session: Session) -> tuple[int, int, int] | None:
 
 
 def _idle(ws) -> bool:
-    """Whether nothing runs and nothing waits for a or x; otherwise says so."""
+    """Whether no segmentation runs; otherwise says so. A pending proposal does not block: segmenting
+    again (after a background seed in its leak, a new range, a new option) replaces it, no x first."""
     if ws.jobs.segmenting:
         ws.app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
-        return False
-    if ws.pending.proposal is not None:
-        ws.app.notify("Accept (a) or reject (x) the pending proposal first", severity="warning")
         return False
     return True
 
@@ -131,8 +129,12 @@ def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | N
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
+    replaced = ws.pending.clear() is not None
     ws.jobs.segmentation_started(run)
-    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})", 0, 100)
+    if replaced:
+        ws.refresh_view()  # the old proposal's hatching goes while the new one is computed
+    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})"
+                     f"{'; it replaces the pending proposal' if replaced else ''}", 0, 100)
     ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
                   name="segment")
 
@@ -171,7 +173,8 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
 def start_propagation(ws, direction: str) -> None:
     """``p``/``<``/``>``: segment the current object from its seed (actions.segment); an object drawn by
     hand (no seed) is propagated from its drawn slice."""
-    seed = object_seed(ws.s)
+    # a pending proposal's seed first: p again (after a background seed in its leak) segments from the same seed
+    seed = ws.pending.seed if ws.pending.proposal is not None and ws.pending.seed is not None else object_seed(ws.s)
     if seed is not None:
         start_segment(ws, direction, seed=seed)
         return
@@ -187,6 +190,7 @@ def start_propagation(ws, direction: str) -> None:
         app.notify(str(exc), severity="error")
         return
     run = PropagationRun(ws, direction)
+    ws.pending.clear()
     ws.jobs.segmentation_started(run)
     ws.show_progress(f"Propagating object {s.current} {direction}", 0, s.shape[0])
     ws.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")

@@ -114,6 +114,7 @@ class SegmentPanel(ModalScreen):
 
     def on_mount(self) -> None:
         self.query_one("#fields").styles.max_height = max(self.app.size.height - 6, 3)
+        self.query_one("#method", Select).focus()  # the first field, not the scrolling box around the fields
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "apply":

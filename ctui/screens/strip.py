@@ -47,6 +47,27 @@ def bars(profile: np.ndarray, cols: list[tuple[int, int]]) -> list[int]:
     return [int(v) for v in h]
 
 
+def fitted(text: str, room: int) -> str:
+    """``text`` or a shorter form of it that fits ``room`` cells, never a word cut in half: "proposal · 2 marks:
+    } { marks, C cut, A accept to here" -> "2 marks: } { marks, C cut, A accept to here" -> "2 marks: } {
+    marks" -> "2 marks"; "slice 16: 8242 px" -> "16: 8242 px" -> "8242 px"."""
+    forms = [text]
+    if " · " in text:
+        forms.append(text.split(" · ", 1)[1])
+    last = forms[-1]
+    if "," in last:
+        forms.append(last.split(",", 1)[0])
+    if ":" in last:
+        head, tail = last.split(":", 1)
+        forms += [head.removeprefix("slice ") + ":" + tail, head] if head.startswith("slice ") else [head]
+        if tail.strip().endswith(" px"):
+            forms.append(tail.strip())
+    for f in forms:
+        if len(f) <= room:
+            return f
+    return ""
+
+
 class ReviewStrip(Widget):
     """Two lines: the sparkline and the markers (``▲`` the slice, ``s`` the seed, ``!`` a mark, ``L`` where a
     leak enters)."""
@@ -120,7 +141,8 @@ class ReviewStrip(Widget):
         free = width - len(segs) - 2
         text = self.hint if y == 1 else (f"slice {self.cursor}: {int(profile[self.cursor])} px"
                                          if 0 <= self.cursor < len(profile) else "")
-        if text and free >= 12:
-            segs.append(Segment("  " + text[:free], _DIM))
+        text = fitted(text, free)
+        if text and free >= 5:
+            segs.append(Segment("  " + text, _DIM))
         strip = Strip(segs)
         return strip.extend_cell_length(width, _DIM).crop(0, width)

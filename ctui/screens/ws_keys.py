@@ -374,11 +374,8 @@ def panel_text(ws) -> Text:
     if not compact:
         t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
-    pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
-    if pending is not None and pending.proposal is not None and pending.notes:  # the proposal's warnings (not toasts)
-        t.append("Notes on the proposal\n", style="bold yellow")
-        for note in pending.notes:
-            t.append(f"• {note}\n", style="yellow")
+    if not compact:
+        _notes_text(ws, t)
     tools = ws.edit_tools
     pen = f" {tools.pen} down" if tools.pen else ""
     t.append(f"Mode {s.edit_mode}  brush {mm(s.brush)} mm{pen}\n")
@@ -402,7 +399,18 @@ def panel_text(ws) -> Text:
     _objects_text(ws, t, compact)
     if s.dirty:
         t.append("\n● unsaved changes", style="yellow")
+    if compact:  # 80x24: the objects and their volumes first, the notes after them (the panel scrolls)
+        _notes_text(ws, t, lead="\n")
     return t
+
+
+def _notes_text(ws, t: Text, lead: str = "") -> None:
+    """The pending proposal's warnings (in the panel, not toasts over the image)."""
+    pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
+    if pending is not None and pending.proposal is not None and pending.notes:
+        t.append(f"{lead}Notes on the proposal\n", style="bold yellow")
+        for note in pending.notes:
+            t.append(f"• {note}\n", style="yellow")
 
 
 def _window_text(ws, t: Text) -> None:

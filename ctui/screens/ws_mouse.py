@@ -7,6 +7,7 @@ Mouse (any terminal that reports mouse events: xterm SGR, tmux with ``mouse on``
 left click                     the cursor (and the crosshair of the other planes) moves
                                there; with ``z`` (click fills) on, it fills as Enter; with
                                the brush/eraser down (b / E) it paints a dab
+double click                   segment the current object from there (S at the click)
 left drag                      brush/eraser down: paints (erases) along the drag; after
                                ``y`` (box): the ROI box from press to release (the
                                cursor stays); else the cursor follows
@@ -43,7 +44,7 @@ from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): click = cursor (z: click fills; "
-              "brush down: a dab), drag = paint/erase with the brush down, the ROI box after y; right click or "
+              "brush down: a dab), double click = segment from there (S), drag = paint/erase with the brush down, the ROI box after y; right click or "
               "Ctrl+click = background seed; Shift/Alt or middle drag = pan; wheel = slices, Ctrl+wheel = zoom "
               "(in: on the pointer); "
               "click an object in the side panel to select it, the review strip to go to a slice. "
@@ -322,8 +323,12 @@ class MouseMixin(ToolsMixin):
 
     def on_click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
-        if self._image_view(event) is not None:
+        iv = self._image_view(event)
+        if iv is not None:
             event.prevent_default()  # the press already moved the cursor (no second handler)
+            t = self.edit_tools  # a double click segments from there (S at the cursor its press put there)
+            if event.chain == 2 and event.button == 1 and not (event.ctrl or event.shift or event.meta or t.pen or t.polygon_mode or t.box_corner):
+                self.action_segment_here()
             return
         w = self._under(event)
         if w is not None and w.id == "panel":
@@ -549,7 +554,7 @@ class MouseMixin(ToolsMixin):
         self.refresh_view()
         why = {m.z: m.why for m in self.review_marks()}.get(s.z)
         if why and self.pending.proposal is not None:
-            self.set_status(f"Slice {s.z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks")
+            self.set_status(self._mark_status(s.z, why))  # at a leak's entry: the cursor on the voxel to click
         elif why:
             self.set_status(f"Slice {s.z}: {why}. t: keep the island / scissors on this slice; {{ }} other marks")
 

@@ -291,15 +291,22 @@ class SeedRange:
         rc = self.result
         if rc is None:
             return None
+        width = float(rc.edges[1] - rc.edges[0]) if len(rc.edges) > 1 else 1.0
+        # the ends to a tenth of a bar at most (10.7459..38.9153 -> 11..39): what the panel then says is readable
+        nd = max(0, -int(np.floor(np.log10(width / 10)))) if width > 0 else 3
+
+        def nice(a: float, b: float) -> tuple[float, float]:
+            return float(round(a, nd)), float(round(b, nd))
+
         if bar is None or not 0 <= bar < len(rc.hist):
             self.first_end = None
-            return (float(rc.low), float(rc.high))
+            return nice(float(rc.low), float(rc.high))
         lo, hi = float(rc.edges[bar]), float(rc.edges[bar + 1])
         if self.first_end is None:
             self.first_end = lo
             return None
         first, self.first_end = self.first_end, None
-        return (min(first, lo), max(first + (hi - lo), hi))
+        return nice(min(first, lo), max(first + (hi - lo), hi))
 
     def wants(self, key) -> bool:
         """True when ``key`` is new (its range is to be computed; the old one is forgotten)."""

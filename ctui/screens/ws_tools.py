@@ -17,8 +17,22 @@ EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 
 
 class ToolsMixin:
-    """3D edit actions; the host provides ``s``, ``app``, ``_editable``, ``labels_changed``,
+    """3D edit actions; the host provides ``s``, ``app``, ``pending``, ``_editable``, ``labels_changed``,
     ``set_status`` and ``refresh_view``."""
+
+    def _mark_status(self, z: int, why: str) -> str:
+        """The status line at the pending proposal's marked slice ``z``. Where a leak enters, the cursor goes to
+        the voxel its flag gives as a background seed: ``B`` places it there, ``p`` segments again (no typing)."""
+        leaks = getattr(self.pending.proposal, "leak_entries", None) or []
+        click = next((lk["click"] for lk in leaks if int(lk.get("slice", -1)) == z and "click" in lk), None)
+        if click is None:
+            return f"Slice {z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks"
+        s = self.s
+        s.x, s.y, s.z = (int(v) for v in click)
+        s.clamp()
+        self.refresh_view()
+        return (f"Slice {z}: {why}. The cursor is on that voxel: B makes it a background seed, then p segments "
+                "again (or C cuts here)")
 
     # ------------------------------------------------------------------ 3D edit tools (t menu)
     def _tool(self, fn, msg: str, *, main_body: bool = False) -> None:
