@@ -54,7 +54,7 @@ def _path_pixels(ws, plane: str, size=(240, 240)):
     the plane's view, the view map), drawn by the workspace's own overlay on a blank image."""
     from ctui.screens import cells, planes
     from ctui.screens.vessel_tool import PATH_COLOR
-    from ctui.screens.ws_mouse import draw_overlay
+    from ctui.screens.ws_overlay import draw_overlay
 
     s = ws.s
     pv = planes.plane_view(s.volume, plane)

@@ -25,7 +25,8 @@ from ctui.screens.session import VIEWS, Session
 from ctui.screens.ws_edit import EditMixin
 from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
-from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin, draw_overlay
+from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin
+from ctui.screens.ws_overlay import draw_overlay
 from ctui.screens.vessel_tool import VESSEL_BINDINGS, VesselMixin
 from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
 
