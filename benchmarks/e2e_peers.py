@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the series and the kidney are made in this process with this tree's ctui
 
 _VTK_WINDOW = r"""
 def window(size):
@@ -187,6 +188,11 @@ from pydicom.sr.codedict import codes
 series, mask_path, out = sys.argv[1], sys.argv[2], sys.argv[3]
 dss = [pydicom.dcmread(os.path.join(series, n)) for n in os.listdir(series) if not n.startswith(".")]
 dss.sort(key=lambda d: float(d.ImagePositionPatient[2]))
+for d in dss:  # type 2 attributes highdicom copies (ctui's writer leaves out what it does not know)
+    for kw in ("PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyDate", "StudyTime",
+               "ReferringPhysicianName", "AccessionNumber", "StudyID"):
+        if kw not in d:
+            setattr(d, kw, "")
 mask = sitk.GetArrayFromImage(sitk.ReadImage(mask_path)) > 0
 desc = hd.seg.SegmentDescription(
     segment_number=1, segment_label="kidney", segmented_property_category=codes.SCT.Organ,
