@@ -53,3 +53,19 @@ def test_frames_packed_one_by_one_equal_the_whole_stack(ny, nx):
     assert _packed(seg, frames) == want + b"\0" * (len(want) % 2)
     four = np.stack([seg == 1, seg == 2], axis=-1)
     assert _packed(four, frames) == want + b"\0" * (len(want) % 2)
+
+
+def test_stl_weld_equals_numpy_unique():
+    """``_weld_triangles`` (lexsort) gives ``np.unique(axis=0)``'s vertices and faces, ties and
+    -0.0 == 0.0 included."""
+    from ctui.engine.io.meshes import _weld_triangles
+
+    rng = np.random.default_rng(3)
+    tri = rng.integers(-3, 3, (400, 3, 3)).astype(np.float32)
+    tri[0, 0] = (-0.0, 0.0, 1.0)
+    tri[1, 1] = (0.0, -0.0, 1.0)
+    u, inv = np.unique(tri.reshape(-1, 3), axis=0, return_inverse=True)
+    v, f = _weld_triangles(tri)
+    assert v.dtype == np.float32 and f.dtype == np.int32
+    assert np.array_equal(v, u) and np.array_equal(f, inv.reshape(-1, 3))
+    assert np.array_equal(v[f], tri)
