@@ -283,9 +283,11 @@ def _usable(p: Path, mesh: Mesh) -> Mesh:
     v, f = mesh.vertices, mesh.faces
     if len(f) == 0:
         raise FormatError(f"{p}: no triangles found")
-    for i in range(0, len(f), 1 << 20):
-        t = v[f[i:i + (1 << 20)]].astype(np.float64)
+    i, step = 0, 1 << 12  # a first small chunk: nearly always it holds a triangle with an area
+    while i < len(f):
+        t = v[f[i:i + step]].astype(np.float64)
         if np.any(np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).max(axis=1) > 0):
             return mesh
+        i, step = i + step, 1 << 20
     raise FormatError(f"{p}: every one of its {len(f)} triangles is degenerate (zero area): no surface to measure "
                       "or render")
