@@ -129,3 +129,15 @@ def test_plan_chooses_the_cache_and_the_command_gives_the_in_memory_result(serie
     monkeypatch.setenv("CTUI_MEMORY", str(need - sb // 2))
     rc, out, _ = cli_streams(["info", str(series)])
     assert rc == 0 and "mesh cache" in out
+
+
+def test_tui_load_goes_through_the_cache_and_says_so(series, monkeypatch):
+    from ctui.screens.session import load_volume
+
+    sb = 14 * 48 * 40 * 2
+    ref = load(series)
+    assert "memory_plan" not in load_volume(str(series)).meta  # in memory: nothing to say
+    monkeypatch.setenv("CTUI_MEMORY", str(memplan.estimate("open", sb) - sb // 2))
+    vol = load_volume(str(series))
+    assert isinstance(vol.data, np.memmap) and np.array_equal(np.asarray(vol.data), ref.data)
+    assert vol.meta["memory_plan"].startswith("memory plan: cache: open needs")
