@@ -18,6 +18,12 @@ Run: ``python3 benchmarks/end_to_end.py [--shape 300,512,512] [--repeat 3] [--le
 
 Ratios printed: ctui / peer (goal <= 1.2), cold / warm.
 
+``--peers`` (issue 40) runs every whole command beside the script a user would write instead
+(render of a big STL, measure, segment, info, mesh --iso, MIP, DVR, SEG export, DICOM load),
+alternating, warm and cold: see ``benchmarks/e2e_peers.py``::
+
+    nice -n 10 python3 benchmarks/end_to_end.py --peers --repeat 3 [--only render,info]
+
 ``--suite`` (issue 27) prints instead, in one run, the wall and CPU seconds (user + system of
 the process and its children, ``os.wait4``: what a loaded machine inflates least) of fresh
 processes for every command a user meets: ``ctui --help``, ``ctui info``, ``ctui mesh --iso``
@@ -145,7 +151,17 @@ def main() -> None:
     ap.add_argument("--suite", action="store_true", help="every command, wall and CPU seconds (issue 27)")
     ap.add_argument("--base", default=None, help="with --suite: an older tree run beside this one (before/after)")
     ap.add_argument("--no-tui", action="store_true", help="with --suite: skip the TUI rows")
+    ap.add_argument("--peers", action="store_true", help="every command beside its peer script, warm and cold "
+                    "(issue 40; benchmarks/e2e_peers.py)")
+    ap.add_argument("--only", default="", help="with --peers: rows whose name contains one of these (comma list)")
+    ap.add_argument("--verbose", action="store_true", help="with --peers: each side's last output line")
     args = ap.parse_args()
+    if args.peers:
+        from e2e_peers import run_peers
+        from e2e_suite import make_kidney
+
+        run_peers(args, make_series=make_series, make_kidney=make_kidney, peer_mesh=PEER)
+        return
     if args.suite:
         from e2e_suite import run_suite
 

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the series are written in this process with this tree's ctui
 TREE = ROOT
 SPACING = (1.0, 0.7, 0.7)  # (dz, dy, dx) mm
 ORIGIN = (-180.0, -180.0, -150.0)  # LPS mm of voxel (0, 0, 0)

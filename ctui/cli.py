@@ -103,6 +103,9 @@ def _memory_plan(args: argparse.Namespace) -> None:
     if plan.mode == "overview":
         args.downsample = ",".join([str(plan.downsample)] * 3)
         print(plan.summary(), file=sys.stderr)
+    if plan.mode == "cache":  # the voxels memory-mapped from the cache file (io/voxcache)
+        args.voxel_cache = True
+        print(plan.summary(), file=sys.stderr)
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -43,11 +43,18 @@ def test_decide_memory_overview_refuse():
     sb = 2000 * 512 * 512 * 2
     roomy = memplan.decide("segment", shape, limit=64 << 30)
     assert roomy.mode == "memory" and roomy.need_bytes == memplan.estimate("segment", sb) < 64 << 30
-    tight = memplan.decide("segment", shape, limit=2 << 30, source="memory option")
-    assert tight.mode == "refuse" and tight.need_bytes > 2 << 30
+    # fits only with the voxels memory-mapped from the cache (not under an address-space limit)
+    cached = memplan.decide("segment", shape, limit=2 << 30, source="memory option")
+    assert cached.mode == "cache" and cached.need_bytes == memplan.estimate("segment", sb) - sb <= 2 << 30
+    assert cached.cache and "memory-mapped from the cache" in cached.reason
+    assert memplan.decide("segment", shape, limit=2 << 30,
+                          source="the address-space limit (RLIMIT_AS, less 700 MB the libraries reserve)").mode == "refuse"
+    tight = memplan.decide("segment", shape, limit=int(1.2 * (1 << 30)), source="memory option")
+    assert tight.mode == "refuse" and tight.need_bytes > 1.2 * (1 << 30)
     assert "downsample=(2, 2, 2)" in tight.reason and "--crop 0," in tight.reason
     zmax = int(tight.fits[-1].split("at most ")[1].split()[0])
-    assert memplan.estimate("segment", zmax * 512 * 512 * 2) <= 2 << 30 < memplan.estimate("segment", (zmax + 1) * 512 * 512 * 2)
+    lim = int(1.2 * (1 << 30))
+    assert memplan.estimate("segment", zmax * 512 * 512 * 2) <= lim < memplan.estimate("segment", (zmax + 1) * 512 * 512 * 2)
     # a volume render may use an overview; a surface render of the same series may not
     ov = memplan.decide("render", shape, limit=2 << 30, overview=True)
     assert ov.mode == "overview" and ov.downsample == 2 and ov.need_bytes <= 2 << 30
@@ -125,10 +132,10 @@ def test_tall_series_segments_and_meshes_under_an_address_space_limit(tall, tmp_
 
 @pytest.mark.slow
 def test_too_little_memory_is_refused_in_one_line_naming_what_fits(tall, tmp_path):
-    r = _ctui(["segment", tall, "--seed", "128,179,300", "--range", "200:3000", "--mode", "3d", "--memory", "500M",
-               "--project", tmp_path / "x.ctui"])
+    r = _ctui(["segment", tall, "--seed", "128,179,300", "--range", "200:3000", "--mode", "3d", "--memory", "450M",
+               "--project", tmp_path / "x.ctui"])  # (500M: it fits with the voxels memory-mapped from the cache)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
-    assert "500.0 MB is allowed by the memory option" in r.stderr and "--crop 0," in r.stderr
+    assert "450.0 MB is allowed by the memory option" in r.stderr and "--crop 0," in r.stderr
     assert not (tmp_path / "x.ctui").exists()
     r = _ctui(["render", tall, "--mode", "mip", "--out", tmp_path / "m.png"], env={"CTUI_MEMORY": "600M"})
     if r.returncode == 0:  # EGL present: the render ran from an overview and said so

@@ -34,7 +34,8 @@ def load_kwargs(args: argparse.Namespace) -> dict:
                         shape=getattr(args, "shape", None), dtype=getattr(args, "dtype", None),
                         offset=getattr(args, "offset", None), crop=getattr(args, "crop", None),
                         downsample=getattr(args, "downsample", None),
-                        resample=not getattr(args, "no_resample", False), memory=getattr(args, "memory", None))
+                        resample=not getattr(args, "no_resample", False), memory=getattr(args, "memory", None),
+                        cache=getattr(args, "voxel_cache", False))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -97,6 +98,12 @@ def _lines(vol, d: dict) -> list[str]:
             lines.append(f"  {sk['file']}: {sk['reason']}")
     if len(objects) > 50 or len(skipped) > 50:
         lines.append(f"  ... and {max(0, len(objects) - 50) + max(0, len(skipped) - 50)} more (--json lists all)")
+    plan = d.get("memory_plan") or {}
+    modes = [f"{c} {plan[c]['mode']}" for c in ("open", "segment", "mesh", "render") if c in plan]
+    if modes:  # "cache": the voxels memory-mapped from the cache folder (ctui info --json says why)
+        from ctui.engine.core.limits import fmt_bytes
+
+        lines.append(f"memory      {', '.join(modes)} ({fmt_bytes(plan['limit_bytes'])}, {plan['limit_source']})")
     for w in vol.warnings:
         lines.append(f"warning     {w}")
     return lines

@@ -38,10 +38,21 @@ def sample_source() -> str:
 
 
 def load_volume(path: str | None, *, progress=None, **options: Any) -> Volume:
-    """Load a series with ``ctui.engine.io.series.load`` (the bundled sample when None)."""
+    """Load a series with ``ctui.engine.io.series.load`` (the bundled sample when None), as the
+    memory plan of ``open`` says: in memory, or memory-mapped from the voxel cache (then
+    ``meta["memory_plan"]`` is the plan's line, for the status line); refused in one line."""
     if path is None:
-        path = sample_source()
-    return loaders.load(path, progress=progress, **options)
+        return loaders.load(sample_source(), progress=progress, **options)
+    from ctui.engine.actions.opened import memory_plan  # (not at startup)
+    from ctui.engine.core.errors import CtuiError
+
+    plan = memory_plan("open", path, **options)
+    if plan.mode == "refuse":
+        raise CtuiError(plan.reason, path=path, option="memory")
+    vol = loaders.load(path, progress=progress, **dict(options, cache=True) if plan.mode == "cache" else options)
+    if plan.mode == "cache":
+        vol.meta["memory_plan"] = plan.summary()
+    return vol
 
 
 class PanelOptions(TypedDict, total=False):

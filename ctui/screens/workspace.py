@@ -94,6 +94,8 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
 
     def on_mount(self) -> None:
         self.refresh_view()
+        if self.s.volume.meta.get("memory_plan"):  # not in memory: say how the voxels are held
+            self.set_status(str(self.s.volume.meta["memory_plan"]))
 
     # ------------------------------------------------------------------ geometry of the views
     @property

@@ -24,6 +24,7 @@ from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
 from ctui.engine.io import memplan
 from ctui.engine.io.imports import is_label_file, label_kind, read_label_file
+from ctui.engine.io.labels import present_ids
 from ctui.engine.io.memplan import MemoryPlan
 from ctui.engine.io.meshes import load_mesh
 from ctui.engine.io.project import Project, load_project, source_load_options, voxel_hash
@@ -78,8 +79,7 @@ class Opened:
         """Ids present in the labels, ascending."""
         if self.labels is None:
             return []
-        counts = np.bincount(np.asarray(self.labels, np.uint8).ravel(), minlength=256)
-        ids = {int(i) for i in np.flatnonzero(counts[1:]) + 1}
+        ids = set(present_ids(self.labels))
         return sorted(ids | {int(k) for k, m in self.masks.items() if m.any()})  # + segments hidden by overlaps
 
     def pick_objects(self, requested: int | Sequence[int] | None = None) -> list[int]:

@@ -93,8 +93,9 @@ def parse_pair(text: Any, option: str, *, integer: bool = False, form: str = "LO
 
 def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, dtype: Any = None,
                  offset: Any = None, crop: Any = None, downsample: Any = None, resample: bool = True,
-                 memory: Any = None) -> dict:
-    """Keyword arguments for ``ctui.engine.io.series.load`` from option text. ``memory``
+                 memory: Any = None, cache: bool = False) -> dict:
+    """Keyword arguments for ``ctui.engine.io.series.load`` from option text. ``cache``: load
+    through the memory-mapped voxel cache (``io/voxcache``; the memory plan's "cache"). ``memory``
     (``4G``, ``512M``, bytes) -> ``memory_limit`` bytes: the loader's and the memory plan's
     limit (``io/memplan``; else ``CTUI_MEMORY``, else what is available)."""
     kw: dict[str, Any] = {}
@@ -123,4 +124,6 @@ def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, 
         from ctui.engine.io.memplan import parse_memory  # (this module is imported by `ctui --help`)
 
         kw["memory_limit"] = parse_memory(memory)
+    if cache:
+        kw["cache"] = True
     return kw

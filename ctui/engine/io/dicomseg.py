@@ -43,6 +43,7 @@ from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.privacy import is_identifying, scrub_dataset_text
 from ctui.engine.core.progress import Progress, report
 from ctui.engine.io.dicomrefs import require_planes, require_references, write_fault
+from ctui.engine.io.labels import present_ids
 from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 SEG_SOP_CLASS = "1.2.840.10008.5.1.4.1.1.66.4"
@@ -209,7 +210,7 @@ def _objects_in(labels: np.ndarray, objects: Sequence[dict] | None,
                 masks: dict[int, np.ndarray] | None = None) -> list[dict]:
     """{id, name, color} of the objects present in ``labels`` or in ``masks`` (objects whose own
     mask overlaps others, possibly hidden in the label map), ascending ids."""
-    present = {int(i) for i in np.flatnonzero(np.bincount(labels.ravel(), minlength=256)) if i != 0}
+    present = set(present_ids(labels))
     present |= {int(k) for k, m in (masks or {}).items() if m.any()}
     info = {int(o["id"]): o for o in (objects or []) if "id" in o}
     out = []
@@ -270,7 +271,9 @@ def write_seg(path: str | os.PathLike, labels: np.ndarray, sources: Sequence[Any
         lut = np.zeros(256, np.uint8)
         for n, o in enumerate(objs, start=1):
             lut[o["id"]] = n
-        seg_array = lut[lab]
+        # ids 1..N already are the segment numbers (objs: every id present): no relabelled copy
+        same = all(o["id"] == n for n, o in enumerate(objs, start=1)) and lab.dtype == np.uint8
+        seg_array = lab if same else lut[lab]
     if len(sources) == 1 and seg_array.shape[0] > 1:
         seg_array = _multiframe_order(seg_array, sources[0])
     report(progress, 0.2, 1.0, "DICOM-SEG: frames")

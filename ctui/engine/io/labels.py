@@ -45,6 +45,17 @@ MAX_VOXELS = 2**31 - 1
 LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
+def present_ids(labels: np.ndarray) -> list[int]:
+    """The label values other than 0 in a (z, y, x) uint8 label volume, ascending. Counted 4 M
+    voxels at a time: ``np.bincount`` copies its input to int64 first (8 bytes a voxel: 4x the
+    series for a whole volume, the peak of ``measure`` and ``export``)."""
+    flat = np.asarray(labels, np.uint8).reshape(-1)
+    seen = np.zeros(256, bool)
+    for i in range(0, flat.size, 1 << 22):
+        seen |= np.bincount(flat[i:i + (1 << 22)], minlength=256) > 0
+    return [int(v) for v in np.flatnonzero(seen[1:]) + 1]
+
+
 def _kind(path: Path) -> str:
     name = path.name.lower()
     if name.endswith(".seg.nrrd"):

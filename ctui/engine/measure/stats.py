@@ -216,20 +216,21 @@ def object_stats(
     lab = np.asarray(labels)
     if lab.ndim != 3:
         raise CtuiError(f"expected a 3D label volume, got shape {lab.shape}")
-    mask = lab.astype(bool) if lab.dtype == bool else lab == object_id
-    n = int(np.count_nonzero(mask))
-    if n == 0:
+    box = _bounds(lab, object_id)  # the object's box, found slab by slab: no whole-volume mask
+    if box is None:
         raise CtuiError(f"object {object_id} is empty")
+    lo, hi = box
+    mask = _mask(lab[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1], object_id)  # within the box
+    n = int(np.count_nonzero(mask))
     sp = np.asarray(spacing, dtype=np.float64)
     vox_mm3 = float(np.prod(sp))
     nz = np.nonzero(mask)
-    lo = np.array([int(i.min()) for i in nz])
-    hi = np.array([int(i.max()) for i in nz])
-    centroid = index_to_mm(np.array([i.mean() for i in nz]), spacing=sp, origin=origin, direction=direction)
+    centroid = index_to_mm(np.array([i.mean() for i in nz]) + lo, spacing=sp, origin=origin, direction=direction)
+    del nz
     corners = np.array([[a, b, c] for a in (lo[0] - 0.5, hi[0] + 0.5) for b in (lo[1] - 0.5, hi[1] + 0.5)
                         for c in (lo[2] - 0.5, hi[2] + 0.5)])
     cxyz = index_to_mm(corners, spacing=sp, origin=origin, direction=direction)
-    pa = principal_axes(mask[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1], spacing=sp, direction=direction)
+    pa = principal_axes(mask, spacing=sp, direction=direction)
     out: dict[str, Any] = {
         "object": int(object_id),
         "voxels": n,
@@ -253,9 +254,9 @@ def object_stats(
     elif mesh:
         m = 3  # margin so the surface closes inside the crop
         sl = tuple(slice(max(a - m, 0), b + m + 1) for a, b in zip(lo, hi))
-        sub = mask[sl]
+        sub = _mask(lab[sl], object_id)
         start = np.array([s.start for s in sl])
-        pad = [(m - (a - s), m - (min(b + m + 1, N) - b - 1)) for a, b, s, N in zip(lo, hi, start, mask.shape)]
+        pad = [(m - (a - s), m - (min(b + m + 1, N) - b - 1)) for a, b, s, N in zip(lo, hi, start, lab.shape)]
         pad = [(max(p0, 0), max(p1, 0)) for p0, p1 in pad]
         if any(p for pp in pad for p in pp):
             sub = np.pad(sub, pad)
@@ -276,6 +277,28 @@ def object_stats(
         out["warnings"] += st["warnings"]
         out["mesh"] = surf
     return out
+
+
+def _mask(lab: np.ndarray, object_id: int) -> np.ndarray:
+    return lab.astype(bool) if lab.dtype == bool else lab == object_id
+
+
+def _bounds(lab: np.ndarray, object_id: int, slab: int = 32) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi) voxel indices (z, y, x), inclusive, of the object's voxels, or None when it has
+    none; ``slab`` slices at a time."""
+    zs, ys, xs = [], np.zeros(lab.shape[1], bool), np.zeros(lab.shape[2], bool)
+    for z0 in range(0, lab.shape[0], slab):
+        m = _mask(lab[z0:z0 + slab], object_id)
+        rows = m.any(axis=2)
+        hit = np.flatnonzero(rows.any(axis=1))
+        if hit.size:
+            zs += [z0 + int(hit[0]), z0 + int(hit[-1])]
+            ys |= rows.any(axis=0)
+            xs |= m.any(axis=1).any(axis=0)
+    if not zs:
+        return None
+    y, x = np.flatnonzero(ys), np.flatnonzero(xs)
+    return np.array([min(zs), int(y[0]), int(x[0])]), np.array([max(zs), int(y[-1]), int(x[-1])])
 
 
 def label_stats(labels: np.ndarray, *, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), direction=None,

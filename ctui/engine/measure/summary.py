@@ -149,6 +149,10 @@ def measure_object(
         "path_mm": None,
         "rows": [],
     }
+    if image is None and path is None:  # volumes and area only: no whole-volume mask
+        if between is not None:
+            raise CtuiError("a volume between planes needs a path")
+        return out
     lab = np.asarray(labels)
     mask = lab.astype(bool) if lab.dtype == bool else lab == object_id
     if image is not None:

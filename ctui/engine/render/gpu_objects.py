@@ -8,22 +8,39 @@ import weakref
 
 import numpy as np
 
-from ctui.engine.core.meshdata import face_areas, signed_volume_mm3
+from ctui.engine.core.meshdata import face_cross, signed_volume_mm3
 from ctui.engine.render.scene import mesh_bounds
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32 for a triangle mesh."""
-    v = np.asarray(vertices, np.float64)
-    f = np.asarray(faces, np.int64)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 * area
+    return _normals_of(np.asarray(vertices, np.float64), np.asarray(faces, np.int64), _face_terms(vertices, faces))
+
+
+def _face_terms(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(ax, ay, az, nx, ny, nz): each face's first vertex and its edges' cross product (length
+    twice its area), by components (``face_cross``: 3x faster than np.cross on rows, the same
+    values), computed once for the normals, the mean area and the orientation."""
+    vt = np.ascontiguousarray(np.asarray(vertices, np.float64).T)
+    return face_cross(vt, np.asarray(faces, np.int64))
+
+
+def _normals_of(v: np.ndarray, f: np.ndarray, terms: tuple[np.ndarray, ...]) -> np.ndarray:
     n = np.zeros((len(v), 3))
+    idx = f.ravel()
     for k in range(3):
-        idx = f.ravel()
-        n[:, k] = np.bincount(idx, weights=np.repeat(fn[:, k], 3), minlength=len(v))
+        n[:, k] = np.bincount(idx, weights=np.repeat(terms[3 + k], 3), minlength=len(v))
     ln = np.linalg.norm(n, axis=1, keepdims=True)
     ln[ln == 0] = 1.0
     return (n / ln).astype(np.float32)
+
+
+def _signed_volume(v: np.ndarray, terms: tuple[np.ndarray, ...]) -> float:
+    """Enclosed volume (Gauss) from the face terms, about the vertices' mean (well conditioned)."""
+    if not len(terms[0]):
+        return 0.0
+    m = v.mean(axis=0)
+    return float(sum((terms[3 + k] * (terms[k] - m[k])).sum() for k in range(3)) / 6.0)
 
 
 class MeshGPU:
@@ -36,9 +53,10 @@ class MeshGPU:
             # faces ordered by their lowest vertex index: neighbouring triangles share
             # vertices in the vertex cache (llvmpipe: ~15% less CPU on a 1M mesh)
             f = f[np.argsort(f.min(axis=1), kind="stable")]
+        terms = _face_terms(v, f)
         nrm = mesh.normals
         if nrm is None or np.shape(nrm) != v.shape:
-            nrm = vertex_normals(v, f)
+            nrm = _normals_of(v, f, terms)
         inter = np.empty((len(v), 6), np.float32)
         inter[:, :3] = v
         inter[:, 3:] = nrm
@@ -48,8 +66,9 @@ class MeshGPU:
         self.vao_v = ctx.vertex_array(progs["surface_v"], [(self.vbo, "3f 3f", "in_pos", "in_normal")], self.ibo)
         self.vao_depth = ctx.vertex_array(progs["depth"], [(self.vbo, "3f 12x", "in_pos")], self.ibo)
         self.nbytes = inter.nbytes + f.nbytes
-        self.mean_area = float(face_areas(v, f).mean()) if len(f) else 0.0
-        self.cull = cull_mode(v, f)
+        self.mean_area = float(0.5 * np.sqrt(terms[3] ** 2 + terms[4] ** 2 + terms[5] ** 2).mean()) if len(f) else 0.0
+        self.cull = cull_mode(v, f, volume=_signed_volume(v.astype(np.float64), terms))
+        del terms
         self.lo, self.hi = mesh_bounds(mesh)
         self.ref = weakref.ref(mesh.vertices) if isinstance(mesh.vertices, np.ndarray) else None
         self.fref = weakref.ref(mesh.faces) if isinstance(mesh.faces, np.ndarray) else None
@@ -59,21 +78,27 @@ class MeshGPU:
             o.release()
 
 
-def cull_mode(v: np.ndarray, f: np.ndarray) -> str | None:
+def cull_mode(v: np.ndarray, f: np.ndarray, *, volume: float | None = None) -> str | None:
     """"back" for a closed, consistently oriented mesh with outward faces (its back
     faces can never be seen from outside), "front" when its faces point inwards,
-    None for open or inconsistent meshes (both sides may show)."""
+    None for open or inconsistent meshes (both sides may show). ``volume``: the mesh's
+    signed volume when known."""
     if len(f) == 0:
         return None
     n = np.int64(len(v))
     f = f.astype(np.int64)
     a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
-    fwd = np.sort(a * n + b)
-    if np.any(fwd[1:] == fwd[:-1]):
-        return None  # a directed edge used twice: inconsistent or non-manifold
-    if not np.array_equal(fwd, np.sort(b * n + a)):
-        return None  # an edge without its twin: open surface
-    vol = signed_volume_mm3(v, f)
+    # each directed edge (a, b) as 2 x (its undirected key) + (a < b), sorted once: closed and
+    # consistently oriented <=> the keys come in pairs 2u, 2u + 1 (each edge once each way)
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    key <<= 1
+    key += a < b
+    key.sort()
+    if len(key) % 2 or np.any(key[0::2] & 1) or not np.array_equal(key[0::2] + 1, key[1::2]):
+        return None  # an edge used twice the same way (inconsistent, non-manifold) or without its twin (open)
+    if len(key) > 2 and not np.all(key[2::2] > key[1:-1:2]):
+        return None  # an undirected edge of more than two faces
+    vol = signed_volume_mm3(v, f) if volume is None else volume
     return "back" if vol > 0 else "front"
 
 

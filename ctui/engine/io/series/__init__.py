@@ -144,6 +144,7 @@ def load(
     resample: bool = True,
     memory_limit: int | None = None,
     headers_only: bool = False,
+    cache: bool = False,
     **options: Any,
 ) -> Volume:
     """Load a series, image stack or raw volume.
@@ -180,6 +181,8 @@ def load(
     headers_only : bool
         DICOM: describe the volume from the headers and three sample slices (see
         :func:`inspect`); other inputs load whole.
+    cache : bool
+        Through the memory-mapped voxel cache (:mod:`ctui.engine.io.voxcache`): ``data`` maps a file.
 
     Returns
     -------
@@ -196,22 +199,19 @@ def load(
     """
     if options:
         raise CtuiError(f"unknown load option(s): {', '.join(sorted(options))}", path=path)
+    if cache and not headers_only:
+        return _through_cache(path, series=series, spacing=spacing, shape=shape, dtype=dtype, progress=progress,
+                              crop=crop, downsample=downsample, offset=offset, resample=resample)
     single, files = _as_paths(path)
     common = dict(crop=crop, downsample=downsample, progress=progress, memory_limit=memory_limit)
     skipped: list[dict[str, str]] = []
     if files is None:
         p = single
         assert p is not None
-        if not p.exists():
-            if p.is_symlink():
-                raise LoadError("broken or looping symbolic link", path=p)
-            raise LoadError("no such file or folder", path=p)
+        _check_exists(p)
         if p.is_dir():
             base = p
-            files = list_files(p, skipped=skipped)
-            if not files:
-                raise LoadError("empty folder: no files to load" if not skipped else
-                                f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
+            files = _folder_files(p, skipped)
         else:
             base = p.parent
             vol = _single_file(p, headers_only=headers_only, shape=shape, dtype=dtype, spacing=spacing,
@@ -230,6 +230,28 @@ def load(
     return _finite(_load_dicom(files, base=base, path_label=path_label, skipped=skipped, series=series,
                                spacing=spacing, resample=resample, headers_only=headers_only, progress=progress,
                                common=common))
+
+
+def _through_cache(path: Any, **options: Any) -> Volume:
+    from ctui.engine.io.voxcache import load_cached  # only for series that do not fit in memory
+
+    return load_cached(path, loader=load, **options)
+
+
+def _check_exists(p: Path) -> None:
+    if not p.exists():
+        if p.is_symlink():
+            raise LoadError("broken or looping symbolic link", path=p)
+        raise LoadError("no such file or folder", path=p)
+
+
+def _folder_files(p: Path, skipped: list[dict[str, str]]) -> list[Path]:
+    """The files of a folder given to :func:`load`; a one-line LoadError when there are none."""
+    files = list_files(p, skipped=skipped)
+    if not files:
+        raise LoadError("empty folder: no files to load" if not skipped else
+                        f"no regular files to load ({skipped[0]['file']}: {skipped[0]['reason']})", path=p)
+    return files
 
 
 def _finite(vol: Volume) -> Volume:

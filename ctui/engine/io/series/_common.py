@@ -3,6 +3,7 @@ the memory check, privacy scrubbing and the parallel slice decoder."""
 
 from __future__ import annotations
 
+import contextvars
 import os
 import re
 import stat
@@ -23,6 +24,16 @@ from ctui.engine.core.limits import fmt_bytes
 IMAGE_SUFFIXES = {".png", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
 _NATURAL = re.compile(r"(\d+)")
 MAX_FILES = 200_000  # bound on a folder walk (symlink loops, huge trees)
+#: how the loaders allocate their output array: None = ``np.empty``; the voxel cache
+#: (``io/voxcache``) sets a function (shape, dtype) -> a memory-mapped ``.npy``
+ALLOCATOR: contextvars.ContextVar[Callable[[tuple, Any], np.ndarray] | None] = contextvars.ContextVar(
+    "ctui_allocator", default=None)
+
+
+def allocate(shape: Sequence[int], dtype: Any) -> np.ndarray:
+    """The loaders' output array (uninitialised): ``np.empty``, or the voxel cache's file."""
+    alloc = ALLOCATOR.get()
+    return np.empty(tuple(shape), dtype=dtype) if alloc is None else alloc(tuple(int(v) for v in shape), dtype)
 
 
 def natural_key(s: str) -> tuple:

@@ -59,7 +59,8 @@ from ctui.engine.core.assumptions import Assumption, dropped_share_error
 from ctui.engine.core.errors import LoadError
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window
-from ctui.engine.io.series._common import Plan, check_memory, make_plan, rel, run_parallel, scrub_obj, to_grey
+from ctui.engine.io.series._common import (Plan, allocate, check_memory, make_plan, rel, run_parallel, scrub_obj,
+                                           to_grey)
 from ctui.engine.io.series._common import _safe
 from ctui.engine.io.series.dicom_geometry import GridPlan, _dominant, _geometry, apply_grid, plan_grid
 from ctui.engine.io.series.dicom_headers import (
@@ -282,7 +283,7 @@ def load_series(
                           resample=resample, spacing=spacing, memory_limit=memory_limit, dtype=_dtype)
     sorted_frames, plan, zsel = prep.frames, prep.plan, prep.zsel
     f0 = sorted_frames[0]
-    out = np.empty(plan.out_shape(prep.full_shape), dtype=prep.dtype)
+    out = allocate(plan.out_shape(prep.full_shape), prep.dtype)
     overflow: list[int] = []
     full_plane = plan.y == slice(0, f0.rows, 1) and plan.x == slice(0, f0.cols, 1)
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
-from ctui.engine.io.series._common import Plan, check_memory, make_plan, natural_key, rel, run_parallel
+from ctui.engine.io.series._common import Plan, allocate, check_memory, make_plan, natural_key, rel, run_parallel
 from ctui.engine.io.series.stacks import _finish, parse_dtype, parse_shape, parse_spacing
 
 
@@ -46,7 +46,7 @@ def _read_planned(full: tuple[int, int, int], native: np.dtype, reader: Callable
     plan = make_plan(full, crop=crop, downsample=downsample, path=path)
     oshape = plan.out_shape(full)
     check_memory(int(np.prod(oshape)) * native.itemsize, shape=oshape, path=path, limit=memory_limit)
-    out = np.empty(oshape, dtype=native)
+    out = allocate(oshape, native)
     zsel = list(range(*plan.z.indices(full[0])))
     return out, plan, zsel, _read_slices_into(out, reader, zsel, plan, progress)
 

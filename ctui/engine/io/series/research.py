@@ -23,7 +23,7 @@ import numpy as np
 from ctui.engine.core.assumptions import Assumption
 from ctui.engine.core.errors import CtuiError, LoadError
 from ctui.engine.core.volume import Volume
-from ctui.engine.io.series._common import check_memory, checked_axes, make_plan
+from ctui.engine.io.series._common import allocate, check_memory, checked_axes, make_plan
 from ctui.engine.io.series.nrrd_data import HEADER_LIMIT, header_end, read_payload, regular_file
 from ctui.engine.io.series.raw import load_raw
 from ctui.engine.io.series.stacks import parse_spacing
@@ -210,7 +210,7 @@ def _stream_nifti(path: Path, nib: Any, proxy: Any, dt: np.dtype, full: tuple[in
     as_int = scaled and dt.kind in "iu" and _integral(proxy.slope) and _integral(proxy.inter)
     out_dt = np.dtype(np.int16) if as_int else np.dtype(np.float32) if scaled or dt.kind == "f" else dt.newbyteorder("=")
     check_memory(int(np.prod(oshape)) * out_dt.itemsize, shape=oshape, path=path, limit=memory_limit)
-    out = np.empty(oshape, dtype=out_dt)
+    out = allocate(oshape, out_dt)
     zsel = range(*plan.z.indices(nz))
     zstop = max(zsel) + 1 if len(zsel) else 0
     buf = np.empty(ny * nx, dtype=dt)
