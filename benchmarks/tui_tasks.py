@@ -423,8 +423,8 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
     return out
 
 
-MR_BRAIN = Path(__file__).resolve().parents[2] / "shared" / "data" / "itksnap_brain_mr"
 
+MR_BRAIN = Path(__file__).resolve().parents[2] / "shared" / "data" / "itksnap_brain_mr"
 
 def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
     """The voxel (z, y, x) of ``mask`` farthest from its surface (the seed a person picks in the middle)."""
@@ -432,200 +432,6 @@ def deepest(mask: np.ndarray, spacing) -> tuple[int, int, int]:
 
     dt = ndimage.distance_transform_edt(np.pad(mask, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
     return tuple(int(v) for v in np.unravel_index(int(np.argmax(dt)), mask.shape))
-
-
-async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarray, name: str, *,
-                        out_dir: Path, use_range: bool = False, png: Path | None = None) -> dict:
-    """One structure as :func:`session` does an organ (its deepest voxel as the seed, the TUI's defaults;
-    ``use_range``: its 5-95th percentile range typed first), then Ctrl+S and Enter; Dice of the saved
-    object, events split by kind (keys, clicks, typed)."""
-    from ctui.engine.actions.project import load_project
-    from ctui.screens import graphics
-    from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import wait_for, wait_workspace
-
-    graphics.use_graphics("halfblock")
-    os.chdir(out_dir)
-    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
-    app = CtuiApp(str(image), autosave_s=1e9)
-    async with app.run_test(size=size) as pilot:
-        await wait_workspace(pilot, app)
-        await pilot.pause()
-        s = app.session
-        c = Counter(pilot)
-        vals = s.volume.data[truth_mask]
-        rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95))) if use_range else None
-        if name == "lateral_ventricles" and not use_range:
-            row = await _dark_structure(c, app, name, truth_mask, png)
-        else:
-            row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
-                               review=False, rng=rng)
-        n_save = c.n
-        await c.press("ctrl+s")
-        await pilot.pause()
-        await c.press("enter")
-        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
-                       what="the saved project")
-        row.update(save_events=c.n - n_save, clicks=c.clicks, typed=c.typed, errors=list(app.internal_errors))
-        proj = s.project_path
-    got = load_project(proj).labels == row["object"]
-    row["dice"] = dice(got, truth_mask)
-    row["volume_ratio"] = float(got.sum()) / max(int(truth_mask.sum()), 1)
-    return row
-
-
-def _histogram_bars(rc) -> tuple[int, int]:
-    """The two bars of the side panel's histogram a person picks for a dark structure in brighter tissue: from
-    the first bar that shows (>= 5% of the tallest) to the bar before the valley that follows the dark peak."""
-    h = np.asarray(rc.hist, float)
-    first = int(np.flatnonzero(h >= 0.05 * h.max())[0])
-    peak = first
-    while peak + 1 < len(h) and h[peak + 1] >= h[peak]:
-        peak += 1
-    valley = peak
-    while valley + 1 < len(h) and h[valley + 1] <= h[valley]:
-        valley += 1
-    return first, max(first, valley - 1)
-
-
-async def _panel_bar_click(c: Counter, app, bar: int) -> bool:
-    """A click on bar ``bar`` of the side panel's "Seed range here" histogram (where the screen shows it);
-    False when the line is not on screen."""
-    from ctui.screens.ws_keys import panel_text
-
-    ws = app.workspace
-    panel = ws.query_one("#panel")
-    lines = panel_text(ws).plain.split("\n")
-    row = next((i for i, line in enumerate(lines) if line.startswith("Seed range here ") and ".." in line), None)
-    if row is None or panel.has_class("hidden"):
-        return False
-    line = lines[row]
-    col = line.index(" ", len("Seed range here ")) + 1 + bar
-    cr, r = panel.content_region, panel.region
-    y = row - int(panel.scroll_offset.y)
-    if not 0 <= y < cr.height or col >= cr.width:
-        return False
-    await c.click("#panel", (col + cr.x - r.x, y + cr.y - r.y))
-    return True
-
-
-async def _dark_structure(c: Counter, app, name: str, truth_mask: np.ndarray, png: Path | None = None) -> dict:
-    """The MR lateral ventricles: a click where they show (the side panel's histogram of the neighbourhood there),
-    the range picked on it with two clicks (the dark peak up to the valley), ``m`` (3D: the two ventricles join
-    across slices), the neck guard off in ``G`` (Tab, Tab, ``0``, Enter: their horns join through narrow
-    necks), ``S`` from the cursor and ``a``."""
-    from ctui.screens.testing import wait_for
-
-    ws, s, pilot = app.workspace, app.session, c.pilot
-    n0, t0 = c.n, time.perf_counter()
-    target = seen_target(truth_mask, s.z, s.volume.spacing, 4.0)
-    cell = await _to_target(c, app, target, truth_mask, exact=False)
-    await c.click("#main", cell)
-    await wait_for(pilot, lambda: ws.seed_range.result is not None, timeout=60, what="the seed range")
-    await pilot.pause()
-    lo_bar, hi_bar = _histogram_bars(ws.seed_range.result)
-    picked = await _panel_bar_click(c, app, lo_bar) and await _panel_bar_click(c, app, hi_bar)
-    if not picked:  # no panel on screen: typed
-        rc = ws.seed_range.result
-        text = f"{rc.edges[lo_bar]:.0f}:{rc.edges[hi_bar + 1]:.0f}"
-        from ctui.screens.testing import answer_prompt
-
-        await c.press("T")
-        c.n += len(text) + 1
-        c.typed += len(text)
-        await answer_prompt(pilot, text)
-    await c.press("m")
-    await c.press("G")
-    await wait_for(pilot, lambda: type(app.screen).__name__ == "SegmentPanel" and bool(app.screen.query("#neck")),
-                   what="the G panel")
-    shots: dict = {}
-    await _dialog(c, app, "mr-G-panel", shots, png)
-    while app.screen.focused is None or app.screen.focused.id != "neck":
-        await c.press("tab")
-    await c.type("0")
-    c.typed += 1
-    await c.press("enter")
-    await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
-    await c.press("S")
-    got = await _wait_proposal(pilot, ws)
-    await _dialog(c, app, "mr-proposal", shots, png)
-    if got:
-        await c.press("a")
-    failed = "" if got else "; ".join(n.message for n in list(app._notifications)[-2:])
-    z, y, x = target
-    return {"organ": name, "object": s.current, "seed_xyz": (x, y, z), "seed_used": None, "proposal": got,
-            "failed": failed, "events": c.n - n0, "seconds": time.perf_counter() - t0, "cursor": s.zyx,
-            "range": s.range_, "options": dict(s.segment_options), "mode": s.prop_mode, "dialogs": shots}
-
-
-def liver_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False) -> dict | str:
-    """The liver (label 5) of ``ct_abdomen_3mm.nii.gz``; a string says why it was skipped."""
-    from ctui.engine.actions.opened import open_input
-
-    image, labels = data / "ct_abdomen_3mm.nii.gz", data / "ct_abdomen_3mm_labels.nii.gz"
-    if not image.exists():
-        return f"{image} is missing"
-    truth = open_input(str(labels)).labels == 5
-    return asyncio.run(one_structure(size, image, truth, "liver", out_dir=out_dir, use_range=use_range))
-
-
-def ventricles_task(size: tuple[int, int], data: Path, out_dir: Path, use_range: bool = False,
-                    png: Path | None = None) -> dict | str:
-    """The lateral ventricles (label 1, "vent-lat") of ITK-SNAP's MR brain sample. ctui reads no GIPL:
-    the image and its labels are written as NIfTI into ``out_dir`` (SimpleITK) first."""
-    orig, seg = data / "MRIcrop-orig.gipl.gz", data / "MRIcrop-seg.gipl.gz"
-    if not orig.exists():
-        return f"{orig} is missing"
-    try:
-        import SimpleITK as sitk
-    except ImportError:
-        return "SimpleITK (to read GIPL) is not installed"
-    folder = out_dir / "mr"
-    folder.mkdir(exist_ok=True)
-    image, labels = folder / "brain_mr.nii.gz", folder / "brain_mr_labels.nii.gz"
-    sitk.WriteImage(sitk.ReadImage(str(orig)), str(image))
-    sitk.WriteImage(sitk.ReadImage(str(seg)), str(labels))
-    from ctui.engine.actions.opened import open_input
-
-    truth = open_input(str(labels)).labels == 1
-    return asyncio.run(one_structure(size, image, truth, "lateral_ventricles", out_dir=out_dir,
-                                     use_range=use_range, png=png))
-
-
-def _picked(r: dict) -> str:
-    """What the ventricles' task chose in the TUI (range, mode, neck), or ""."""
-    if r.get("range") is None:
-        return ""
-    lo, hi = r["range"]
-    return f"  range {lo:g}..{hi:g} picked, {r['mode']}, neck {r['options'].get('neck')}"
-
-
-def print_structures(sizes, data: Path, mr: Path, *, use_range: bool = False, png: Path | None = None) -> int:
-    """Issue 37's liver and MR lateral ventricles at each size: events by kind and Dice."""
-    print("ctui TUI tasks: liver (ct_abdomen_3mm, label 5), lateral ventricles (ITK-SNAP MR brain, label 1); "
-          f"deepest voxel as the seed, {'typed 5-95% range, ' if use_range else ''}the TUI's defaults")
-    print(f"{'size':>7} {'structure':<19} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'save':>4} "
-          f"{'seconds':>8} {'Dice':>6} {'vol ratio':>9}")
-    for size in sizes:
-        for task, folder in ((liver_task, data), (ventricles_task, mr)):
-            with tempfile.TemporaryDirectory() as tmp:
-                r = task(size, folder, Path(tmp), use_range, **({"png": png} if task is ventricles_task else {}))
-            if isinstance(r, str):
-                print(f"{size[0]:>3}x{size[1]:<3} skipped: {r}")
-                continue
-            keys = r["events"] - r["clicks"] - r["typed"]
-            print(f"{size[0]:>3}x{size[1]:<3} {r['organ']:<19} {r['events']:>6} {keys:>5} {r['clicks']:>6} "
-                  f"{r['typed']:>5} {r['save_events']:>4} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
-                  f"{r['volume_ratio']:>9.2f}"
-                  f"{'' if r['proposal'] else '  (no proposal: ' + r['failed'][:100] + ')'}"
-                  f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}"
-                  f"{_picked(r)}")
-            if r.get("dialogs"):
-                bad = {k: v for k, v in r["dialogs"].items() if v}
-                print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
-                      + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
-    print("(events: the structure's, from the workspace to the accepted object; save: Ctrl+S and Enter)")
-    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -661,9 +467,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.workflow:
         return print_workflow(sizes, image, labels, None if args.png is None else Path(args.png).resolve())
     if args.structures:
+        from tui_tasks_structures import print_structures
+
         return print_structures(sizes, data, Path(args.mr), use_range=args.range,
                                 png=None if args.png is None else Path(args.png).resolve())
     if args.hard:
+        from tui_tasks_hard import print_hard
+
         return print_hard(sizes, data.parent, args.only)
     print(f"ctui TUI tasks on {image.name}: left kidney (label 3), spleen (label 1); "
           f"{'review marks; ' if args.review else ''}{'typed 5-95% range; ' if args.range else ''}"
@@ -709,120 +519,6 @@ def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) ->
 
 
 # --------------------------------------------------------------- issue 34: a seed in the organ's least uniform part
-HARD = (("spleen (msd)", "msd_spleen_crop/sub-spleen2_ct.nii.gz", "msd_spleen_crop/sub-spleen2_ct_seg-manual.nii.gz", None),
-        ("kidney_left", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 3),
-        ("kidney_right", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 2),
-        ("spleen", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 1),
-        ("liver", "totalseg_example/ct_abdomen_3mm.nii.gz", "totalseg_example/ct_abdomen_3mm_labels.nii.gz", 5))
-
-
-def least_uniform_seed(data: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int]:
-    """(z, y, x): of the organ's voxels at least 6 mm deep (or half its depth when thinner), the one whose 10 mm
-    neighbourhood spreads most (sd of the values): cortex beside medulla, a vessel beside the pulp."""
-    from scipy import ndimage
-
-    dt = ndimage.distance_transform_edt(np.pad(ref, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
-    deep = dt >= min(6.0, 0.5 * float(dt.max()))
-    size = [max(1, round(10.0 / float(sp))) | 1 for sp in spacing]
-    f = data.astype(np.float64)
-    sd = np.sqrt(np.maximum(ndimage.uniform_filter(f * f, size) - ndimage.uniform_filter(f, size) ** 2, 0))
-    return tuple(int(v) for v in np.unravel_index(int(np.argmax(np.where(deep, sd, -1))), ref.shape))
-
-
-def _full_mask(p, shape) -> np.ndarray:
-    """The pending proposal ``p`` as a (z, y, x) mask."""
-    full = np.zeros(shape, bool)
-    for z in p.masks:
-        full[z] = p.slice_mask(z)
-    return full
-
-
-def _leak_voxel(entries: list, proposal_mask: np.ndarray, ref: np.ndarray, spacing) -> tuple[int, int, int] | None:
-    """The background click (x, y, z): the first leak flag's voxel (``entries``: the object's settings["leaks"]),
-    else (the person's eye, played by the reference) the deepest point of the result's largest piece outside the
-    organ when it is over 1.2x."""
-    from scipy import ndimage
-
-    if entries:
-        return tuple(int(v) for v in entries[0]["click"])
-    if proposal_mask.sum() <= 1.2 * ref.sum():
-        return None
-    parts, n = ndimage.label(proposal_mask & ~ndimage.binary_dilation(ref))
-    if not n:
-        return None
-    big = parts == int(np.argmax(np.bincount(parts.ravel())[1:])) + 1
-    dt = ndimage.distance_transform_edt(np.pad(big, 1), sampling=spacing)[1:-1, 1:-1, 1:-1]
-    z, y, x = np.unravel_index(int(np.argmax(dt)), big.shape)
-    return int(x), int(y), int(z)
-
-
-async def hard_session(size: tuple[int, int], image: Path, ref: Path, label: int | None, *,
-                       out_dir: Path) -> dict:
-    """One organ from its least uniform interior seed, as the kidney and spleen tasks do it (``_organ``: wheel to
-    the seed's slice, zoom on it, a double click); when the proposal leaks, a right click in the leak (a background
-    seed: wheel to its slice first), ``p`` again (the pending proposal's seed, no ``x`` first) and ``a``."""
-    from ctui.engine.actions.opened import open_input
-    from ctui.screens import graphics
-    from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import wait_workspace
-
-    graphics._chosen = "halfblock"
-    os.chdir(out_dir)
-    os.environ["CTUI_AUTOSAVE_DIR"] = str(out_dir / "autosave")
-    app = CtuiApp(str(image), autosave_s=1e9)
-    t0 = time.perf_counter()
-    async with app.run_test(size=size) as pilot:
-        await wait_workspace(pilot, app)
-        await pilot.pause()
-        s, ws = app.session, app.workspace
-        truth = open_input(str(ref)).labels
-        organ = truth == label if label is not None else truth > 0
-        z, y, x = least_uniform_seed(s.volume.data, organ, s.volume.spacing)
-        c = Counter(pilot)
-        row = await _organ(c, app, image.name, (z, y, x), organ, first=True, review=False, rng=None, exact=True,
-                           accept=False)
-        got = row["proposal"]
-        p = ws.pending.proposal
-        clicked = _leak_voxel(list(getattr(p, "leak_entries", None) or []), _full_mask(p, s.shape), organ,
-                              s.volume.spacing) if got else None
-        if clicked is not None:  # the leak: a right click in it (a background seed), p again (the proposal's seed)
-            lx, ly, lz = clicked
-            cell = await _to_target(c, app, (lz, ly, lx), None, exact=True)
-            await c.right_click("#main", cell)
-            await c.press("p")
-            got = await _wait_proposal(pilot, ws)
-        if got:
-            await c.press("a")
-        await pilot.pause()
-        result = s.seg.labels == s.current
-        errors = list(getattr(app, "internal_errors", []))
-    return {"seed_xyz": (x, y, z), "clicked": clicked, "events": c.n, "clicks": c.clicks, "typed": c.typed, "dice": dice(result, organ),
-            "volume_ratio": float(result.sum()) / max(int(organ.sum()), 1), "seconds": time.perf_counter() - t0,
-            "proposal": got, "failed": row["failed"], "errors": errors}
-
-
-def print_hard(sizes, shared: Path, only: list[str] | None = None) -> int:
-    print("ctui TUI tasks (issue 34): one organ from the seed in its least uniform part (largest 10 mm sd, >= 6 mm "
-          "deep); a background click (the leak flag's voxel, else the leak's deepest point) when the proposal leaks")
-    print(f"{'size':>7} {'organ':<13} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'seconds':>8} {'Dice':>6} "
-          f"{'vol ratio':>9}  seed x,y,z; background click")
-    for name, img, lab, label in HARD:
-        if only and name not in only:
-            continue
-        if not (shared / img).exists():
-            print(f"skipped {name}: {shared / img} is missing")
-            continue
-        for size in sizes:
-            with tempfile.TemporaryDirectory() as tmp:
-                r = asyncio.run(hard_session(size, shared / img, shared / lab, label, out_dir=Path(tmp)))
-            print(f"{size[0]:>3}x{size[1]:<3} {name:<13} {r['events']:>6} {r['events'] - r['clicks'] - r['typed']:>5} "
-                  f"{r['clicks']:>6} {r['typed']:>5} {r['seconds']:>8.1f} {r['dice']:>6.3f} "
-                  f"{r['volume_ratio']:>9.2f}  {','.join(map(str, r['seed_xyz']))}; "
-                  f"{'none' if r['clicked'] is None else ','.join(map(str, r['clicked']))}"
-                  f"{'' if r['proposal'] else ' (no proposal: ' + r['failed'][:150] + ')'}{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
-    print("goal (issue 34): <= 12 events to an accepted organ, a background click included where needed")
-    return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())
