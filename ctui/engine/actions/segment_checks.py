@@ -171,8 +171,8 @@ BODY_SHARE = 0.3
 # 0.30-0.31; the head-and-neck results that passed silently, a spinal cord or a brainstem seed filling the neck or
 # the brain, 5-16x to 120x: 0.44-0.79)
 SLICE_SHARE = 0.4
-SLICE_BODY_CM2 = 50.0  # ... on slices where the body's cross-section is at least this (a cropped field of view's
-# last slices hold a few voxels of it)
+SLICE_BODY_CM2 = 50.0  # both on slices where the body's cross-section is at least this (openkbp pt_5's field of
+# view is cropped to 9-13 cm^2 around its larynx and brainstem: a correct larynx held 76% of that "body")
 BODY_HU = -400.0
 BODY_SLICES = 16
 
@@ -203,8 +203,10 @@ def body_check(volume: Any, seg: Any, r: Any, box: tuple[slice, slice, slice] | 
     data = volume.data[zs]
     if getattr(volume, "modality", "") != "CT" and not float(data.min()) < -500:
         return []
-    body = int(np.count_nonzero(data > BODY_HU))
-    obj = int(np.count_nonzero(seg.labels[zs] == r.id))
+    areas = np.count_nonzero(data > BODY_HU, axis=(1, 2))
+    full = areas * float(volume.spacing[1]) * float(volume.spacing[2]) / 100.0 >= SLICE_BODY_CM2
+    body = int(areas[full].sum())  # a cropped field of view's slices (a larynx's 10 cm^2 of it) say nothing
+    obj = int(np.count_nonzero(seg.labels[zs[full]] == r.id))
     what = ""
     if body and obj > BODY_SHARE * body:
         what = f"fills {obj / body:.0%} of the body on its slices"
