@@ -23,7 +23,7 @@ threshold fill from the seed reaches beyond the organ (its reference dilated by 
 a user's clicks in the neighbours the fill leaks into, at most 4.
 
 Columns: Dice, volume ratio (result / reference), HD95 (mm), seconds. ``--speed`` adds the
-slice-mode kidney timing on a 300 x 512 x 512 series (automatic width vs --neck 5).
+slice-mode kidney timing on a 300 x 512 x 512 series (automatic width vs --neck 5, and the automatic range vs a given one).
 ``--contrast`` prints the kidneys of the abdomen enhanced by its labels (renal veins drawn to the vena
 cava; ``phantoms.contrast_abdomen``), with and without 120:400: automatic width, ``--neck 5`` and ``--neck 0``.
 ``--grid 3 [--noise 15]`` reruns the abdomen on a 1 x 1 x 3 mm grid (a thin-pixel series' grid).
@@ -348,16 +348,18 @@ def aorta_limits() -> int:
 
 
 def speed(repeat: int = 5) -> None:
-    """Slice-mode kidney on the 300 x 512 x 512 series of benchmarks/segment_methods.py: automatic width vs 5 mm."""
+    """Slice-mode kidney on the 300 x 512 x 512 series of benchmarks/segment_methods.py: automatic width vs 5 mm, and
+    the automatic range vs the given 150:260."""
     from benchmarks.segment_methods import make_series
 
     vol, kidney, seed, _bg = make_series()
     out: dict[str, tuple[float, float]] = {}
-    for label, neck in (("--neck 5", 5.0), ("automatic", None)):
+    for label, neck, th in (("--neck 5", 5.0, [(150.0, 260.0)]), ("automatic", None, [(150.0, 260.0)]),
+                            ("auto range", None, [])):
         ts, cs = [], []
         for _ in range(repeat):
             t, c = time.perf_counter(), time.process_time()
-            res = segment(vol, [seed], [(150.0, 260.0)], options=SegmentOptions(neck_mm=neck))
+            res = segment(vol, [seed], th, options=SegmentOptions(neck_mm=neck))
             ts.append(time.perf_counter() - t)
             cs.append(time.process_time() - c)
         got = res.segmentation.labels == 1
@@ -367,6 +369,9 @@ def speed(repeat: int = 5) -> None:
               f"Dice vs the phantom kidney {dice(got, kidney):.3f}")
     a, b = out["automatic"], out["--neck 5"]
     print(f"speed: automatic / --neck 5 = {a[0] / b[0]:.2f}x wall, {a[1] / b[1]:.2f}x CPU (goal <= 1.5x)")
+    r = out["auto range"]
+    print(f"speed: automatic range / given range (both automatic width) = {r[0] / a[0]:.2f}x wall, "
+          f"{r[1] / a[1]:.2f}x CPU (goal <= 1.5x)")
 
 
 if __name__ == "__main__":

@@ -239,7 +239,7 @@ def main() -> int:
     modes = args.modes.split(",")
     print(f"{'set':8s} {'structure':22s} {'mode':5s} {'Dice':>6s} {'vol x':>6s} {'HD95':>6s} | {'rnd med':>7s} "
           f"{'rnd min':>7s} {'spread':>6s} | {'out':>3s} {'warned':>6s} | range (deepest)")
-    total = {"runs": 0, "out": 0, "warned": 0, "refused": 0, "ok": 0, "ok_flagged": 0, "flagged": 0}
+    total = {"runs": 0, "out": 0, "warned": 0, "refused": 0, "ok": 0, "ok_flagged": 0, "flagged": 0, "ok_warned": 0}
     per_set: dict[str, list[float]] = {}
     t0 = time.perf_counter()
     for set_name, name, vol, ref in cases(which, args.patients):
@@ -267,6 +267,9 @@ def main() -> int:
                 if 0.8 <= ratio <= 1.25 and ds[-1] >= 0.8:  # a correct result: a flag here is a false one
                     total["ok"] += 1
                     total["ok_flagged"] += bool(flags)
+                    total["ok_warned"] += bool(warns)  # any warning on a correct result is a false one
+                    if warns:
+                        print(f"{'':8s} {name:22s} {mode:5s} seed {i}: false warning on a correct result: {warns[0][:90]}")
                 if flags:
                     print(f"{'':8s} {name:22s} {mode:5s} seed {i}: {len(flags)} leak flag(s), x{ratio:.2f}, "
                           f"{suggested(vol, ref, s, got, mode, flags[0])}")
@@ -297,7 +300,8 @@ def main() -> int:
     print(f"\nsummary ({time.perf_counter() - t0:.0f} s): {total['runs']} results, {total['refused']} refused, "
           f"{total['out']} outside 0.5-2x the reference volume, {total['warned']} of them warned "
           f"({total['out'] - total['warned']} silent); leak flags on {total['flagged']} results, "
-          f"{total['ok_flagged']} of the {total['ok']} correct ones (0.8-1.25x, Dice >= 0.8)")
+          f"{total['ok_flagged']} of the {total['ok']} correct ones (0.8-1.25x, Dice >= 0.8); any warning on "
+          f"{total['ok_warned']} of the correct ones")
     for k, v in per_set.items():
         a = np.array(v)
         print(f"  {k:14s} median Dice {np.median(a):.3f}, >= 0.90: {int((a >= 0.9).sum())}/{len(a)}")

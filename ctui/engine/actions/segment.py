@@ -406,7 +406,7 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
         r.warnings.extend(sanity(r, start, spacing, opts))
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
-        r.warnings.extend(body_check(volume, seg, r) + leak_check(seg, r, start, box, spacing))
+        r.warnings.extend(body_check(volume, seg, r, box) + leak_check(seg, r, start, box, spacing))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]

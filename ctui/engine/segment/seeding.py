@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from ctui.engine.core.limits import check_allocation
-from ctui.engine.segment.autorange import plateau_range
+from ctui.engine.segment.autorange import OUTLIER, plateau_range
 from ctui.engine.segment.autoneck import NeckChoice, choose_width, coarse, local_depth, resample_factors, sweep_box
 from ctui.engine.segment.fill3d import fill3d_seeds
 from ctui.engine.segment.necks import fill_holes_2d
@@ -124,7 +124,8 @@ def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float =
                rule: str = "plateau") -> RangeChoice:
     """The automatic range for a seed (x, y, z): ``rule="plateau"`` (default) widened from the seed's own value
     until the joined volume jumps (:mod:`ctui.engine.segment.autorange`); ``"ball"`` the neighbourhood's
-    median +- k sd (see the module docstring). Always holds the seed's own value."""
+    median +- k sd (see the module docstring). Holds the seed's own value unless it is an outlier
+    (further than ``autorange.OUTLIER`` noise sd from its 3 x 3 x 3 median: the fill then starts beside it)."""
     vals, noise = _ball_values(volume, pipe, seed)
     med = float(np.median(vals))
     mad = 1.4826 * float(np.median(np.abs(vals - med)))
@@ -133,7 +134,7 @@ def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float =
     x, y, z = seed
     window = pipe.window_for(volume)
     own = float(pipe.final_region(volume, z, y, y + 1, x, x + 1, window=window)[0, 0])
-    steps, why = None, f"the seed's {RANGE_BALL_MM:g} mm neighbourhood: median {med:.0f} +- {k:g} x {sd:.0f}"
+    steps, why, centre = None, f"the seed's {RANGE_BALL_MM:g} mm neighbourhood: median {med:.0f} +- {k:g} x {sd:.0f}", own
     if rule == "plateau":  # the ball's range, but never past a value where a neighbour joins
         centre = _own_value(volume, pipe, seed, window)
         _a, _b, steps = plateau_range(volume, pipe, seed, max(noise, 1e-6), centre, own)
@@ -146,7 +147,8 @@ def seed_range(volume: Any, pipe: Any, seed: tuple[int, int, int], *, k: float =
             hi = steps.stops["high"]
         why += "; " + ("narrowed where a neighbour joins the seed's region: " + ", ".join(cut) if cut
                        else "no neighbour joins within it")
-    lo, hi = min(lo, own), max(hi, own)
+    if rule != "plateau" or abs(own - centre) <= OUTLIER * max(noise, 1e-6):
+        lo, hi = min(lo, own), max(hi, own)  # an outlier seed voxel is left out: the fill starts beside it
     edges = np.linspace(min(med - 4 * sd, lo), max(med + 4 * sd, hi), HIST_BINS + 1)
     hist = np.histogram(np.clip(vals, edges[0], edges[-1]), bins=edges)[0]
     return RangeChoice(low=lo, high=hi, median=med, sd=sd, voxels=int(vals.size), hist=[int(h) for h in hist],
