@@ -78,10 +78,11 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout = stdout = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
     if args.command != "open":
         _hide_input_paths(args, hide=not getattr(args, "keep_identifiers", False))
+    ours = sys.stdout
     try:
         return _run(args)
     finally:
-        if isinstance(sys.stdout, _PathHidingStdout):
+        if isinstance(ours, _PathHidingStdout) and sys.stdout is ours:  # only the stream this call set
             sys.stdout = stdout
 
 

@@ -8,6 +8,7 @@ be created.
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import os
 import sys
@@ -92,3 +93,32 @@ def _guard_textual_redirects() -> None:
 
 
 _guard_textual_redirects()
+
+
+_APPS_MADE = [0]
+
+
+def _count_apps() -> None:
+    """Count every Textual app made, so that only the tests that made one pay for a full collection."""
+    from textual.app import App
+
+    init = App.__init__
+
+    def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        _APPS_MADE[0] += 1
+        init(self, *args, **kwargs)
+
+    App.__init__ = counting_init  # type: ignore[method-assign]
+
+
+_count_apps()
+
+
+@pytest.fixture(autouse=True)
+def _collect_after_apps():
+    """After a test that made a Textual app, collect what it left in reference cycles (an app coroutine
+    left pending), so that it ends inside that test (see ``_Redirect``)."""
+    made = _APPS_MADE[0]
+    yield
+    if _APPS_MADE[0] != made:
+        gc.collect()

@@ -281,10 +281,15 @@ async def test_random_key_monkey_finds_no_internal_error():
 
 
 async def test_series_too_big_for_memory_offers_downsampling():
-    app = CtuiApp(str(SAMPLE_DIR), memory_limit=1_000_000)  # the 2.6 MB phantom "does not fit"
+    from ctui.engine.io.memplan import estimate
+
+    sb = 80 * 128 * 128 * 2  # the phantom's voxels
+    full, half = estimate("open", sb), estimate("open", 40 * 64 * 64 * 2)
+    assert half < full - sb  # a limit between: neither in memory nor memory-mapped, but downsampled x2
+    app = CtuiApp(str(SAMPLE_DIR), memory_limit=(half + full - sb) // 2)  # the 2.6 MB phantom "does not fit"
     async with app.run_test(size=(120, 40)) as pilot:
         await wait_for(pilot, lambda: app.errors, what="the memory error")
-        assert isinstance(app.screen, LoadingScreen) and app.screen.too_big
+        assert isinstance(app.screen, LoadingScreen) and app.screen.too_big, app.errors
         assert "downsample" in app.errors[0]
         await pilot.press("d")
         await wait_workspace(pilot, app)
