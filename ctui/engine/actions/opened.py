@@ -78,7 +78,9 @@ class Opened:
         """Ids present in the labels, ascending."""
         if self.labels is None:
             return []
-        counts = np.bincount(np.asarray(self.labels, np.uint8).ravel(), minlength=256)
+        from ctui.engine.segment.selection import label_counts  # cv2's histogram: opened loads at start-up
+
+        counts = label_counts(np.asarray(self.labels, np.uint8))  # not np.bincount: an int64 copy, 8 B a voxel
         ids = {int(i) for i in np.flatnonzero(counts[1:]) + 1}
         return sorted(ids | {int(k) for k, m in self.masks.items() if m.any()})  # + segments hidden by overlaps
 
