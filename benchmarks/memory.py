@@ -137,8 +137,9 @@ def kidney(trees: dict[str, Path], tmp: Path) -> None:
     runs = {"segment (slice)": ctui + ["--json"], "segment --mode 3d": ctui + ["--mode", "3d", "--json"],
             "segment --mask": ctui + ["--mask", str(tmp / "kidney.nii.gz")]}
     print(f"\nkidney: {series.name}, seed {seed} (left kidney's deepest voxel), series {series_bytes / 2**20:.0f} MB")
-    for name, tree in trees.items():  # each tree compiles its own kernels once, outside the figures
-        peak_rss(ctui + ["--json"], tree)
+    for tree in trees.values():  # each tree compiles its own kernels (every mode's) once, outside the figures
+        for cmd in runs.values():
+            peak_rss(cmd, tree)
     load = load_peak(str(series), trees["after"])
     print(f"  load baseline {load / 2**20:.0f} MB; peak above it, x series, and the peak in MB:")
     print(f"  {'command':20s} " + " ".join(f"{name:>14s}" for name in trees))
