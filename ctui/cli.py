@@ -73,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _quiet_libraries()
+    from ctui.engine.core.limits import fit_address_space  # before numpy: BLAS reads its thread count at load
+
+    fit_address_space()
     stdout = sys.stdout
     if stdout is None:  # started with stdout closed (`ctui info X >&-`)
         sys.stdout = stdout = open(os.devnull, "w")  # noqa: SIM115 - lives as long as the process
@@ -111,6 +114,9 @@ def _memory_plan(args: argparse.Namespace) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     try:
+        from ctui.engine.core.limits import check_address_space
+
+        check_address_space(args.command)  # below it a library's loader crashes or spins (ulimit -v)
         _memory_plan(args)
         rc = args.func(args)
         sys.stdout.flush()  # a closed pipe shows up here, not at exit

@@ -110,3 +110,54 @@ def check_allocation(nbytes: float, *, what: str, path: Any = None, fraction: fl
         if hint:
             msg += f"; {hint}"
         raise CtuiError(msg, path=path)
+
+
+# ---------------------------------------------------------------- address-space limit (ulimit -v)
+#: The address space (MB) each command's libraries map on a small input under :func:`fit_address_space`'s
+#: settings (its VmPeak, measured on the bundled sample and a project of it, plus 15%). Below it a library's
+#: loader can fail in native code instead of raising: OpenCV's BLAS segfaults, scipy's BLAS retries its buffer
+#: forever. The command is refused first, in one line. Commands not listed: :data:`AS_FLOOR_OTHER_MB`.
+AS_FLOOR_MB = {"info": 210, "demo": 510, "drift": 340, "segment": 680, "edit": 640, "mesh": 640, "measure": 690,
+               "export": 640, "report": 830, "render": 990, "vessel": 1050}
+AS_FLOOR_OTHER_MB = 1000  # the TUI (open, web), batch (Dask), auto (TotalSegmentator)
+_M_ARENA_MAX = -8  # glibc's mallopt parameter
+
+
+def address_space_limit() -> int | None:
+    """RLIMIT_AS in bytes (``ulimit -v``), None when unlimited or unknown."""
+    try:
+        import resource  # POSIX only
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, OSError, ValueError):
+        return None
+    return None if soft == resource.RLIM_INFINITY or soft <= 0 else int(soft)
+
+
+def fit_address_space() -> int | None:
+    """Under an address-space limit, map less before the libraries load (call it before numpy is imported):
+    BLAS single-threaded (``OPENBLAS_NUM_THREADS=1`` unless set: three BLAS copies load, numpy's, scipy's and
+    OpenCV's, and each thread of each maps a 32-64 MB buffer) and at most two malloc arenas (each thread's
+    arena reserves 64 MB). Results do not change: ctui's kernels use no BLAS threads. Returns the limit (bytes)
+    or None (then nothing is changed)."""
+    limit = address_space_limit()
+    if limit is None:
+        return None
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    try:
+        import ctypes  # glibc's mallopt; elsewhere nothing to do
+
+        ctypes.CDLL(None).mallopt(_M_ARENA_MAX, 2)
+    except (OSError, AttributeError):
+        pass
+    return limit
+
+
+def check_address_space(command: str) -> None:
+    """CtuiError (one line, what is needed) when ``ulimit -v`` is below what ``command``'s libraries map."""
+    limit = address_space_limit()
+    floor = AS_FLOOR_MB.get(command, AS_FLOOR_OTHER_MB) * 1024 * 1024
+    if limit is not None and limit < floor:
+        raise CtuiError(f"the address-space limit (ulimit -v {limit // 1024}) is below the {fmt_bytes(floor)} "
+                        f"that ctui {command}'s libraries map (numpy, OpenCV, scipy, numba, VTK/EGL): raise it "
+                        f"to at least ulimit -v {floor // 1024}")

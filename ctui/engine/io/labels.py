@@ -121,7 +121,7 @@ def _save_nifti(p: Path, labels: np.ndarray, volume: Volume) -> None:
     import nibabel as nib
 
     aff = nifti_affine(volume)
-    img = nib.Nifti1Image(np.ascontiguousarray(labels.transpose(2, 1, 0)), aff)
+    img = nib.Nifti1Image(labels.transpose(2, 1, 0), aff)  # a view: nibabel writes it in NIfTI (Fortran) order, no copy
     hdr = img.header
     hdr.set_data_dtype(np.uint8)
     hdr.set_xyzt_units("mm")
