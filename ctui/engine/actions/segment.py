@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions import defaults
-from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
+from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap, sub_grid_neck
 from ctui.engine.actions.segment_checks import body_check, check_background, leak_check, sanity, tissue_check, wrap_check
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
@@ -256,6 +256,8 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     labels = None if opts.overwrite else seg.labels
     if opts.neck_mm is None:
         choice = auto_width(volume, pipe, seed, lo, hi, labels=labels, object_id=oid, limit=box)
+        if sub_grid_neck(choice, tuple(volume.spacing)):  # the region bounds the leak: no cut at full resolution
+            choice.reason, choice.width_mm = f"bounded: {choice.reason}, under one sweep voxel (no cut)", 0.0
         width = choice.width_mm
         inr = in_range(final, lo, hi).view(bool)
         if labels is not None:

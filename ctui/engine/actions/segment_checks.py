@@ -58,7 +58,7 @@ def sanity(r: Any, start: Any, spacing: tuple[float, ...], opts: Any) -> list[st
     if 0 < r.voxels < max(27, seed_px // 4):
         out.append(f"the object collapsed to {r.voxels} voxels (its seed slice had {seed_px} px): widen the range, "
                    "move the seed deeper into the object, or check the background seeds")
-    if start.neck is not None and start.width <= 0 and not start.neck.reason.startswith("no leak"):
+    if start.neck is not None and start.width <= 0 and not start.neck.reason.startswith(("no leak", "bounded")):
         out.append(f"the leak guard is off for this object ({start.neck.reason}): check it for leaks, or force "
                    "a neck width")
     rc = start.auto_range
