@@ -9,6 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ctui.engine.segment.autoneck import resample_factors
 from ctui.engine.segment.necks import disc
 from ctui.engine.segment.selection import seeded_components
 
@@ -72,4 +73,7 @@ def sub_grid_neck(choice: Any, spacing: tuple[float, ...]) -> bool:
     Then the action keeps the region and cuts nothing (width 0)."""
     if choice is None or choice.width_mm <= 0 or choice.region is None or len(choice.radii_mm) < 3:
         return False
-    return choice.width_mm <= 2.0 * choice.radii_mm[2] + 1e-6 and min(choice.region.factors) > 1
+    own = resample_factors(tuple(float(s) for s in spacing))  # type: ignore[arg-type]  # three floats
+    # the series' own voxels finer than the ~2 mm grid on every axis (not a grid coarsened for a large box: the
+    # contrast CT's aorta, 1.5 mm, kept its 0.59)
+    return choice.width_mm <= 2.0 * choice.radii_mm[2] + 1e-6 and min(own) > 1 and tuple(choice.region.factors) == own
