@@ -64,8 +64,9 @@ OWN_BALLS = 12.0
 
 
 # ... and when it is not a closed dark compartment: this share of its face brighter than its range (the MR brain's
-# lateral ventricles in white matter, 0.90-0.98, 31-34x the seed's ball and as many of their own: a thin structure)
-CLOSED = 0.9
+# lateral ventricles in white matter, 0.88-0.98 (fill, levelset), 31-34x the seed's ball and as many of their own: a
+# thin structure; the abdomen's leaks 0.01-0.32)
+CLOSED = 0.85
 
 
 LEAK_BODY = 0.25  # ... or holding this share of the body on its slices (the abdomen's liver at 1.22x from a seed 20 mm
