@@ -410,7 +410,7 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
         r.warnings.extend(body_check(volume, seg, r, box) + leak_check(seg, r, start, box, spacing))
-        r.warnings.extend(mixed_check(r))
+        r.warnings.extend(mixed_check(volume, seg, r, start, box))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]
