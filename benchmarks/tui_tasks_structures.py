@@ -98,8 +98,8 @@ async def _panel_bar_click(c: Counter, app, bar: int) -> bool:
 async def _dark_structure(c: Counter, app, name: str, truth_mask: np.ndarray, png: Path | None = None) -> dict:
     """The MR lateral ventricles: a click where they show (the side panel's histogram of the neighbourhood there),
     the range picked on it with two clicks (the dark peak up to the valley), ``m`` (3D: the two ventricles join
-    across slices), the neck guard off in ``G`` (Tab, Tab, ``0``, Enter: their horns join through narrow
-    necks), ``S`` from the cursor and ``a``."""
+    across slices), ``S`` from the cursor and ``a`` (the automatic neck keeps their horns: the leak's bridges are
+    thinner than one sweep voxel, ``segment_start.sub_grid_neck``; it took ``G`` Tab Tab ``0`` Enter before)."""
     from ctui.screens.testing import wait_for
 
     ws, s, pilot = app.workspace, app.session, c.pilot
@@ -121,17 +121,7 @@ async def _dark_structure(c: Counter, app, name: str, truth_mask: np.ndarray, pn
         c.typed += len(text)
         await answer_prompt(pilot, text)
     await c.press("m")
-    await c.press("G")
-    await wait_for(pilot, lambda: type(app.screen).__name__ == "SegmentPanel" and bool(app.screen.query("#neck")),
-                   what="the G panel")
     shots: dict = {}
-    await _dialog(c, app, "mr-G-panel", shots, png)
-    while app.screen.focused is None or app.screen.focused.id != "neck":
-        await c.press("tab")
-    await c.type("0")
-    c.typed += 1
-    await c.press("enter")
-    await wait_for(pilot, lambda: app.screen is ws, what="the workspace")
     await c.press("S")
     got = await _wait_proposal(pilot, ws)
     await _dialog(c, app, "mr-proposal", shots, png)

@@ -266,7 +266,8 @@ def test_aorta_one_seed_says_what_it_could_not_do():
     res = segment(vol, [seed], [], options=SegmentOptions(mode="3d"))
     got = res.segmentation.labels == res.objects[0].id
     assert dice(got, ref) >= 0.55 and np.count_nonzero(got & ~ref) < 0.1 * got.sum()
-    assert any("not uniform" in w for w in res.objects[0].warnings)
+    o = res.objects[0]  # said as a warning, or as a note on the range under MIXED_WARN x the noise (issue 37)
+    assert any("not uniform" in w for w in o.warnings) or "not uniform" in o.auto_range["why"]
     rng = tuple(float(v) for v in np.percentile(vol.data[ref], [5, 95]))
     res = segment(vol, [seed], [rng], options=SegmentOptions(mode="slice"))
     obj = res.objects[0]

@@ -37,8 +37,9 @@ from typing import Any
 import numpy as np
 
 from ctui.engine.actions import defaults
-from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap
-from ctui.engine.actions.segment_checks import body_check, check_background, leak_check, sanity, tissue_check, wrap_check
+from ctui.engine.actions.segment_start import SNAP_MM, box_mask2d, box_text, in_region, snap, sub_grid_neck
+from ctui.engine.actions.segment_checks import (body_check, check_background, leak_check, mixed_check, own_measures, sanity,
+                                               tissue_check, wrap_check)
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.core.progress import Progress, report
@@ -256,6 +257,8 @@ def _seed_fill(volume: Any, pipe: Pipeline, seg: Segmentation, oid: int, seed: S
     labels = None if opts.overwrite else seg.labels
     if opts.neck_mm is None:
         choice = auto_width(volume, pipe, seed, lo, hi, labels=labels, object_id=oid, limit=box)
+        if sub_grid_neck(choice, tuple(volume.spacing)):  # the region bounds the leak: no cut at full resolution
+            choice.reason, choice.width_mm = f"bounded: {choice.reason}, under one sweep voxel (no cut)", 0.0
         width = choice.width_mm
         inr = in_range(final, lo, hi).view(bool)
         if labels is not None:
@@ -403,10 +406,11 @@ def _segment(volume: Any, seeds: Sequence[Sequence[int]], thresholds: Sequence[T
         r.slices = None if box is None else (box[0].start, box[0].stop - 1)
         r.cuts = [{"slice": c["slice"], "voxels": c["voxels"],
                    "mm": [round(float(v), 1) for v in geo.index_to_mm((c["slice"], c["y"], c["x"]))]} for c in r.cuts]
-        r.warnings.extend(sanity(r, start, spacing, opts))
+        r.warnings.extend(sanity(r, start, spacing, opts, own=lambda o, b=box, st=start: own_measures(volume, seg, o, st, b, spacing)))
         r.warnings.extend(tissue_check(volume, seg, r, start, box))
         r.warnings.extend(wrap_check(volume, seg, r, start, box))
         r.warnings.extend(body_check(volume, seg, r, box) + leak_check(seg, r, start, box, spacing))
+        r.warnings.extend(mixed_check(volume, seg, r, start, box))
         info = seg.objects.get(r.id)
         if info is not None:  # what the guard chose and where it cut goes into the project with the object
             info.settings["cuts"] = [dict(c) for c in r.cuts[:50]]
