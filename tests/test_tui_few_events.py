@@ -12,9 +12,8 @@ import pytest
 
 from ctui.engine.core.volume import Volume
 from ctui.screens import graphics
-from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
-from ctui.screens.testing import cell_of_voxel, wait_for, wait_workspace
+from ctui.screens.testing import cell_of_voxel, wait_for, workspace_of
 
 
 @pytest.fixture(autouse=True)
@@ -53,10 +52,7 @@ async def _proposal(pilot, ws) -> np.ndarray:
 async def test_double_click_segments_and_a_background_click_then_p_replaces_the_leaky_proposal():
     s, organ, other = _two_balls()
     s.segment_options = {"method": "grow"}  # the fronts compete: a background seed in the neighbour takes it back
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(120, 40)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (120, 40)) as (app, pilot, ws):
         await pilot.pause()
         # a single click moves the cursor only
         await pilot.click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
@@ -88,10 +84,7 @@ async def test_double_click_segments_and_a_background_click_then_p_replaces_the_
 
 async def test_double_click_with_the_brush_down_paints_and_does_not_segment():
     s, _organ, _other = _two_balls()
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(120, 40)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (120, 40)) as (app, pilot, ws):
         await pilot.press("b")
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         await pilot.pause(0.3)
@@ -103,10 +96,7 @@ async def test_the_g_panel_opens_on_its_first_field_so_two_tabs_reach_the_neck()
     from ctui.screens.segpanel import SegmentPanel
 
     s, _organ, _other = _two_balls()
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(80, 24)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (80, 24)) as (app, pilot, ws):
         await pilot.press("G")
         await wait_for(pilot, lambda: isinstance(app.screen, SegmentPanel), what="the G panel")
         await pilot.pause()
@@ -122,10 +112,7 @@ async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
     from ctui.screens.ws_keys import panel_text
 
     s, _organ, _other = _two_balls()
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(80, 24)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (80, 24)) as (app, pilot, ws):
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         await _proposal(pilot, ws)
         note = ("the object is 34x the ball that fits at the seed: it probably leaked into a neighbour; "
@@ -138,10 +125,7 @@ async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
         notes = next(i for i, line in enumerate(lines) if line.startswith("Notes on the proposal"))
         assert obj < notes
         assert "ml" in lines[obj] and obj < ws.query_one("#panel").size.height  # on screen, with its volume
-    app = CtuiApp(session=_two_balls()[0], autosave_s=1e9)
-    async with app.run_test(size=(160, 50)) as pilot:  # a tall panel: the notes under the settings, as before
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(_two_balls()[0], (160, 50)) as (app, pilot, ws):  # a tall panel: the notes under the settings, as before
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         await _proposal(pilot, ws)
         ws.pending.notes = ["a note"]
@@ -152,10 +136,7 @@ async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
 async def test_a_leak_mark_puts_the_cursor_on_its_background_voxel_then_b_and_p_remove_the_leak():
     s, organ, other = _two_balls()
     s.segment_options = {"method": "grow"}
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(120, 40)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (120, 40)) as (app, pilot, ws):
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         got = await _proposal(pilot, ws)
         assert got[other].mean() > 0.5
@@ -181,10 +162,7 @@ async def test_80x24_review_strip_says_a_shorter_whole_text_not_a_cut_one():
     assert fitted("proposal · 2 marks: } { marks, C cut, A accept to here", 20) == "2 marks: } { marks"
     assert fitted("slice 16: 8242 px", 12) == "16: 8242 px"
     s, _organ, _other = _two_balls()
-    app = CtuiApp(session=s, autosave_s=1e9)
-    async with app.run_test(size=(80, 24)) as pilot:
-        await wait_workspace(pilot, app)
-        ws = app.workspace
+    async with workspace_of(s, (80, 24)) as (app, pilot, ws):
         await pilot.double_click("#main", offset=cell_of_voxel(app, (14, 32, 18)))
         await _proposal(pilot, ws)
         await pilot.pause()

@@ -3,7 +3,9 @@ states, move the cursor with the keys a person would press."""
 
 from __future__ import annotations
 
+import contextlib
 import time
+from typing import Any, AsyncIterator
 
 from textual.events import MouseMove, MouseScrollDown, MouseScrollUp
 from textual.widgets import OptionList
@@ -31,6 +33,18 @@ async def wait_workspace(pilot, app, timeout: float = 120.0) -> None:
         return ws is not None and app.screen is ws and ws.is_mounted and bool(ws.query("#main"))
 
     await wait_for(pilot, ready, timeout=timeout, what="the workspace")
+
+
+@contextlib.asynccontextmanager
+async def workspace_of(session: Any, size: tuple[int, int] = (120, 40)) -> AsyncIterator[tuple[Any, Any, Any]]:
+    """``async with workspace_of(session, (cols, rows)) as (app, pilot, ws)``: the app on ``session``
+    (no autosave) at that terminal size, with its workspace on screen."""
+    from ctui.screens.app import CtuiApp  # only when used: benchmarks import this module without the app
+
+    app = CtuiApp(session=session, autosave_s=1e9)
+    async with app.run_test(size=size) as pilot:
+        await wait_workspace(pilot, app)
+        yield app, pilot, app.workspace
 
 
 async def goto_voxel(pilot, app, z: int, y: int, x: int) -> None:
