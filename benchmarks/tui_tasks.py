@@ -124,6 +124,19 @@ class Counter:
         await wheel(self.pilot, widget, offset, up=True, control=control)
 
 
+
+async def save_project(c: Counter, pilot, s) -> int:
+    """Ctrl+S and Enter (the save dialog's default name), until the project is on disk: the events."""
+    from ctui.screens.testing import wait_for
+
+    n_save = c.n
+    await c.press("ctrl+s")
+    await pilot.pause()
+    await c.press("enter")
+    await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
+                   what="the saved project")
+    return c.n - n_save
+
 async def _wait_proposal(pilot, ws, timeout: float = 300.0) -> bool:
     end = time.monotonic() + timeout
     await pilot.pause(0.05)
@@ -284,7 +297,7 @@ async def session(size: tuple[int, int], image: Path, labels: Path, *, review: b
                   out_dir: Path, box: bool = False) -> dict:
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import wait_for, wait_workspace
+    from ctui.screens.testing import wait_workspace
 
     graphics._chosen = "halfblock"
     os.chdir(out_dir)
@@ -305,13 +318,7 @@ async def session(size: tuple[int, int], image: Path, labels: Path, *, review: b
                 rng = (float(np.percentile(vals, 5)), float(np.percentile(vals, 95)))
             rows.append(await _organ(c, app, name, seeds[name], truth == k, first=i == 0, review=review, rng=rng,
                                      box=box))
-        n_save = c.n
-        await c.press("ctrl+s")
-        await pilot.pause()
-        await c.press("enter")
-        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
-                       what="the saved project")
-        save_events = c.n - n_save
+        save_events = await save_project(c, pilot, s)
         proj_path = s.project_path
         errors = list(app.internal_errors) if hasattr(app, "internal_errors") else []
     wall = time.perf_counter() - t_start

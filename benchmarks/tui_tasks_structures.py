@@ -15,7 +15,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from tui_tasks import Counter, _dialog, _organ, _to_target, _wait_proposal, deepest, dice, seen_target  # noqa: E402
+from tui_tasks import Counter, save_project, _dialog, _organ, _to_target, _wait_proposal, deepest, dice, seen_target  # noqa: E402
 
 
 
@@ -28,7 +28,7 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
     from ctui.engine.actions.project import load_project
     from ctui.screens import graphics
     from ctui.screens.app import CtuiApp
-    from ctui.screens.testing import wait_for, wait_workspace
+    from ctui.screens.testing import wait_workspace
 
     graphics.use_graphics("halfblock")
     os.chdir(out_dir)
@@ -46,13 +46,7 @@ async def one_structure(size: tuple[int, int], image: Path, truth_mask: np.ndarr
         else:
             row = await _organ(c, app, name, deepest(truth_mask, s.volume.spacing), truth_mask, first=True,
                                review=False, rng=rng)
-        n_save = c.n
-        await c.press("ctrl+s")
-        await pilot.pause()
-        await c.press("enter")
-        await wait_for(pilot, lambda: s.project_path is not None and Path(s.project_path).exists(), timeout=60,
-                       what="the saved project")
-        row.update(save_events=c.n - n_save, clicks=c.clicks, typed=c.typed, errors=list(app.internal_errors))
+        row.update(save_events=await save_project(c, pilot, s), clicks=c.clicks, typed=c.typed, errors=list(app.internal_errors))
         proj = s.project_path
     got = load_project(proj).labels == row["object"]
     row["dice"] = dice(got, truth_mask)
