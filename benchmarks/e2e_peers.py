@@ -36,6 +36,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the series and the kidney are made in this process with this tree's ctui
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from end_to_end import SERIES_AS_VTK  # noqa: E402
 
 _VTK_WINDOW = r"""
 def window(size):
@@ -85,14 +88,7 @@ import sys, vtk
 import SimpleITK as sitk
 from vtk.util import numpy_support
 series, mode, out, size = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
-reader = sitk.ImageSeriesReader()
-reader.SetFileNames(reader.GetGDCMSeriesFileNames(series))
-img = reader.Execute()
-arr = sitk.GetArrayViewFromImage(img)
-vimg = vtk.vtkImageData()
-vimg.SetDimensions(arr.shape[2], arr.shape[1], arr.shape[0])
-vimg.SetSpacing(*img.GetSpacing())
-vimg.GetPointData().SetScalars(numpy_support.numpy_to_vtk(arr.ravel(), deep=False))
+""" + SERIES_AS_VTK + r"""vimg.GetPointData().SetScalars(numpy_support.numpy_to_vtk(arr.ravel(), deep=False))
 mapper = vtk.vtkGPUVolumeRayCastMapper()
 mapper.SetInputData(vimg)
 ctf = vtk.vtkColorTransferFunction()

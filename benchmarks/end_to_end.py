@@ -55,13 +55,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "benchmarks" / "_cache"
 SAMPLE = ROOT / "sample_data" / "phantom"
 
-PEER = r"""
-import sys, os
-os.environ.setdefault("VTK_SMP_BACKEND_IN_USE", "STDThread")
-import SimpleITK as sitk
-import vtk
-from vtk.util import numpy_support
-series, level, out = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+#: a peer script's reading of the DICOM series into a vtkImageData (SimpleITK then VTK, no copy)
+SERIES_AS_VTK = """\
 reader = sitk.ImageSeriesReader()
 reader.SetFileNames(reader.GetGDCMSeriesFileNames(series))
 img = reader.Execute()
@@ -69,7 +64,16 @@ arr = sitk.GetArrayViewFromImage(img)
 vimg = vtk.vtkImageData()
 vimg.SetDimensions(arr.shape[2], arr.shape[1], arr.shape[0])
 vimg.SetSpacing(*img.GetSpacing())
-vimg.SetOrigin(*img.GetOrigin())
+"""
+
+PEER = r"""
+import sys, os
+os.environ.setdefault("VTK_SMP_BACKEND_IN_USE", "STDThread")
+import SimpleITK as sitk
+import vtk
+from vtk.util import numpy_support
+series, level, out = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+""" + SERIES_AS_VTK + r"""vimg.SetOrigin(*img.GetOrigin())
 vimg.GetPointData().SetScalars(numpy_support.numpy_to_vtk(arr.ravel(), deep=False))
 fe = vtk.vtkFlyingEdges3D()
 fe.SetInputData(vimg)
