@@ -32,7 +32,7 @@ Every table splits the events into keys, clicks (wheel notches and drags too) an
 
     python3 benchmarks/tui_tasks.py [--size 160x50 --size 80x24] [--review] [--range] [--box]
     python3 benchmarks/tui_tasks.py --structures   # issue 37: the liver and the MR brain's lateral ventricles
-    python3 benchmarks/tui_tasks.py --workflow [--png DIR]   # issue 37: segment, section, 3D, SEG + STL, save, reopen
+    python3 benchmarks/tui_tasks.py --workflow [--png DIR]   # issue 37: segment, fix a leak, section, 3D, SEG + STL, save, reopen
     python3 benchmarks/tui_tasks.py --hard [--only liver]   (issue 34: the msd spleen, the abdomen's kidneys, spleen and liver from their least
         uniform part, one background click where the proposal leaks)
 """
@@ -351,9 +351,30 @@ async def _dialog(c: Counter, app, step: str, shots: dict, png: Path | None) -> 
     shots[step] = dialog_problems(app, text) if app.screen is not app.workspace else []
 
 
+WORKFLOW_LABEL = 2  # the right kidney: clicked where it shows on the middle slice, it takes in the liver below
+
+
+async def _back_on(c: Counter, app, ref: np.ndarray) -> None:
+    """A click on the object where it is deepest on the slice shown (when the cursor is off it), for the section
+    through the cursor."""
+    s = app.session
+    obj = s.seg.labels[s.z] == s.current
+    if obj[s.y, s.x] or not (obj & ref[s.z]).any():
+        return
+    from ctui.screens.testing import cell_of_voxel
+
+    dt = in_slice_depth(obj & ref[s.z], s.volume.spacing[1:])
+    y, x = np.unravel_index(int(np.argmax(dt)), dt.shape)
+    await c.click("#main", cell_of_voxel(app, (s.z, int(y), int(x))))
+    await c.pilot.pause()
+
+
 async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir: Path, png: Path | None = None) -> dict:
     """Issue 37's whole workflow on the abdomen CT written as a DICOM series (a SEG needs its source images):
-    the kidney as in :func:`session`, a section through it at the cursor (``M``, ``x``, the object's axis), the 3D
+    the right kidney as in :func:`session` (clicked where it shows on the middle slice, the proposal takes in the
+    liver below it), the leak fixed on the slices the person drags on the review strip with a box and the
+    scissors (:mod:`tui_tasks_fix`; Dice and volume before and after), a click back on the kidney and a section
+    through it at the cursor (``M``, ``x``, the object's axis), the 3D
     view (``r``, Escape), the DICOM-SEG and the kidney's STL (``e``), the project saved and reopened with its
     set-up. Events split by kind: keys, clicks (and wheel notches, drags), typed characters. Every dialog is
     captured (``png``: its PNG written there) and its buttons checked in view."""
@@ -365,6 +386,7 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
     from ctui.screens.measure_screen import MeasureScreen
     from ctui.screens.testing import wait_for, wait_workspace
     from ctui.screens.view3d import View3DScreen
+    from tui_tasks_fix import fix_leak
 
     graphics.use_graphics("halfblock")
     os.chdir(out_dir)
@@ -381,11 +403,17 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
         truth, seeds = seeds_and_truth(labels, s.volume.spacing)
         c = Counter(pilot)
         await _dialog(c, app, "workspace", shots, png)
-        organ = await _organ(c, app, "kidney_left", seeds["kidney_left"], truth == 3, first=True, review=False,
-                             rng=None)
+        ref = truth == WORKFLOW_LABEL
+        organ = await _organ(c, app, "kidney_right", None, ref, first=True, review=False, rng=None, accept=False)
         out["organ_events"] = organ["events"]
         await _dialog(c, app, "kidney", shots, png)
-        await c.press("M")  # the section through the cursor, which the double click left in the kidney
+        async def shot(step: str) -> None:
+            await _dialog(c, app, step, shots, png)
+        out["fix"] = await fix_leak(c, app, ref, shot)  # the strip's slices, accept, a box, scissors on them
+        organ["object"] = s.current
+        await _dialog(c, app, "fixed", shots, png)
+        await _back_on(c, app, ref)
+        await c.press("M")  # the section through the cursor, which the click left in the kidney
         await wait_for(pilot, lambda: isinstance(app.screen, MeasureScreen) and app.screen.stats, timeout=120,
                        what="the measures")
         ms = app.screen
@@ -420,11 +448,14 @@ async def workflow(size: tuple[int, int], image: Path, labels: Path, *, out_dir:
         out["typed"] = c.typed
         out["errors"] = list(app.internal_errors)
         proj = s.project_path
+        await c.press("G")  # not counted: the segmentation options dialog, captured at this size
+        await _dialog(c, app, "segmentation-options", shots, png)
+        await c.press("escape")
     app2 = CtuiApp(project=proj, autosave_s=1e9)
     async with app2.run_test(size=size) as pilot:
         await wait_workspace(pilot, app2)
         got = app2.session.seg.labels == organ["object"]
-        out["reopened_dice"] = dice(got, truth == 3)
+        out["reopened_dice"] = dice(got, ref)
     out["files"] = sorted(p.name for p in out_dir.iterdir() if p.suffix in (".stl", ".dcm"))
     out["dialogs"] = shots
     return out
@@ -451,8 +482,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", action="append", default=None, help="with --hard: only these organs (repeatable)")
     ap.add_argument("--hard", action="store_true", help="issue 34: the msd spleen and the left kidney from the seed in "
                     "their least uniform part, with one background click where the proposal leaks")
-    ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, section, STL, "
-                    "save, reopen) instead of the organs")
+    ap.add_argument("--workflow", action="store_true", help="issue 37's whole workflow (kidney, leak fix, section, "
+                    "3D, SEG + STL, save, reopen) instead of the organs")
     ap.add_argument("--structures", action="store_true", help="issue 37's liver and MR lateral ventricles "
                     "instead of the kidney and spleen")
     ap.add_argument("--mr", default=str(MR_BRAIN), help="the itksnap_brain_mr folder")
@@ -506,8 +537,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) -> int:
-    print(f"ctui TUI workflow on {image.name} written as a DICOM series: left kidney, a section through it, the 3D "
-          "view, DICOM-SEG and STL, save, reopen")
+    print(f"ctui TUI workflow on {image.name} written as a DICOM series: right kidney (label 2), its leak fixed "
+          "(strip slices, box, scissors), a section through it, the 3D view, DICOM-SEG and STL, save, reopen")
     print(f"{'size':>7} {'events':>6} {'keys':>5} {'clicks':>6} {'typed':>5} {'organ':>5}  reopened Dice  3D px   files; section")
     for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
@@ -517,6 +548,14 @@ def print_workflow(sizes, image: Path, labels: Path, png: Path | None = None) ->
               f"{r['organ_events']:>5}  {r['reopened_dice']:>13.3f}  {r['view3d'][1]}x{r['view3d'][0]}  "
               f"{', '.join(r['files'])}; {r['section'][:70]}"
               f"{'; errors: ' + str(len(r['errors'])) if r['errors'] else ''}")
+        f = r["fix"]
+        if f["slices"] is None:
+            print(f"{'':>7} fix: no leak (Dice {f['before'][0]:.3f}, volume {f['before'][1]:.2f}x the reference)")
+        else:
+            print(f"{'':>7} fix: slices {f['slices'][0]}..{f['slices'][1]} (strip limits {f.get('limits')}), box "
+                  f"{f.get('roi_box')}: {f['events']} events ({f['events'] - f['clicks'] - f['typed']} keys, "
+                  f"{f['clicks']} clicks, {f['typed']} typed); Dice {f['before'][0]:.3f} -> {f['after'][0]:.3f}, "
+                  f"volume {f['before'][1]:.2f} -> {f['after'][1]:.2f}x the reference")
         bad = {k: v for k, v in r["dialogs"].items() if v}
         print(f"{'':>7} screens captured: {', '.join(r['dialogs'])}; "
               + ("every dialog's buttons in view" if not bad else f"PROBLEMS: {bad}"))
