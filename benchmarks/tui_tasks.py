@@ -325,7 +325,7 @@ async def session(size: tuple[int, int], image: Path, labels: Path, *, review: b
     from ctui.engine.actions.project import load_project
 
     saved = load_project(proj_path).labels
-    for r, (name, k) in zip(rows, ORGANS):
+    for r, (_name, k) in zip(rows, ORGANS):
         got = saved == r["object"]
         ref = truth == k
         r["dice"] = dice(got, ref)
