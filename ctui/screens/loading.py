@@ -53,6 +53,7 @@ class LoadingScreen(GuardMixin, Screen):
     LoadingScreen { align: center middle; }
     LoadingScreen > Vertical { width: 80%; height: auto; border: round $accent; padding: 1 2; }
     LoadingScreen > Vertical.preview { width: 100%; height: 1fr; border: none; padding: 0 1; }
+    LoadingScreen #load-title { width: 1fr; }  /* a long path wraps instead of running off the box (80x24) */
     LoadingScreen ProgressBar { margin: 1 0; }
     LoadingScreen > Vertical.preview ProgressBar { margin: 0; }
     """
