@@ -328,7 +328,11 @@ class MeasureScreen(GuardMixin, Screen):
             return
         sm = [r["s_mm"] for r in rows]
         area = [r["area_mm2"] for r in rows]
-        img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": len(sm) <= 60}])
+        # the y axis from 0: a 1% change over a cursor's 2 mm path is not drawn from the bottom to the top, and a
+        # narrowing to half shows as half the height
+        top = max((float(v) for v in area if np.isfinite(v)), default=1.0)
+        img, lim = line_plot(iv.target_pixels(), [{"x": sm, "y": area, "color": object_color(oid), "points": len(sm) <= 60}],
+                             ylim=(0.0, top if top > 0 else 1.0))
         iv.set_image(img, token=("sections", oid, len(rows)))
         a = np.array(area, float)
         ok = a[np.isfinite(a)]
@@ -336,7 +340,7 @@ class MeasureScreen(GuardMixin, Screen):
         src = "grey levels (partial volume)" if self.grey else "mask"
         lines = [f"[b]Sections of object {oid}[/b] from the {src}", f"path {length:.1f} mm, {len(rows)} sections"
                  + (f" ({left_out} at caps/branches left out)" if left_out else ""), "",
-                 f"area {lim[2]:.0f}..{lim[3]:.0f} mm² (y axis)", f"arc 0..{length:.0f} mm (x axis)"]
+                 f"area 0..{lim[3]:.0f} mm² (y axis)", f"arc 0..{length:.0f} mm (x axis)"]
         if ok.size:
             lines += ["", f"min area {ok.min():.1f} mm²", f"max area {ok.max():.1f} mm²", f"mean     {ok.mean():.1f} mm²"]
         try:
