@@ -35,7 +35,7 @@ ExportJob = Any
 NEEDS = ("", "dicom")
 #: Suffixes of input files, removed to get the stem that output names start from.
 INPUT_SUFFIXES = (".ctui.autosave", ".ctui", ".seg.nrrd", ".nii.gz", ".nii", ".nrrd", ".nhdr", ".mha", ".mhd",
-                  ".dcm", ".ima", ".tiff", ".tif", ".png", ".npy", ".raw", ".gz", ".zip")
+                  ".gipl.gz", ".gipl", ".dcm", ".ima", ".tiff", ".tif", ".png", ".npy", ".raw", ".gz", ".zip")
 
 
 @dataclass(frozen=True)

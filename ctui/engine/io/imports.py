@@ -369,6 +369,8 @@ def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_refer
     if not p.exists():
         raise CtuiError("no such label file", path=p)
     g = None if grid is None else Geometry.of(grid)
+    if p.name.lower().endswith((".gipl", ".gipl.gz")):  # ITK-SNAP's label maps (a GIPL alone opens as a volume)
+        return _from_labelmap(p, g, "gipl")
     kind = label_kind(p)
     if kind == "dicom-seg":
         return _from_seg(p, g, frame_of_reference, instances)

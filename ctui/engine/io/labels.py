@@ -1,4 +1,5 @@
-"""Label-map export and import: NIfTI (.nii, .nii.gz) and NRRD (.nrrd, .seg.nrrd).
+"""Label-map export and import: NIfTI (.nii, .nii.gz) and NRRD (.nrrd, .seg.nrrd); import only: GIPL
+(.gipl, .gipl.gz: ITK-SNAP's segmentations).
 
 Written with the maintained libraries (nibabel, pynrrd) so 3D Slicer, ITK-SNAP and
 friends open the files aligned with the source series.
@@ -66,7 +67,9 @@ def _kind(path: Path) -> str:
         return "nii"
     if name.endswith(".nrrd"):
         return "nrrd"
-    raise FormatError(f"{path}: unknown label-map format (use .nii, .nii.gz, .nrrd or .seg.nrrd)")
+    if name.endswith((".gipl", ".gipl.gz")):
+        return "gipl"
+    raise FormatError(f"{path}: unknown label-map format (use .nii, .nii.gz, .nrrd, .seg.nrrd or .gipl)")
 
 
 def _check_labels(path, labels: np.ndarray, volume: Volume) -> np.ndarray:
@@ -266,6 +269,8 @@ def load_labels(path: str | os.PathLike) -> tuple[np.ndarray, Volume]:
     try:
         if kind in ("nii", "nii.gz"):
             return _load_nifti(p, st.st_size, compressed=(kind == "nii.gz"))
+        if kind == "gipl":
+            return _load_gipl(p)
         return _load_nrrd(p, st.st_size)
     except CtuiError:  # FormatError, or a size the memory limits refuse
         raise
@@ -301,6 +306,21 @@ def _load_nifti(p: Path, file_size: int, *, compressed: bool) -> tuple[np.ndarra
         raise FormatError(f"{p}: data shape {data.shape} differs from the header's {shape3}")
     affine_lps = LPS_TO_RAS @ np.asarray(img.affine, dtype=np.float64)
     return _geometry_volume(p, data, affine_lps, "NIfTI")
+
+
+def _load_gipl(p: Path) -> tuple[np.ndarray, Volume]:
+    """An ITK-SNAP GIPL segmentation: the header's sizes checked against the file's first
+    (:func:`ctui.engine.io.series.gipl.read_header`), identity direction as ITK reads it."""
+    from ctui.engine.io.series import gipl  # loaded with its format
+
+    hdr = gipl.read_header(p)
+    n = int(np.prod(hdr.shape))
+    check_allocation(hdr.data_bytes + 2 * n, what=f"the {'x'.join(str(v) for v in hdr.shape[::-1])} label map", path=p)
+    data = gipl.read_voxels(p, hdr)
+    affine = np.eye(4)
+    affine[:3, :3] = np.diag(hdr.spacing_xyz)
+    affine[:3, 3] = hdr.origin
+    return _geometry_volume(p, data.transpose(2, 1, 0), affine, "GIPL")
 
 
 def _check_gzip_isize(p: Path, need: int) -> None:

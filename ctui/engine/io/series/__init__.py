@@ -15,7 +15,7 @@
   size) and ``dtype`` (``'>u2'`` = big-endian uint16), or a folder / glob / list of
   headerless per-slice files with ``shape=(y, x)`` in numeric name order
   (CThead.1 .. CThead.113);
-* **MetaImage** ``.mhd`` (+ ``.raw``) and ``.mha``.
+* **MetaImage** ``.mhd`` (+ ``.raw``) and ``.mha``; **GIPL** ``.gipl`` / ``.gipl.gz`` (ITK-SNAP).
 
 Files that are not images, are broken, or whose slice size differs are skipped with a
 reason each (``Volume.skipped``); when nothing loads a :class:`LoadError` names the
@@ -48,7 +48,7 @@ from ctui.engine.io.series._common import IMAGE_SUFFIXES, available_memory, fmt_
 __all__ = ["load", "inspect", "scan", "estimate", "LoadError"]
 
 _MHD = {".mhd", ".mha"}
-_RESEARCH = (".nii", ".nii.gz", ".nrrd", ".nhdr")
+_RESEARCH = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".gipl", ".gipl.gz")
 
 
 def _is_volume_file(p: Path) -> bool:
@@ -67,6 +67,10 @@ def _load_volume_file(p: Path, **kw: Any) -> Volume:
         from ctui.engine.io.series.research import load_nrrd  # loaded with its format
 
         return load_nrrd(p, **kw)
+    if name.endswith((".gipl", ".gipl.gz")):
+        from ctui.engine.io.series.gipl import load_gipl  # loaded with its format
+
+        return load_gipl(p, **kw)
     from ctui.engine.io.series.metaimage import load_mhd  # loaded with its format
 
     return load_mhd(p, **kw)
@@ -96,7 +100,8 @@ def _as_paths(path: Any) -> tuple[Path | None, list[Path] | None]:
 
 
 def _is_dicom_candidate(p: Path) -> bool:
-    return p.suffix.lower() not in IMAGE_SUFFIXES | _MHD | {".raw", ".txt", ".md", ".json", ".nii", ".gz", ".nrrd", ".orig"}
+    return p.suffix.lower() not in IMAGE_SUFFIXES | _MHD | {".raw", ".txt", ".md", ".json", ".nii", ".gz", ".nrrd", ".orig",
+                                                             ".gipl"}
 
 
 def _looks_dicom(p: Path) -> bool:
@@ -512,6 +517,10 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
                      "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
                      "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],
                      "kind": "mhd"}]
+        if vf.name.lower().endswith((".gipl", ".gipl.gz")):
+            from ctui.engine.io.series import gipl  # loaded with its format
+
+            return [gipl.header_info(vf)]
         from ctui.engine.io.series.research import header_info  # loaded with its format
 
         return [header_info(vf)]
