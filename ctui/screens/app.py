@@ -126,7 +126,20 @@ class CtuiApp(App):
         advice = colour_advice(getattr(self.console, "color_system", None))
         if advice and not self.is_headless:
             self._colour_warned = True
-            self.notify(advice, title="Colours", severity="warning", timeout=15)
+            self.colour_note(advice)
+
+    def colour_note(self, advice: str, tries: int = 0) -> None:
+        """The colour advice on the workspace's status line, below the views, once the workspace shows
+        (retried each 0.5 s for a minute while a load or dialog is in front). A 15 s toast of it covered
+        11 of 24 rows at 80x24, the status line too. Its first sentence shortened, the fix (tmux's, then
+        TEXTUAL_COLOR_SYSTEM=truecolor) stays within the status line's 3 lines at 80 columns."""
+        ws = self.workspace
+        if ws is None or self.screen is not ws:
+            if tries < 120:
+                self.set_timer(0.5, lambda: self.colour_note(advice, tries + 1))
+            return
+        head, _, fix = advice.partition(". ")
+        ws.set_status(f"{head.split('only ')[-1].split(',')[0]} only: grey slices band. {fix}" if fix else advice)
 
     def notify(self, message: str, *, title: str = "", severity: SeverityLevel = "information", timeout: float | None = None, markup: bool = False) -> None:
         if severity == "error":
