@@ -50,6 +50,26 @@ def test_itksnap_segmentation_as_labels_over_the_mr():
     assert np.array_equal(opened.labels, ref)
     assert opened.object_ids == sorted(int(v) for v in np.unique(ref) if v)
     assert any("orientation" in n for n in opened.notes)
+    # names and colours from ITK-SNAP's label description beside it (MRIcrop-seg.label)
+    objects = {o["id"]: o for o in opened.project.objects}
+    assert objects[1]["name"] == "vent-lat" and objects[1]["color"] == [0, 30, 255]
+    assert objects[8]["name"] == "corpus-callosum" and objects[8]["color"] == [255, 8, 186]
+
+
+def test_itksnap_label_description_beside_a_gipl(tmp_path):
+    from ctui.engine.io.imports import read_label_file
+
+    arr = np.zeros((3, 4, 5), np.uint8)
+    arr[1, 1:3, 1:4], arr[2, 0, 0] = 2, 7
+    _write_itk(tmp_path / "seg.gipl.gz", arr, (1.0, 1.0, 2.0), (0.0, 0.0, 0.0))
+    (tmp_path / "seg.label").write_text('# IDX -R- -G- -B- -A-- VIS MSH LABEL\n'
+                                        '    0  0 0 0 0.00 0 0 "Clear"\n'
+                                        '    2  10 20 300 1.00 1 1 "left kidney"\n'
+                                        'not a label line\n')
+    imp = read_label_file(tmp_path / "seg.gipl.gz")
+    assert np.array_equal(imp.labels, arr) and imp.kind == "gipl"
+    assert [(o["id"], o["name"], o["color"]) for o in imp.objects][0] == (2, "left kidney", [10, 20, 255])
+    assert imp.objects[1]["id"] == 7 and imp.objects[1]["name"] == "object 7"  # not described: ctui's own
 
 
 def _write_itk(path, arr, spacing_xyz, origin):

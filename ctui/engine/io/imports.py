@@ -26,6 +26,7 @@ own full mask, so measuring an object (:meth:`ImportedLabels.mask`) uses all its
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +41,7 @@ from ctui.engine.io.labels import load_labels
 from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
 
 LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
-KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd")
+KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd", "gipl")
 
 
 @dataclass
@@ -52,7 +53,7 @@ class ImportedLabels:
     labels : ndarray (z, y, x) uint8 on ``geometry`` (0 background).
     objects : list of dict ``{"id", "name", "color" (r, g, b 0..255), "source_number"}``.
     geometry : Geometry of ``labels`` (the series' when one was given).
-    kind : "dicom-seg", "rtstruct", "nifti" or "nrrd".
+    kind : "dicom-seg", "rtstruct", "nifti", "nrrd" or "gipl".
     masks : {object id: bool (z, y, x)} full masks of objects that overlap others.
     warnings : list of str.
     path : the file read.
@@ -330,9 +331,36 @@ def _from_labelmap(p: Path, grid: Geometry | None, kind: str) -> ImportedLabels:
         geom = grid
     ids = [int(i) for i in np.flatnonzero(np.bincount(lab.ravel(), minlength=256)) if i != 0]
     names = _nrrd_names(p) if kind == "nrrd" else {}
-    objects = [{"id": i, "name": names.get(i, f"object {i}"), "color": list(object_color(i)), "source_number": i}
+    described = itksnap_labels(p) if kind == "gipl" else {}
+    names.update({i: name for i, (name, _) in described.items()})
+    objects = [{"id": i, "name": names.get(i, f"object {i}"),
+                "color": list(described[i][1] if i in described else object_color(i)), "source_number": i}
                for i in ids]
     return ImportedLabels(lab, objects, geom, kind, {}, [], str(p))
+
+
+_ITKSNAP_LINE = re.compile(r'^\s*(\d+)\s+(\d+)\s+(\d+)\s+(\d+)\s+\S+\s+\S+\s+\S+\s+"(.*)"\s*$')
+
+
+def itksnap_labels(p: Path) -> dict[int, tuple[str, tuple[int, int, int]]]:
+    """Names and colours of an ITK-SNAP label description beside the label map (``seg.gipl.gz`` ->
+    ``seg.label``: lines ``IDX R G B A VIS MSH "NAME"``), else {}. Read up to 1 MB; other lines skipped."""
+    stem = p.name[: -len(".gz")] if p.name.lower().endswith(".gz") else p.name
+    desc = p.with_name(stem.rsplit(".", 1)[0] + ".label")
+    try:
+        if not desc.is_file():
+            return {}
+        with open(desc, "rb") as fh:
+            text = fh.read(1 << 20).decode("utf-8", "replace")
+    except OSError:
+        return {}
+    out: dict[int, tuple[str, tuple[int, int, int]]] = {}
+    for line in text.splitlines():
+        m = _ITKSNAP_LINE.match(line)
+        if m and 0 < int(m[1]) < 256:
+            r, g, b = (min(255, int(v)) for v in m.group(2, 3, 4))
+            out[int(m[1])] = (m[5][:64], (r, g, b))
+    return out
 
 
 def _nrrd_names(p: Path) -> dict[int, str]:
