@@ -59,7 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the object's grey-level statistics (HU for CT: mean, sd, percentiles) from the series "
                    "(a project's series is loaded; on with --labels)")
     p.add_argument("--labels", metavar="FILE", default=None,
-                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the volume INPUT (a DICOM "
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd, .gipl) over the volume INPUT (a DICOM "
                    "series or a NIfTI/NRRD/MetaImage CT: its grey levels give HU statistics and --partial-volume); "
                    "the two geometries must match (affines within 2%% of a voxel)")
     p.add_argument("--json", action="store_true", help="print a JSON report")

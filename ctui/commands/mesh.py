@@ -50,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(voxel staircase kept) instead of smoothed signed-distance surfaces")
     p.add_argument("--ascii", action="store_true", help="ASCII STL/PLY instead of binary")
     p.add_argument("--labels", metavar="FILE", default=None,
-                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd, .gipl) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     p.add_argument("--json", action="store_true", help="print a JSON report")
     add_load_options(p)
 

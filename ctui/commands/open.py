@@ -29,7 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--crop", default=None, metavar="z0,z1,y0,y1,x0,x1", help="load only this box (voxel indices)")
     p.add_argument("--labels", default=None, metavar="FILE",
                    help="open a label file over the series PATH for editing: DICOM-SEG, RTSTRUCT, .nii, .nii.gz, "
-                   ".nrrd (e.g. from 3D Slicer or TotalSegmentator); its geometry must match the series'")
+                   ".nrrd, .gipl (e.g. from 3D Slicer, TotalSegmentator or ITK-SNAP); its geometry must match the "
+                   "series'")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -64,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fov", type=number("--fov", 1, 170), default=defaults.FLY_FOV_DEG,
                    help=f"fly-through view angle in degrees (default {defaults.FLY_FOV_DEG:g})")
     p.add_argument("--labels", metavar="FILE", default=None,
-                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd) over the series INPUT: its geometry must match the series'; INPUT is then the series")
+                   help="a label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd, .gipl) over the series INPUT: its geometry must match the series'; INPUT is then the series")
     add_load_options(p)
 
 
