@@ -76,15 +76,16 @@ def export_image(rgb: np.ndarray, path: str):
     return Path(path)
 
 
-def run_export(ws: WorkspaceHost, kind: str, path: str) -> str:
-    """Do one export (called in a worker thread); returns a message."""
+def run_export(ws: WorkspaceHost, kind: str, path: str, *, shown: tuple | None = None) -> str:
+    """Do one export (called in a worker thread); returns a message. ``shown``: the slice view's
+    (RGB image, spacing yx) taken on the UI thread (the worker reads no widget); None: read them here."""
     if kind == IMAGE[0]:
         check_output(path, inputs=[ws.s.source_path, ws.s.project_path], label="the image")  # as every export
-        rgb = ws.main_view.rgb
+        rgb, spacing_yx = shown if shown is not None else (ws.main_view.rgb, ws.main_view.spacing_yx)
         if rgb is None:
             raise ValueError("no image shown")
 
-        rgb = physical_image(rgb, ws.main_view.spacing_yx)  # the physical aspect, as on screen
+        rgb = physical_image(rgb, spacing_yx)  # the physical aspect, as on screen
         export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
         return f"Wrote {path}"
     res = export_session(ws.s, kind, path)
@@ -106,7 +107,8 @@ def export_dialog(ws: WorkspaceHost) -> None:
                 return
             path = str(Path(path.strip()).expanduser())
 
-            ws.work.run(lambda: run_export(ws, kind, path), what="Export", name=f"export {kind}")
+            shown = (ws.main_view.rgb, ws.main_view.spacing_yx)  # on the UI thread: the worker touches no widget
+            ws.work.run(lambda: run_export(ws, kind, path, shown=shown), what="Export", name=f"export {kind}")
 
         app.push_screen(PromptScreen(f"Export to ({suffixes[kind]})", default_name(ws.s, kind)), got_path)
 
