@@ -23,15 +23,16 @@ from ctui.engine.segment import propagate
 from ctui.engine.segment.selection import Segmentation
 from ctui.screens.messages import JobProgress, ProposalReady, SegmentationFailed
 from ctui.screens.session import Session
-from ctui.screens.ws_host import WorkspaceHost
+from ctui.screens.ws_host import RunHost
 
 
 class PropagationRun:
-    """One segmentation or propagation of the workspace ``ws``: its cancel event and, when it
+    """One segmentation or propagation of the workspace ``ws`` (all the worker sees of it: its session and
+    its message box, :class:`ctui.screens.ws_host.RunHost`): its cancel event and, when it
     ends, its proposal, the segmentation's report (``actions.segment``'s object result, None
     for a propagation), the seed (x, y, z) and the settings the object keeps when accepted."""
 
-    def __init__(self, ws: WorkspaceHost, direction: str) -> None:
+    def __init__(self, ws: RunHost, direction: str) -> None:
         self.ws = ws
         self.direction = direction
         self.event = threading.Event()

@@ -55,9 +55,9 @@ class WorkspaceScreen(GuardMixin, Screen):
     is an engine call."""
 
     BINDINGS = BINDINGS + MOUSE_BINDINGS + VESSEL_BINDINGS
-    #: more owners (classes taking the screen) whose ``action_<name>`` the key actions ``do('<name>')``
-    #: reach: a tool added by a subclass (ARCHITECTURE.md, "How to add a TUI tool")
-    TOOLS: ClassVar[tuple[Callable[[Any], Owner], ...]] = ()
+    #: more owners (built with the screen) whose ``action_<name>`` the key actions ``do('<name>')`` reach:
+    #: tools a subclass adds (ARCHITECTURE.md, "A TUI tool or key"; tests/test_tui_tool.py)
+    TOOLS: ClassVar[tuple[type[Owner], ...]] = ()
 
     DEFAULT_CSS = """
     WorkspaceScreen #views { height: 1fr; }
@@ -94,7 +94,7 @@ class WorkspaceScreen(GuardMixin, Screen):
         self.segment = SegmentRunner(self)  # S, p, a, x, Escape: the segmentation runs and the proposal
         self.work = JobRunner(self)  # the 3D cell, exports, the AI draft
         owners: list[Owner] = [self.nav, self.edit, self.tools, self.mouse, self.review, self.vessel, self.segment,
-                               *(tool(self) for tool in self.TOOLS)]
+                               self.work, *(tool(self) for tool in self.TOOLS)]
         #: the key actions by name: each owner's action_<name> (one owner per name)
         self.actions: dict[str, Callable[..., Any]] = {"toggle_panel": self.toggle_panel}
         for owner in owners:

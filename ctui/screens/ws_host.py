@@ -43,6 +43,18 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the owners import 
     from ctui.screens.ws_tools import ToolOwner
 
 
+class RunHost(Protocol):
+    """What a worker's run sees of the screen that started it: the session it reads, and a message
+    box (thread-safe ``post_message``; ``is_attached`` False once the screen has gone)."""
+
+    s: Session
+
+    @property
+    def is_attached(self) -> bool: ...
+
+    def post_message(self, message: Message) -> bool: ...
+
+
 class WorkspaceHost(Protocol):
     """The screen as its owners see it: the session, the workspace's state, its owners, and the few
     things only a screen does (show progress and status, repaint, notify, post a message, run a worker)."""
