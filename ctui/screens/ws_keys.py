@@ -4,6 +4,8 @@ and the side panel's text."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
 from rich.text import Text
 
@@ -14,6 +16,9 @@ from ctui.screens.messages import SeedRangeReady
 from ctui.screens.session import VIEWS
 from ctui.screens.ws_host import Owner, WorkspaceHost
 from ctui.screens.ws_state import describe, mm, value_unit
+
+if TYPE_CHECKING:
+    from ctui.screens.app import CtuiApp
 
 BINDINGS = keys(via="do", table="""
 left,h                move(-1,0)             Cursor left                        hidden
@@ -244,7 +249,7 @@ class NavOwner(Owner):
         export_dialog(self.ws)
 
     def action_open(self) -> None:
-        self.app.action_open()  # type: ignore[attr-defined]  # the CtuiApp's (the workspace runs in no other app)
+        cast("CtuiApp", self.app).action_open()  # the workspace runs in no other app
 
 
 def panel_text(ws: WorkspaceHost) -> Text:
