@@ -271,7 +271,7 @@ async def _organ(c: Counter, app, name: str, seed, truth_mask: np.ndarray, *, fi
     await c.double_click("#main", cell)  # the cursor there and the segmentation from it
     got = await _wait_proposal(pilot, ws)
     filled = 0
-    if got and review and any(m.kind == "seed" for m in ws.review_marks()):
+    if got and review and any(m.kind == "seed" for m in ws.review.review_marks()):
         # the strip marks the seed slice itself: the fill leaked there. Box the organ, segment again (p: the
         # proposal's own seed; the box confines the fill and the propagation)
         await _box(c, app, truth_mask, z)

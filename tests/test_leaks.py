@@ -108,7 +108,7 @@ async def test_the_review_strip_marks_where_the_leak_enters(monkeypatch, tmp_pat
             s.seg.objects[s.current].seeds.append((32, 32, 20))
             ws.volumes.version += 1
             ws.refresh_view()
-            ws.update_strip()
+            ws.review.update_strip()
             strip = ws.query_one("#strip", ReviewStrip)
             assert "on" in strip.classes and entry in strip.leaked
             for _ in range(4):

@@ -179,7 +179,7 @@ def test_drift_labels_must_match_the_series_geometry(tmp_path, sample_dir, capsy
 def test_side_panel_shows_long_object_names_in_full():
     """An object's name is not cut to 10 characters: a long one gets a line of its own."""
     from ctui.screens.ws_keys import panel_text
-    from ctui.screens.ws_state import EditTools, ObjectVolumes, ViewState
+    from ctui.screens.ws_state import EditTools, ObjectVolumes, ProposalState, SeedRange, ViewState
 
     s = _session("nifti")
     s.seg.objects[1].name = "kidney_left_lower_pole"
@@ -191,6 +191,15 @@ def test_side_panel_shows_long_object_names_in_full():
             self.viewstate = ViewState()
             self.volumes = ObjectVolumes()
             self.edit_tools = EditTools()
+            self.pending = ProposalState()
+            self.seed_range = SeedRange()
+            self.size = type("Size", (), {"width": 120, "height": 40})()
+
+        def call_after_refresh(self, *_a) -> None:  # the seed range waits for a painted screen: none here
+            pass
+
+        def update_panel(self) -> None:
+            pass
 
     text = panel_text(Ws(s)).plain
     assert "kidney_left_lower_pole" in text and " liver " in text

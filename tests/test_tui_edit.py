@@ -60,7 +60,7 @@ async def test_brush_and_eraser_counts_and_undo():
         before = s.seg.labels.copy()
         ws = app.workspace
         with pytest.raises(Exception):
-            ws.dab("brush", (s.z, -5, 3))
+            ws.edit.dab("brush", (s.z, -5, 3))
         assert np.array_equal(before, s.seg.labels)
         assert not app.internal_errors
 

@@ -150,11 +150,11 @@ async def test_workspace_strip_and_volumes_after_brush_and_undo(_halfblock, monk
             await pilot.pause()
             truth = label_counts(s.seg.labels)
             assert np.array_equal(ws.volumes.counts(s.seg), truth)
-            src = ws.review_source()
+            src = ws.review.review_source()
             ref = _old_of_labels(s.seg.labels, s.current)
             if max(ref[1], default=0) - min(ref[1], default=0) >= 2:
                 _same_stack(src, ref)
-                assert [m.z for m in ws.review_marks()] == [m.z for m in review.marks(review.Stack(*_stack_args(s.seg.labels, s.current)))]
+                assert [m.z for m in ws.review.review_marks()] == [m.z for m in review.marks(review.Stack(*_stack_args(s.seg.labels, s.current)))]
             else:
                 assert src is None
         assert len(scans) == 1  # the object was read whole once; each edit re-read only its slices

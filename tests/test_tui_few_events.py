@@ -142,7 +142,7 @@ async def test_a_leak_mark_puts_the_cursor_on_its_background_voxel_then_b_and_p_
         assert got[other].mean() > 0.5
         # the leak flag as actions.segment reports it (where it enters, the voxel to click as background)
         ws.pending.proposal.leak_entries = [{"slice": 17, "at": [40, 32, 17], "volume_ml": 7.0, "click": [58, 30, 17]}]
-        ws._marks_cache = None
+        ws.review.marks_cache = None
         for _ in range(6):  # } to the next marked slice until the leak's
             await pilot.press("right_curly_bracket")
             if s.z == 17:

@@ -324,7 +324,7 @@ async def test_shift_drag_pans_and_ortho_click_sets_plane():
         await pilot.press("plus", "plus")
         assert app.workspace.viewstate.zoom == 4.0
         await pilot.pause()
-        c0 = ws.viewstate.pan_center or ws._view_center()
+        c0 = ws.viewstate.pan_center or ws.view_center()
         cursor = s.zyx
         w, h = ws.main_view.size
         await drag(pilot, "#main", [(w // 2, h // 2), (w // 2 + 8, h // 2), (w // 2 + 16, h // 2)], shift=True)

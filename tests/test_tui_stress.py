@@ -228,12 +228,12 @@ async def test_quit_during_propagation(monkeypatch):
 
 async def test_internal_error_is_a_notification_not_a_traceback(monkeypatch):
     """A bug in a handler, an action or a worker callback must not end the app."""
-    from ctui.screens.workspace import WorkspaceScreen
+    from ctui.screens.ws_edit import EditOwner
 
     def broken(self):
         raise RuntimeError("simulated bug")
 
-    monkeypatch.setattr(WorkspaceScreen, "action_connectivity", broken)
+    monkeypatch.setattr(EditOwner, "action_connectivity", broken)  # the key c's action (its owner's)
     app = CtuiApp()
     async with app.run_test(size=(100, 30)) as pilot:
         await wait_workspace(pilot, app)

@@ -177,7 +177,6 @@ async def test_proposal_warnings_go_to_the_panel_not_toasts():
     from types import SimpleNamespace
 
     from ctui.engine.segment.propagate import Proposal
-    from ctui.screens.propagation import finished
 
     s = _body_and_island()
     s.seg.labels[:] = 0
@@ -191,7 +190,7 @@ async def test_proposal_warnings_go_to_the_panel_not_toasts():
         run = SimpleNamespace(proposal=p, seed=(24, 24, 10), object_settings={}, started=time.perf_counter(),
                               report=report)
         before = len(app._notifications)
-        finished(ws, run)
+        ws.segment.finished(run)
         await pilot.pause()
         assert len(app._notifications) == before  # no toast
         assert "1 note in the panel" in str(ws.query_one("#status").render())

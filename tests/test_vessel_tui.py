@@ -71,7 +71,7 @@ async def test_vessel_path_on_every_view_and_report_in_measure_screen():
     the three planes (bright where it crosses the plane, at the path's voxels), and the vessel's
     report (length, diameters, max per segment) in the measure screen."""
     from ctui.screens import planes
-    from ctui.screens.vessel_tool import START_COLOR, records
+    from ctui.screens.vessel_tool import START_COLOR
 
     vol, truth, length = u_bend(noise=0.0)
     start, via, end = (30, 20, Z0), (30, 32, 42), (30, 44, Z0)
@@ -88,10 +88,10 @@ async def test_vessel_path_on_every_view_and_report_in_measure_screen():
         s.z, s.y, s.x = end[2], end[1], end[0]
         await pilot.press("O")
         await wait_for(pilot, lambda: ws.pending.proposal is not None, timeout=120, what="the vessel proposal")
-        assert len(records(ws)) == 1  # the proposal's path, before it is accepted
+        assert len(ws.vessel.records()) == 1  # the proposal's path, before it is accepted
         await pilot.press("a")
         await pilot.pause()
-        rec = records(ws)[0]
+        rec = ws.vessel.records()[0]
         path = np.asarray(rec["path"])
         assert np.abs(path[:, 2] - 30).max() <= 1.0  # the tube's axis: x = 30
         # the sagittal plane through x = 30 holds the whole path; the axial plane z = Z0 crosses both legs

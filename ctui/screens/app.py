@@ -260,9 +260,14 @@ class CtuiApp(App):
         if not worker.is_cancelled:
             self.post_message(SessionReady(sess))
 
-    def _start_workspace(self, session: Session, *, recovery: bool = True) -> None:
-        from ctui.screens.workspace import WorkspaceScreen
+    def make_workspace(self, session: Session) -> WorkspaceScreen:
+        """The workspace on ``session``. An app with more tools returns a subclass with them
+        (ARCHITECTURE.md, "A TUI tool or key"; tests/test_tui_tool.py)."""
+        from ctui.screens.workspace import WorkspaceScreen  # imported when a series opens (startup time)
 
+        return WorkspaceScreen(session)
+
+    def _start_workspace(self, session: Session, *, recovery: bool = True) -> None:
         self.session = session
         for w in sorted(session.volume.warnings, key=lambda w: w not in session.volume.assumptions)[:3] if recovery else []:
             self.notify(w, title="Series", severity="warning", timeout=6)
@@ -276,7 +281,7 @@ class CtuiApp(App):
         elif skipped:
             self.notify(f"{len(skipped)} files skipped (ctui info lists them), e.g. {skipped[0].get('file')}: "
                         f"{skipped[0].get('reason')}", severity="warning", timeout=6)
-        ws = WorkspaceScreen(session)
+        ws = self.make_workspace(session)
         self.workspace = ws
         # replace whatever is on the stack (loading screen, old workspace)
         while len(self.screen_stack) > 1:

@@ -28,7 +28,7 @@ from ctui.engine.core.colors import MAX_OBJECTS
 from ctui.engine.core.progress import Cancelled
 from ctui.screens.guard import GuardMixin
 from ctui.screens.messages import AutoReady, JobFailed, JobProgress
-from ctui.screens.ws_jobs import job_progress
+from ctui.screens.ws_host import WorkspaceHost
 
 WHAT = "AI first draft"
 
@@ -145,9 +145,9 @@ class AutoScreen(GuardMixin, ModalScreen[dict | None]):
         self.dismiss(None)
 
 
-def open_auto(ws) -> None:
+def open_auto(ws: WorkspaceHost) -> None:
     """``Z``: say what is missing in one line, else ask the options and start the worker."""
-    if ws._busy():
+    if ws.edit.busy():
         return
     why = auto.missing("total")
     if why:
@@ -155,10 +155,14 @@ def open_auto(ws) -> None:
         ws.app.notify(why, severity="error", timeout=10)
         return
     objects = {i: o.name for i, o in ws.s.seg.objects.items()}
-    ws.app.push_screen(AutoScreen(objects), lambda c: c is not None and start(ws, c))
+    def chosen(choice: dict | None) -> None:
+        if choice is not None:
+            start(ws, choice)
+
+    ws.app.push_screen(AutoScreen(objects), chosen)
 
 
-def start(ws, choice: dict[str, Any]):
+def start(ws: WorkspaceHost, choice: dict[str, Any]):
     """Run the draft in a thread (Escape cancels it); its result comes back as ``AutoReady``."""
     snapshot = ws.s.seg.labels.copy()
     objects = ws.s.seg.object_list()
@@ -168,7 +172,7 @@ def start(ws, choice: dict[str, Any]):
         ws.post_message(JobProgress(f"{WHAT}: starting TotalSegmentator", 0, 100))
         try:
             res = auto.auto_segment(ws.s.volume, labels=snapshot, objects=objects, max_id=MAX_OBJECTS,
-                                    progress=job_progress(ws, WHAT), **choice)
+                                    progress=ws.work.progress(WHAT), **choice)
         except Cancelled:
             ws.post_message(JobFailed(WHAT, "cancelled"))
             return
@@ -181,7 +185,7 @@ def start(ws, choice: dict[str, Any]):
     return ws.jobs.track(ws.run_worker(body, thread=True, group="job", name=WHAT))
 
 
-def apply_result(ws, res, snapshot: np.ndarray) -> None:
+def apply_result(ws: WorkspaceHost, res, snapshot: np.ndarray) -> None:
     """Write what the draft changed (voxels where its labels differ from ``snapshot``: edits made while
     it ran stay) as one undo step, name and colour its objects, say what came in."""
     ws.jobs.worker_ended()
@@ -194,16 +198,17 @@ def apply_result(ws, res, snapshot: np.ndarray) -> None:
         return
     if changed.any():
         idx = [np.flatnonzero(changed.any(axis=a)) for a in ((1, 2), (0, 2), (0, 1))]
-        box = tuple(slice(int(i[0]), int(i[-1]) + 1) for i in idx)
+        box = (slice(int(idx[0][0]), int(idx[0][-1]) + 1), slice(int(idx[1][0]), int(idx[1][-1]) + 1),
+               slice(int(idx[2][0]), int(idx[2][-1]) + 1))
         seg.apply_region(box, np.where(changed[box], res.labels[box], seg.labels[box]),
                          label=f"TotalSegmentator {res.task}")
     for o in res.added:
         obj = next(x for x in res.objects if int(x["id"]) == int(o["id"]))
         oid = seg.add_object(obj["name"], color=tuple(obj["color"]), object_id=int(obj["id"]))
-        seg.objects[oid].name, seg.objects[oid].color = str(obj["name"]), tuple(int(c) for c in obj["color"])
+        seg.objects[oid].name, seg.objects[oid].color = str(obj["name"]), (int(obj["color"][0]), int(obj["color"][1]), int(obj["color"][2]))
     if res.added:
         ws.s.current = int(res.added[0]["id"])
     names = ", ".join(f"{o['name']} {o['volume_ml']:.1f} mL" for o in res.added)
     notes = [f"skipped {s}" for s in res.skipped] + list(res.warnings)
-    ws._edited(f"{WHAT}: {len(res.added)} object(s) from TotalSegmentator {res.task} in {res.seconds:.0f} s: "
+    ws.edit.edited(f"{WHAT}: {len(res.added)} object(s) from TotalSegmentator {res.task} in {res.seconds:.0f} s: "
                f"{names}" + (f" ({'; '.join(notes)})" if notes else "") + "; u undoes")

@@ -19,7 +19,7 @@ from ctui.screens.dialogs import PromptScreen
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
-from ctui.screens.messages import Call
+from ctui.screens.messages import DriftReady, Note
 from ctui.screens.plot import line_plot
 from ctui.screens.projects import opened_of
 
@@ -65,14 +65,20 @@ class DriftScreen(GuardMixin, Screen):
     def analyse(self) -> None:
         labels = self.s.labels()
         if labels is None or not labels.any():
-            self.post_message(Call(self._info, "No objects yet: segment one (Enter, p) to check drift."))
+            self.post_message(Note("No objects yet: segment one (Enter, p) to check drift."))
             return
         try:
             rep = drift_check(opened_of(self.s)).report  # the same check as `ctui drift`
         except Exception as exc:
             self.app.notify(f"Drift analysis failed: {exc}", severity="error")
             return
-        self.post_message(Call(self._show, rep))
+        self.post_message(DriftReady(rep))
+
+    def on_note(self, msg: Note) -> None:
+        self._info(msg.text)
+
+    def on_drift_ready(self, msg: DriftReady) -> None:
+        self._show(msg.report)
 
     def _info(self, text: str) -> None:
         self.query_one("#dr-info", Static).update(text)

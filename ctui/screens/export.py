@@ -16,7 +16,7 @@ from ctui.screens.cells import physical_image
 from ctui.screens.dialogs import ChoiceScreen, PromptScreen
 from ctui.screens.projects import opened_of
 from ctui.screens.session import Session, safe_cwd
-from ctui.screens.ws_jobs import run_job
+from ctui.screens.ws_host import WorkspaceHost
 
 #: Menu ids the screen adds to the engine's formats: a format's surfaces for the current
 #: object only (``<format>:current``) and the slice view as shown.
@@ -76,15 +76,16 @@ def export_image(rgb: np.ndarray, path: str):
     return Path(path)
 
 
-def run_export(ws, kind: str, path: str) -> str:
-    """Do one export (called in a worker thread); returns a message."""
+def run_export(ws: WorkspaceHost, kind: str, path: str, *, shown: tuple | None = None) -> str:
+    """Do one export (called in a worker thread); returns a message. ``shown``: the slice view's
+    (RGB image, spacing yx) taken on the UI thread (the worker reads no widget); None: read them here."""
     if kind == IMAGE[0]:
         check_output(path, inputs=[ws.s.source_path, ws.s.project_path], label="the image")  # as every export
-        rgb = ws.main_view.rgb
+        rgb, spacing_yx = shown if shown is not None else (ws.main_view.rgb, ws.main_view.spacing_yx)
         if rgb is None:
             raise ValueError("no image shown")
 
-        rgb = physical_image(rgb, ws.main_view.spacing_yx)  # the physical aspect, as on screen
+        rgb = physical_image(rgb, spacing_yx)  # the physical aspect, as on screen
         export_image(rgb if rgb.ndim == 3 else np.repeat(rgb[:, :, None], 3, axis=2), path)
         return f"Wrote {path}"
     res = export_session(ws.s, kind, path)
@@ -92,7 +93,7 @@ def run_export(ws, kind: str, path: str) -> str:
     return f"Wrote {path}: {len(res.objects)} object(s) ({names})" + "".join(f"; {w}" for w in res.warnings[:1])
 
 
-def export_dialog(ws) -> None:
+def export_dialog(ws: WorkspaceHost) -> None:
     app = ws.app
     items, note = menu_items(ws.s)
     suffixes = {k: (IMAGE[2] if k == IMAGE[0] else FORMATS[k.split(":")[0]].suffix) for k, _ in items}
@@ -106,7 +107,8 @@ def export_dialog(ws) -> None:
                 return
             path = str(Path(path.strip()).expanduser())
 
-            run_job(ws, lambda: run_export(ws, kind, path), what="Export", name=f"export {kind}")
+            shown = (ws.main_view.rgb, ws.main_view.spacing_yx)  # on the UI thread: the worker touches no widget
+            ws.work.run(lambda: run_export(ws, kind, path, shown=shown), what="Export", name=f"export {kind}")
 
         app.push_screen(PromptScreen(f"Export to ({suffixes[kind]})", default_name(ws.s, kind)), got_path)
 

@@ -46,7 +46,3 @@ class GuardMixin:
             await super()._dispatch_message(message)  # type: ignore[misc]  # a mixin: Textual's Screen follows it in the MRO
         except Exception as exc:
             report_internal_error(self.app, exc)  # type: ignore[attr-defined]  # a mixin: self is a Screen, whose app is the CtuiApp
-
-    def on_call(self, message) -> None:
-        """A :class:`ctui.screens.messages.Call` posted by a worker of this screen."""
-        message.fn(*message.args, **message.kwargs)

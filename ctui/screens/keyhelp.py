@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import itertools
 
+from ctui.screens.keytable import action_name
+
 
 TASKS = ("Segment", "Review", "Edit", "Views", "3D and measure", "Files", "Navigate", "More")
 
@@ -74,7 +76,7 @@ def key_name(key: str) -> str:
 
 def task_of(action: str) -> str:
     """The task group of a binding's action ("propagate('both')" -> "Segment")."""
-    base = action.split("(")[0].strip()
+    base = action_name(action)
     if base in ACTION_TASK:
         return ACTION_TASK[base]
     low = base.lower()
@@ -106,7 +108,7 @@ def task_rows(nodes) -> list[tuple[str, str, str]]:
     for i, (key, action, desc) in enumerate(_bindings(nodes)):
         task = task_of(action)
         keys = " ".join(key_name(k) for k in key.split(","))
-        rank = order.get(action.split("(")[0].strip(), len(order))
+        rank = order.get(action_name(action), len(order))
         rows.append((TASKS.index(task), rank, i, task, keys, desc))
     rows.sort()
     return [(task, keys, desc) for *_r, task, keys, desc in rows]

@@ -188,14 +188,24 @@ class LoadFailed(Message):
         self.options = dict(options or {})
 
 
-class Call(Message, bubble=False):
-    """Run ``fn(*args, **kwargs)`` on the UI thread in the screen it is posted to (screens
-    mix in :class:`ctui.screens.guard.GuardMixin`, which handles it). Unlike
-    ``App.call_from_thread`` it never blocks the worker, and it is dropped when the screen
-    has closed meanwhile instead of touching widgets that are gone."""
+@event
+class SeriesFound(Message, bubble=False):
+    """The open screen's scan of ``path`` ended: the series ``found`` (headers), or ``error`` (a reason)."""
 
-    def __init__(self, fn: Any, *args: Any, **kwargs: Any) -> None:
-        super().__init__()
-        self.fn = fn
-        self.args = args
-        self.kwargs = kwargs
+    path: Any
+    found: list
+    error: str | None
+
+
+@event
+class DriftReady(Message, bubble=False):
+    """The drift screen's check ended: ``report`` (``actions.drift``'s report)."""
+
+    report: Any
+
+
+@event
+class Note(Message, bubble=False):
+    """A line for the posting screen's own info label (a scan's progress, an empty result); not bubbled."""
+
+    text: str

@@ -19,7 +19,7 @@ from textual.widgets.option_list import Option
 from ctui.engine.core.progress import Cancelled
 from ctui.engine.actions import series as loaders
 from ctui.screens.guard import GuardMixin
-from ctui.screens.messages import Call
+from ctui.screens.messages import Note, SeriesFound
 
 
 def describe_series(s: dict) -> str:
@@ -115,12 +115,12 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
         """Series in ``path`` (headers only). A newer scan (the user moved on) or closing the
         screen cancels this one between headers: a large tree is not read to the end."""
         worker = get_current_worker()
-        self.post_message(Call(self._status, f"Scanning {path} ..."))
+        self.post_message(Note(f"Scanning {path} ..."))
 
         def progress(done: float, total: float, message: str = "") -> None:
             if worker.is_cancelled:
                 raise Cancelled()
-            self.post_message(Call(self._status, f"Scanning {path}: {message} {done:g}/{total:g}"))
+            self.post_message(Note(f"Scanning {path}: {message} {done:g}/{total:g}"))
 
         try:
             found = loaders.scan(str(path), progress=progress)
@@ -130,12 +130,16 @@ class OpenScreen(GuardMixin, ModalScreen[tuple | None]):
         except Exception as exc:  # unreadable folder, loader error: a reason, not a traceback
             found, err = [], str(exc)
         if not worker.is_cancelled:
-            self.post_message(Call(self._show, path, found, err))
+            self.post_message(SeriesFound(path, found, err))
+
+    def on_note(self, msg: Note) -> None:
+        self._status(msg.text)
 
     def _status(self, text: str) -> None:
         self.query_one("#op-status", Label).update(text)
 
-    def _show(self, path: Path, found: list[dict], err: str | None) -> None:
+    def on_series_found(self, msg: SeriesFound) -> None:
+        path, found, err = msg.path, msg.found, msg.error
         self.current = path
         self.series = list(found or [])
         ol = self.query_one("#op-series", OptionList)

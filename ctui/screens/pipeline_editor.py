@@ -19,7 +19,7 @@ from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
-from ctui.screens.messages import Call
+from ctui.screens.messages import StageViewsReady
 
 MORPHOLOGY = ("closing", "opening", "erode", "dilate", "conservative")
 
@@ -337,9 +337,11 @@ class PipelineEditor(GuardMixin, ModalScreen[None]):
         except Exception as exc:
             self.app.notify(f"Preview failed: {exc}", severity="error")
             return
-        self.post_message(Call(self._show, z, views))
+        self.post_message(StageViewsReady(z, 0, views))
 
-    def _show(self, z: int, views) -> None:
+    def on_stage_views_ready(self, msg: StageViewsReady) -> None:
+        msg.stop()  # the editor's preview, not the workspace's views
+        z, views = msg.z, msg.views
         pv = planes.plane_view(self.s.volume, planes.slice_plane(self.s.volume))  # the patient's frame
         cursor = planes.cursor_in(pv, self.s.zyx, self.s.shape)
         for wid, arr in (("#pe-inter", views.intermediate), ("#pe-final", views.final)):

@@ -4,7 +4,9 @@ from the cursor (``S``) or from the object's seed (``p``, ``<``, ``>``), with a 
 cancel (Escape), then a pending proposal shown (hatched, outlined in yellow) on every plane
 until accepted (``a``: the object becomes the proposal, one undo step) or rejected (``x``).
 An object drawn by hand (no seed) is propagated from its drawn slice instead. The worker
-talks to the workspace through messages."""
+talks to the workspace through messages. The runs are started and ended by the workspace's
+:class:`ctui.screens.ws_segment.SegmentRunner`; this module (the engine's segmentation, scipy)
+loads with the first run."""
 
 from __future__ import annotations
 
@@ -20,16 +22,17 @@ from ctui.engine.core.progress import Cancelled
 from ctui.engine.segment import propagate
 from ctui.engine.segment.selection import Segmentation
 from ctui.screens.messages import JobProgress, ProposalReady, SegmentationFailed
-from ctui.screens.segpanel import describe, options_for
 from ctui.screens.session import Session
+from ctui.screens.ws_host import RunHost
 
 
 class PropagationRun:
-    """One segmentation or propagation of the workspace ``ws``: its cancel event and, when it
+    """One segmentation or propagation of the workspace ``ws`` (all the worker sees of it: its session and
+    its message box, :class:`ctui.screens.ws_host.RunHost`): its cancel event and, when it
     ends, its proposal, the segmentation's report (``actions.segment``'s object result, None
     for a propagation), the seed (x, y, z) and the settings the object keeps when accepted."""
 
-    def __init__(self, ws, direction: str) -> None:
+    def __init__(self, ws: RunHost, direction: str) -> None:
         self.ws = ws
         self.direction = direction
         self.event = threading.Event()
@@ -107,39 +110,7 @@ def object_seed(session: Session) -> tuple[int, int, int] | None:
     return int(x), int(y), int(z)
 
 
-def _idle(ws) -> bool:
-    """Whether no segmentation runs; otherwise says so. A pending proposal does not block: segmenting
-    again (after a background seed in its leak, a new range, a new option) replaces it, no x first."""
-    if ws.jobs.segmenting:
-        ws.app.notify("A segmentation is already running (Escape cancels it)", severity="warning")
-        return False
-    return True
-
-
-def start_segment(ws, direction: str = "both", *, seed: tuple[int, int, int] | None = None) -> None:
-    """Segment the current object from ``seed`` (default: the cursor) through ``actions.segment``."""
-    app = ws.app
-    s = ws.s
-    if not _idle(ws):
-        return
-    seed = seed or (int(s.x), int(s.y), int(s.z))
-    try:
-        opts, th = options_for(s, direction)
-    except (CtuiError, ValueError) as exc:
-        app.notify(str(exc), severity="error")
-        return
-    run = PropagationRun(ws, direction)
-    replaced = ws.pending.clear() is not None
-    ws.jobs.segmentation_started(run)
-    if replaced:
-        ws.refresh_view()  # the old proposal's hatching goes while the new one is computed
-    ws.show_progress(f"Segmenting object {s.current} from {seed[0]},{seed[1]},{seed[2]} ({describe(s)})"
-                     f"{'; it replaces the pending proposal' if replaced else ''}", 0, 100)
-    ws.run_worker(lambda: _segment_work(run, seed, opts, th), thread=True, exclusive=True, group="propagate",
-                  name="segment")
-
-
-def _segment_work(run: PropagationRun, seed, opts, th) -> None:
+def segment_work(run: PropagationRun, seed, opts, th) -> None:
     ws = run.ws
     s = ws.s
     progress = run.progress(get_current_worker(), "Segmenting")
@@ -170,33 +141,7 @@ def _segment_work(run: PropagationRun, seed, opts, th) -> None:
     run.done(proposal, report=obj, seed=seed, object_settings=settings)
 
 
-def start_propagation(ws, direction: str) -> None:
-    """``p``/``<``/``>``: segment the current object from its seed (actions.segment); an object drawn by
-    hand (no seed) is propagated from its drawn slice."""
-    # a pending proposal's seed first: p again (after a background seed in its leak) segments from the same seed
-    seed = ws.pending.seed if ws.pending.proposal is not None and ws.pending.seed is not None else object_seed(ws.s)
-    if seed is not None:
-        start_segment(ws, direction, seed=seed)
-        return
-    app = ws.app
-    s = ws.s
-    if not _idle(ws):
-        return
-    try:
-        settings = settings_for(s, direction)
-        if not (s.seg.labels[s.z] == s.current).any():
-            raise CtuiError(f"object {s.current} has no pixels on slice {s.z}: fill it here first (Enter)")
-    except (CtuiError, ValueError) as exc:
-        app.notify(str(exc), severity="error")
-        return
-    run = PropagationRun(ws, direction)
-    ws.pending.clear()
-    ws.jobs.segmentation_started(run)
-    ws.show_progress(f"Propagating object {s.current} {direction}", 0, s.shape[0])
-    ws.run_worker(lambda: _work(run, settings), thread=True, exclusive=True, group="propagate", name="propagate")
-
-
-def _work(run: PropagationRun, settings) -> None:
+def propagate_work(run: PropagationRun, settings) -> None:
     """The worker: progress and the result go to the workspace as messages."""
     ws = run.ws
     s = ws.s
@@ -221,46 +166,3 @@ def _work(run: PropagationRun, settings) -> None:
         ws.post_message(SegmentationFailed("Propagation", str(exc)))
         return
     run.done(proposal)
-
-
-def finished(ws, run: PropagationRun) -> None:
-    ws.jobs.segmentation_ended()
-    ws.show_progress(None)
-    p = run.proposal
-    if p is None:  # done() always gives one; a run that ended without is a SegmentationFailed
-        return
-    ws.pending.show(p, seed=run.seed, object_settings=run.object_settings)
-    rng = p.slices
-    secs = time.perf_counter() - run.started
-    where = f"slices {rng[0]}..{rng[1]}" if rng else "no slices"
-    rep = run.report
-    # warnings are advisory: notes in the side panel (and counted on the status line), never a toast
-    # over the image, the proposal line or the review strip
-    notes = list(rep.warnings) if rep is not None else list(p.warnings())
-    ws.pending.notes = notes
-    said = f" ({len(notes)} note{'s' if len(notes) != 1 else ''} in the panel)" if notes else ""
-    if rep is not None:
-        ws.set_status(f"Proposal: {rep.message()} in {secs:.1f} s{said}. a accepts, x rejects")
-    else:
-        ws.set_status(f"Proposal (hatched): {p.voxels} voxels, {where} in {secs:.1f} s{said}. a accepts, x rejects")
-    ws.refresh_view()
-
-
-def accept(ws) -> None:
-    """``a``: the pending proposal goes into the segmentation (one undo step)."""
-    if ws.pending.proposal is None:
-        ws.app.notify("No pending propagation", timeout=2)
-        return
-    n, p = ws.pending.accept(ws.s.seg)
-    ws.labels_changed()
-    ws.set_status(f"Accepted: {n} voxels added to object {p.object_id} (u undoes)")
-    ws.refresh_view()
-
-
-def reject(ws) -> None:
-    """``x``: the pending proposal is dropped."""
-    if ws.pending.clear() is None:
-        ws.app.notify("No pending propagation", timeout=2)
-        return
-    ws.set_status("Propagation rejected")
-    ws.refresh_view()

@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import contextlib
 import time
-from typing import Any, AsyncIterator
+from typing import TYPE_CHECKING, Any, AsyncIterator
 
 from textual.events import MouseMove, MouseScrollDown, MouseScrollUp
 from textual.widgets import OptionList
 
 from ctui.screens import planes
 from ctui.screens.graphics import cell_pixels
+
+if TYPE_CHECKING:
+    from ctui.screens.session import Session
 
 
 async def wait_for(pilot, predicate, *, timeout: float = 90.0, what: str = "condition") -> None:
@@ -36,7 +39,7 @@ async def wait_workspace(pilot, app, timeout: float = 120.0) -> None:
 
 
 @contextlib.asynccontextmanager
-async def workspace_of(session: Any, size: tuple[int, int] = (120, 40)) -> AsyncIterator[tuple[Any, Any, Any]]:
+async def workspace_of(session: Session, size: tuple[int, int] = (120, 40)) -> AsyncIterator[tuple[Any, Any, Any]]:
     """``async with workspace_of(session, (cols, rows)) as (app, pilot, ws)``: the app on ``session``
     (no autosave) at that terminal size, with its workspace on screen."""
     from ctui.screens.app import CtuiApp  # only when used: benchmarks import this module without the app

@@ -1,6 +1,11 @@
 """The slice workspace: axial, sagittal and coronal views (one at a time, or 2x2 with
 the 3D view), the pipeline's four views of an axial slice (2x2), a shared cursor
-(crosshair), the side panel and every segmentation key (:mod:`ctui.screens.ws_edit`).
+(crosshair), the side panel and every segmentation key.
+
+The screen draws; its owners (:mod:`ctui.screens.ws_host` lists them) hold the rest and
+do the keys: one Textual action, ``do(name, args)``, runs an owner's ``action_<name>``
+through the screen's table of actions, and one handler hands the workers' messages to
+their owners.
 
 Slices are numbered from 0 in the TUI as in the CLI ("Slice 40/79": index/last index).
 """
@@ -8,10 +13,13 @@ Slices are numbered from 0 in the TUI as in the CLI ("Slice 40/79": index/last i
 from __future__ import annotations
 
 import numpy as np
-from textual import on, work
+from typing import Any, Callable, ClassVar
+
+from textual import events, on, work
 from textual.app import ComposeResult
 from textual.containers import Grid, Horizontal, Vertical
 from textual.screen import Screen
+from textual.message import Message
 from textual.widgets import Label, ProgressBar, Static
 
 from ctui.engine.core.windows import apply_window
@@ -22,13 +30,18 @@ from ctui.screens.keybar import KeyBar
 from ctui.screens.messages import (AutoReady, CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
                                    SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
-from ctui.screens.ws_edit import EditMixin
-from ctui.screens.ws_keys import BINDINGS, NavMixin, panel_text
 from ctui.screens.strip import ReviewStrip
-from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseMixin
+from ctui.screens.vessel_tool import VESSEL_BINDINGS, VesselOwner
+from ctui.screens.ws_edit import EditOwner
+from ctui.screens.ws_host import Owner
+from ctui.screens.ws_jobs import JobRunner
+from ctui.screens.ws_keys import BINDINGS, NavOwner, panel_text
+from ctui.screens.ws_mouse import MOUSE_BINDINGS, MouseOwner
 from ctui.screens.ws_overlay import draw_overlay
-from ctui.screens.vessel_tool import VESSEL_BINDINGS, VesselMixin
+from ctui.screens.ws_review import ReviewOwner
+from ctui.screens.ws_segment import SegmentRunner
 from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
+from ctui.screens.ws_tools import ToolOwner
 
 
 class SidePanel(Static):
@@ -37,10 +50,14 @@ class SidePanel(Static):
     """
 
 
-class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, Screen):
-    """Slice views + side panel. Thin: every computation is an engine call."""
+class WorkspaceScreen(GuardMixin, Screen):
+    """Slice views + side panel, composed of owners (module docstring). Thin: every computation
+    is an engine call."""
 
     BINDINGS = BINDINGS + MOUSE_BINDINGS + VESSEL_BINDINGS
+    #: more owners (built with the screen) whose ``action_<name>`` the key actions ``do('<name>')`` reach:
+    #: tools a subclass adds (ARCHITECTURE.md, "A TUI tool or key"; tests/test_tui_tool.py)
+    TOOLS: ClassVar[tuple[type[Owner], ...]] = ()
 
     DEFAULT_CSS = """
     WorkspaceScreen #views { height: 1fr; }
@@ -66,6 +83,25 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         self.pending = ProposalState()  # the proposal waiting for a (accept) or x (reject)
         self.volumes = ObjectVolumes()  # labels version, volume per object
         self.seed_range = SeedRange()  # the side panel's range at the cursor
+        self._status_lines = 1  # the status line's height (a longer message wraps)
+        # the owners: each holds its part of the state and does its keys (ws_host.WorkspaceHost: what they see)
+        self.nav = NavOwner(self)  # cursor, slices, planes, zoom, windows, the other screens
+        self.edit = EditOwner(self)  # label edits: fill, brush, objects, undo
+        self.tools = ToolOwner(self)  # the 3D edit tools of the t menu
+        self.mouse = MouseOwner(self)  # clicks, drags, the wheel; the ROI box and background seeds
+        self.review = ReviewOwner(self)  # the review strip and its keys
+        self.vessel = VesselOwner(self)  # D / O: the vessel tool
+        self.segment = SegmentRunner(self)  # S, p, a, x, Escape: the segmentation runs and the proposal
+        self.work = JobRunner(self)  # the 3D cell, exports, the AI draft
+        owners: list[Owner] = [self.nav, self.edit, self.tools, self.mouse, self.review, self.vessel, self.segment,
+                               self.work, *(tool(self) for tool in self.TOOLS)]
+        #: the key actions by name: each owner's action_<name> (one owner per name)
+        self.actions: dict[str, Callable[..., Any]] = {"toggle_panel": self.toggle_panel}
+        for owner in owners:
+            for name, fn in owner.actions().items():
+                if name in self.actions:
+                    raise ValueError(f"two owners of the workspace's action {name!r}")
+                self.actions[name] = fn
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
@@ -102,7 +138,7 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
     def main_view(self) -> ImageView:
         return self.query_one("#main", ImageView)
 
-    def _view_center(self, plane: str | None = None) -> tuple[float, float]:
+    def view_center(self, plane: str | None = None) -> tuple[float, float]:
         """(x, y) image pixel the view of ``plane`` (default: the session's) centres on."""
         return self.viewstate.center(self.s, plane or self.s.plane)
 
@@ -135,7 +171,7 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
             note += f"  x {s.x} y {s.y} = [b]{s.value():g}{unit}[/b]"
         return f"{plane} {axis} {idx}/{last}  [b]{left}[/b]◀▶[b]{right}[/b]  [b]{top}[/b]▲▼[b]{bottom}[/b]{note}"
 
-    def _targets(self) -> list[tuple[str, str, ImageView]]:
+    def targets(self) -> list[tuple[str, str, ImageView]]:
         """(plane, view, widget) of every visible slice view."""
         s = self.s
         if self.viewstate.grid_mode:
@@ -157,10 +193,10 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         s = self.s
         s.clamp()
         need_stage = False
-        for plane, view, iv in self._targets():
+        for plane, view, iv in self.targets():
             pv = planes.plane_view(s.volume, plane)
             cursor = planes.cursor_in(pv, s.zyx, s.shape)
-            center = self._view_center(plane)
+            center = self.view_center(plane)
             iv.overlay = lambda grid, vm, _p=plane: draw_overlay(self, _p, grid, vm)
             if view in ("intermediate", "final"):
                 need_stage = True
@@ -172,12 +208,12 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
                 img = self.plane_image(plane, view)
             iv.set_image(img, token=(s.z, view if view != "overlay" else plane, self.viewstate.token),
                          spacing_yx=pv.spacing_yx, zoom=self.viewstate.zoom, center=center, cursor=cursor)
-        self._captions()
+        self.captions()
         if need_stage:
             self.compute_stage_views(s.z, self.viewstate.next_token())
         self.update_panel()
 
-    def _captions(self) -> None:
+    def captions(self) -> None:
         if self.viewstate.ortho_mode:
             for p in planes.PLANES:
                 self.query_one(f"#oc-{p}", Label).update(self.caption(p))
@@ -202,12 +238,12 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         if z != s.z:
             return  # superseded
         self.viewstate.last_views = views
-        for plane, view, iv in self._targets():
+        for plane, view, iv in self.targets():
             if view in ("intermediate", "final"):
                 pv = planes.plane_view(s.volume, plane)
                 img = planes.orient(s.display(getattr(views, view)), pv)
                 iv.set_image(img, token=(z, view, token), spacing_yx=pv.spacing_yx, zoom=self.viewstate.zoom,
-                             center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+                             center=self.view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
 
     def labels_changed(self) -> None:
         self.volumes.changed()
@@ -217,12 +253,12 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
 
     def update_panel(self) -> None:
         self.query_one("#panel", SidePanel).update(panel_text(self), layout=False)  # fixed size: no relayout
-        self.update_strip()
+        self.review.update_strip()
 
     def set_status(self, msg: str) -> None:
         """The status line; a message longer than the width wraps (up to 3 lines)."""
         lines = 1 + len(str(msg)) // max(self.size.width - 2, 20)
-        relayout = lines != getattr(self, "_status_lines", 1)
+        relayout = lines != self._status_lines
         self._status_lines = lines
         self.query_one("#status", Static).update(msg, layout=relayout)
 
@@ -242,7 +278,12 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
                 event.stop()
                 self.set_status("Enter right after Ctrl+S: nothing filled (the project is saved); Enter again fills")
 
-    def action_toggle_panel(self) -> None:
+    def action_do(self, name: str, args: tuple = ()) -> None:
+        """The screen's one Textual action: the owner's action ``name`` with ``args`` (the bindings'
+        ``do('move', (-1, 0))``; the command palette and the ``t`` menu call it too)."""
+        self.actions[name](*args)
+
+    def toggle_panel(self) -> None:
         """\\: hide or show the side panel (the views get its width: 80x24 terminals)."""
         panel = self.query_one("#panel", SidePanel)
         panel.set_class(not panel.has_class("hidden"), "hidden")
@@ -253,65 +294,63 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
 
     # ------------------------------------------------------------------ messages from workers and screens
     @on(CellRendered)
-    def _cell_rendered(self, msg: CellRendered) -> None:
-        self.jobs.worker_ended()
-        self.show_progress(None)
-        # no image (no EGL, a failure): the cell is emptied and its caption says why
-        self.query_one("#o-3d", ImageView).set_image(msg.image, token=("3d", self.volumes.version))
-        self.query_one("#oc-3d", Label).update(msg.caption)
-
     @on(ProposalReady)
-    def _proposal_ready(self, msg: ProposalReady) -> None:
-        from ctui.screens.propagation import finished  # propagation imports the engine's segmentation
-
-        finished(self, msg.run)
-
     @on(AutoReady)
-    def _auto_ready(self, msg: AutoReady) -> None:
-        from ctui.screens.auto_screen import apply_result  # loaded with the draft's dialog
-
-        apply_result(self, msg.result, msg.snapshot)
-
     @on(JobFinished)
-    def _job_finished(self, msg: JobFinished) -> None:
-        self.jobs.worker_ended()
-        self.show_progress(None)
-        self.set_status(msg.text)  # the status line, not a toast over the image and the review strip
-
     @on(JobFailed)
-    def _job_failed(self, msg: JobFailed) -> None:
-        self.jobs.worker_ended()
-        self._failed(msg.what, msg.reason)
-
     @on(SegmentationFailed)
-    def _segmentation_failed(self, msg: SegmentationFailed) -> None:
-        self.jobs.segmentation_ended()
-        self._failed(msg.what, msg.reason)
-
-    def _failed(self, what: str, reason: str) -> None:
-        self.show_progress(None)
-        if reason == "cancelled":
-            self.set_status(f"{what} cancelled: nothing changed")
-            return
-        self.app.notify(f"{what} failed: {reason}", severity="error", timeout=10)
-
     @on(JobProgress)
-    def _job_progress(self, msg: JobProgress) -> None:
-        self.show_progress(msg.label, msg.done, msg.total if msg.total is not None else 0)
-
     @on(Status)
-    def _status_msg(self, msg: Status) -> None:
-        self.set_status(msg.text)
-
     @on(SeedRangeReady)
-    def _seed_range_ready(self, _msg: SeedRangeReady) -> None:
-        if self.query("#panel"):  # composed (a message may arrive while the screen is taken down)
-            self.update_panel()
-
     @on(LabelsChanged)
-    def _labels_msg(self, _msg: LabelsChanged) -> None:
-        self.labels_changed()
-        self.refresh_view()
+    def _message(self, msg: Message) -> None:
+        """A worker's (or another screen's) message, to the owner it is for."""
+        if isinstance(msg, CellRendered):  # no image (no EGL, a failure): the cell is emptied, its caption says why
+            self.jobs.worker_ended()
+            self.show_progress(None)
+            self.query_one("#o-3d", ImageView).set_image(msg.image, token=("3d", self.volumes.version))
+            self.query_one("#oc-3d", Label).update(msg.caption)
+        elif isinstance(msg, ProposalReady):
+            self.segment.finished(msg.run)
+        elif isinstance(msg, SegmentationFailed):
+            self.segment.failed(msg.what, msg.reason)
+        elif isinstance(msg, AutoReady):
+            from ctui.screens.auto_screen import apply_result  # loaded with the draft's dialog
+
+            apply_result(self, msg.result, msg.snapshot)
+        elif isinstance(msg, JobFinished):
+            self.work.finished(msg.text)
+        elif isinstance(msg, JobFailed):
+            self.work.failed(msg.what, msg.reason)
+        elif isinstance(msg, JobProgress):
+            self.show_progress(msg.label, msg.done, msg.total if msg.total is not None else 0)
+        elif isinstance(msg, Status):
+            self.set_status(msg.text)
+        elif isinstance(msg, SeedRangeReady):
+            if self.query("#panel"):  # composed (a message may arrive while the screen is taken down)
+                self.update_panel()
+        elif isinstance(msg, LabelsChanged):
+            self.labels_changed()
+            self.refresh_view()
+
+    # ------------------------------------------------------------------ the mouse, to its owner
+    def on_mouse_down(self, event: events.MouseDown) -> None:
+        self.mouse.mouse_down(event)
+
+    def on_mouse_move(self, event: events.MouseMove) -> None:
+        self.mouse.mouse_move(event)
+
+    def on_mouse_up(self, event: events.MouseUp) -> None:
+        self.mouse.mouse_up(event)
+
+    def on_click(self, event: events.Click) -> None:
+        self.mouse.click(event)
+
+    def on_mouse_scroll_up(self, event: events.MouseScrollUp) -> None:
+        self.mouse.scroll_up(event)
+
+    def on_mouse_scroll_down(self, event: events.MouseScrollDown) -> None:
+        self.mouse.scroll_down(event)
 
     def show_progress(self, label: str | None, done: float = 0, total: float = 100) -> None:
         row = self.query_one("#progress-row")
@@ -322,10 +361,32 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
         self.query_one("#progress-label", Label).update(label)
         self.query_one("#progress", ProgressBar).update(total=max(total, 1) if total else None, progress=done)
 
+    def repaint_cursor(self) -> None:
+        """The cursor (and the captions, the panel) moved; the images stay."""
+        s = self.s
+        for plane, _view, iv in self.targets():
+            pv = planes.plane_view(s.volume, plane)
+            iv.set_view(zoom=self.viewstate.zoom, center=self.view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
+        self.captions()  # the value readout is in the caption while the panel is hidden
+        self.update_panel()
+
+    def set_layout(self, *, grid: bool = False, ortho: bool = False) -> None:
+        """One plane (both False), the pipeline's 2x2 views (``grid``) or the planes' 2x2 with 3D (``ortho``)."""
+        self.viewstate.set_layout(grid=grid, ortho=ortho)
+        self.query_one("#grid").set_class(grid, "on")
+        self.query_one("#ortho").set_class(ortho, "on")
+        self.query_one("#main-box").set_class(grid or ortho, "off")
+        for iv in self.query(ImageView):
+            iv.token = None
+        self.refresh_view()
+
+    def review_strip(self) -> ReviewStrip | None:
+        """The review strip (None before the screen is composed, or while it is taken down)."""
+        strips = self.query("#strip")
+        return strips.first(ReviewStrip) if strips else None
+
     # ------------------------------------------------------------------ the 3D cell of the 2x2 layout
     def request_3d(self) -> None:
-        from ctui.screens.ws_jobs import render_cell  # the renderer loads with the first 3D cell
-
         iv = self.query_one("#o-3d", ImageView)
         if not self.viewstate.ortho_mode:
             return
@@ -335,4 +396,4 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
             # spun (a CI run hung in test_3d_cell_shows_shaded_objects_and_follows_edits)
             self.set_timer(0.05, self.request_3d)
             return
-        self.jobs.track(render_cell(self, iv.target_pixels()), replace=True)
+        self.jobs.track(self.work.render_cell(iv.target_pixels()), replace=True)

@@ -1,10 +1,12 @@
 """The workspace's segmentation keys: fill, brush, eraser, modes, limits, islands,
-fill between slices, objects, undo/redo (a mixin of :class:`WorkspaceScreen`).
+fill between slices, objects, undo/redo (:class:`EditOwner`, composed by :class:`WorkspaceScreen`).
 
 Every change is one undo step of the engine's ``Segmentation``; the screen only asks
 and reports."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -13,34 +15,34 @@ from ctui.engine.actions import defaults
 from ctui.engine.actions import edit as et
 from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen, PromptScreen
 from ctui.screens.planes import plane_view
+from ctui.screens.ws_host import Owner
 from ctui.screens.ws_state import mm
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 
 
-class EditMixin:
-    """Segmentation actions; the host screen provides ``s``, ``app``, ``refresh_view``,
-    ``update_panel``, ``set_status`` and ``labels_changed``."""
+class EditOwner(Owner):
+    """The label edits: every change one undo step of the session's ``Segmentation``."""
 
     # ------------------------------------------------------------------ guards
-    def _busy(self) -> bool:
+    def busy(self) -> bool:
         """Label edits wait while a propagation reads the labels (Escape cancels it)."""
-        if self.jobs.segmenting:
+        if self.ws.jobs.segmenting:
             self.app.notify("A propagation is running: wait for it or press Escape to cancel", severity="warning", timeout=3)
             return True
         return False
 
-    def _editable(self) -> bool:
-        return not self._busy()
+    def editable(self) -> bool:
+        return not self.busy()
 
-    def _edited(self, msg: str) -> None:
-        self.labels_changed()
+    def edited(self, msg: str) -> None:
+        self.ws.labels_changed()
         self.set_status(msg)
         self.refresh_view()
 
     # ------------------------------------------------------------------ fill
     def action_fill(self) -> None:
-        if not self._editable():
+        if not self.editable():
             return
         s = self.s
         if plane_view(s.volume, s.plane).normal != 0:
@@ -50,10 +52,10 @@ class EditMixin:
         try:
             with s._lock:
                 image = s.pipeline.final_slice(s.volume, s.z)
-            kw = {"low": s.range_[0], "high": s.range_[1]} if s.range_ else {"tolerance": s.tolerance}
+            kw: dict[str, Any] = {"low": s.range_[0], "high": s.range_[1]} if s.range_ else {"tolerance": s.tolerance}
             n, reason, (lo, hi) = et.fill_slice(s.seg, image, s.x, s.y, s.z, object_id=s.current, mode=s.edit_mode,
                                                 connectivity=s.connectivity, limits=s.limits, data=s.volume.data,
-                                                spacing_yx=tuple(s.volume.spacing[1:]), box=s.roi_box, **kw)
+                                                spacing_yx=(s.volume.spacing[1], s.volume.spacing[2]), box=s.roi_box, **kw)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
@@ -63,7 +65,7 @@ class EditMixin:
             self.app.notify(f"Fill rejected: {reason}{used}", severity="warning")
             return
         verb = {"add": "Filled", "replace": "Replaced with", "subtract": "Subtracted"}[s.edit_mode]
-        self._edited(f"{verb} {n} px, object {s.current} (range {lo:g}..{hi:g}); p propagates, u undoes")
+        self.edited(f"{verb} {n} px, object {s.current} (range {lo:g}..{hi:g}); p propagates, u undoes")
 
     # ------------------------------------------------------------------ brush / eraser
     def dab(self, tool: str, zyx: tuple[int, int, int] | None = None) -> int:
@@ -75,9 +77,9 @@ class EditMixin:
                       radius=0, radius_mm=s.brush, mode=mode, limits=s.limits, box=s.roi_box)
 
     def action_dab(self) -> None:
-        if not self._editable():
+        if not self.editable():
             return
-        tool = self.edit_tools.pen or "brush"
+        tool = self.ws.edit_tools.pen or "brush"
         try:
             n = self.dab(tool)
         except EDIT_ERRORS as exc:
@@ -85,7 +87,7 @@ class EditMixin:
             return
         msg = f"{'Erased' if tool == 'eraser' else 'Painted'} {n} voxels (brush {mm(self.s.brush)} mm); u undoes"
         if n:
-            self._edited(msg)
+            self.edited(msg)
         else:  # nothing changed: no new labels version (it would recount every object's volume)
             self.set_status(msg)
 
@@ -93,7 +95,7 @@ class EditMixin:
         """b / E: put the brush (eraser) down, so moving the cursor paints (erases) from where it went down;
         again lifts it. Putting it down paints nothing (b b leaves the labels as they were; Space dabs)."""
         s = self.s
-        if not self.edit_tools.toggle_pen(tool):
+        if not self.ws.edit_tools.toggle_pen(tool):
             self.set_status(f"{tool.capitalize()} lifted")
             self.update_panel()
             return
@@ -106,24 +108,24 @@ class EditMixin:
         """Dabs from ``start`` to ``end`` (a cursor move with the pen down), as undo steps of one dab each;
         the pen's first stroke since it went down paints ``start`` too (the stroke starts where it went down)."""
         steps = max(abs(a - b) for a, b in zip(start, end))
-        first = 0 if not self.edit_tools.pen_painted else 1
-        self.edit_tools.pen_painted = True
+        first = 0 if not self.ws.edit_tools.pen_painted else 1
+        self.ws.edit_tools.pen_painted = True
         pts = [tuple(int(round(a + (b - a) * t)) for a, b in zip(start, end))
                for t in np.linspace(0.0, 1.0, steps + 1)[first:]] if steps else []
         n = 0
         try:
             for p in dict.fromkeys(pts):
-                n += self.dab(self.edit_tools.pen, p)  # type: ignore[arg-type]  # the pen is down while a stroke runs (never None here)
+                n += self.dab(self.ws.edit_tools.pen, p)  # type: ignore[arg-type]  # the pen is down while a stroke runs (never None here)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
         if n:
-            self.labels_changed()
+            self.ws.labels_changed()
 
     def action_brush_size(self, d: int) -> None:
         """,/. : the brush radius in mm, one in-plane pixel per step (0 mm: a single pixel)."""
         s = self.s
         step = float(min(s.volume.spacing[1:]))
-        s.brush = float(min(max(round((s.brush + d * step) / step) * step, 0.0), 100.0))
+        s.brush = float(min(max(round(((s.brush or 0.0) + d * step) / step) * step, 0.0), 100.0))
         self.set_status(f"Brush radius {mm(s.brush)} mm ({s.brush_px(plane_view(s.volume, s.plane).normal):.1f} px)")
         self.refresh_view()
 
@@ -173,14 +175,14 @@ class EditMixin:
 
     # ------------------------------------------------------------------ whole-object tools
     def _object_tool(self, fn, done_msg: str) -> None:
-        if not self._editable():
+        if not self.editable():
             return
         try:
             n = fn(self.s.seg, self.s.current)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
-        self._edited(done_msg.format(n=n, obj=self.s.current))
+        self.edited(done_msg.format(n=n, obj=self.s.current))
 
     def action_keep_largest(self) -> None:
         self._object_tool(lambda seg, oid: seg.keep_largest_island(oid),
@@ -203,14 +205,14 @@ class EditMixin:
         self.app.push_screen(PromptScreen("Remove islands smaller than N voxels", "100"), done)
 
     def action_fill_between(self) -> None:
-        if not self._editable():
+        if not self.editable():
             return
         try:
             n = self.s.seg.fill_between_slices(self.s.current, slices=self.s.limits.slices, spacing=self.s.volume.spacing)
         except EDIT_ERRORS as exc:
             self.app.notify(str(exc), severity="error")
             return
-        self._edited(f"Filled between slices: {n} voxels added to object {self.s.current} (u undoes)")
+        self.edited(f"Filled between slices: {n} voxels added to object {self.s.current} (u undoes)")
 
     def action_tools(self) -> None:
         options = [("keep_largest", "Keep the largest island (I)"), ("remove_islands", "Remove islands under N voxels (X)"),
@@ -232,7 +234,7 @@ class EditMixin:
 
         def done(choice: str | None) -> None:
             if choice:
-                getattr(self, f"action_{choice}")()
+                self.ws.action_do(choice)
 
         self.app.push_screen(ChoiceScreen(f"Edit object {self.s.current}", options), done)
 
@@ -312,13 +314,13 @@ class EditMixin:
 
     def action_clear_object(self) -> None:
         s = self.s
-        if not self._editable():
+        if not self.editable():
             return
 
-        def done(ok: bool) -> None:
+        def done(ok: bool | None) -> None:
             if ok:
                 n = s.seg.clear_object(s.current)
-                self._edited(f"Cleared {n} voxels of object {s.current} (u undoes)")
+                self.edited(f"Cleared {n} voxels of object {s.current} (u undoes)")
 
         self.app.push_screen(ConfirmScreen(f"Erase every voxel of object {s.current}? (u undoes)", "Erase", "Keep"), done)
 
@@ -328,11 +330,11 @@ class EditMixin:
         self.update_panel()
 
     def action_undo(self, redo: bool = False) -> None:
-        if self._busy():
+        if self.busy():
             return
         label = self.s.seg.redo() if redo else self.s.seg.undo()
         verb = "Redone" if redo else "Undone"
         self.app.notify(f"{verb}: {label}" if label else f"Nothing to {verb[:-2].lower()}", timeout=2)
         if label:
-            self.labels_changed()
+            self.ws.labels_changed()
             self.refresh_view()

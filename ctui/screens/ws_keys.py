@@ -1,21 +1,26 @@
 """The workspace's keys (every binding, named in the ``?`` help), its navigation and
-view actions (a mixin of :class:`ctui.screens.workspace.WorkspaceScreen`) and the
-side panel's text."""
+view actions (:class:`NavOwner`, composed by :class:`ctui.screens.workspace.WorkspaceScreen`)
+and the side panel's text."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from rich.text import Text
 
 from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
-from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.messages import SeedRangeReady
 from ctui.screens.session import VIEWS
+from ctui.screens.ws_host import Owner, WorkspaceHost
 from ctui.screens.ws_state import describe, mm, value_unit
 
-BINDINGS = keys("""
+if TYPE_CHECKING:
+    from ctui.screens.app import CtuiApp
+
+BINDINGS = keys(via="do", table="""
 left,h                move(-1,0)             Cursor left                        hidden
 right,l               move(1,0)              Cursor right                       hidden
 up,k                  move(0,-1)             Cursor up                          hidden
@@ -86,7 +91,7 @@ o                     open                   Open                               
 """)
 
 
-class NavMixin:
+class NavOwner(Owner):
     """Cursor, slices, planes, zoom, windows and the other screens."""
 
     # ------------------------------------------------------------------ cursor
@@ -97,29 +102,21 @@ class NavMixin:
         before = s.zyx
         s.z, s.y, s.x = planes.moved(pv, before, dx, dy)
         s.clamp()
-        if self.edit_tools.pen and s.zyx != before and not self._busy():
-            self.stroke(before, s.zyx)
+        if self.ws.edit_tools.pen and s.zyx != before and not self.ws.edit.busy():
+            self.ws.edit.stroke(before, s.zyx)
             self.refresh_view()
-        elif self.viewstate.ortho_mode:
+        elif self.ws.viewstate.ortho_mode:
             self.refresh_view()
         else:
-            self._repaint_cursor()
-
-    def _repaint_cursor(self) -> None:
-        s = self.s
-        for plane, _view, iv in self._targets():
-            pv = planes.plane_view(s.volume, plane)
-            iv.set_view(zoom=self.viewstate.zoom, center=self._view_center(plane), cursor=planes.cursor_in(pv, s.zyx, s.shape))
-        self._captions()  # the value readout is in the caption while the panel is hidden
-        self.update_panel()
+            self.ws.repaint_cursor()
 
     def action_pan(self, dx: int, dy: int) -> None:
         s = self.s
-        if self.viewstate.zoom <= 1:
+        if self.ws.viewstate.zoom <= 1:
             self.app.notify("Zoom in (+) first to pan", timeout=2)
             return
         # panning drags the cursor along so it stays visible
-        self.action_move(*self.viewstate.pan_by(s, dx, dy))
+        self.action_move(*self.ws.viewstate.pan_by(s, dx, dy))
 
     def action_slice(self, d: int) -> None:
         """PageUp/PageDown: the next plane along the current view's normal (z for axial)."""
@@ -138,30 +135,12 @@ class NavMixin:
         s.z, s.y, s.x = zyx
         self.refresh_view()
 
-    def action_goto(self) -> None:
-        last = self.s.shape[0] - 1
-
-        def done(val: str | None) -> None:
-            if not val:
-                return
-            try:
-                z = int(val.strip())
-            except ValueError:
-                self.app.notify(f"Not a slice number: {val!r}", severity="error")
-                return
-            if not 0 <= z <= last:
-                self.app.notify(f"Slices run from 0 to {last}", severity="warning", timeout=3)
-            self.s.z = z
-            self.refresh_view()
-
-        self.app.push_screen(PromptScreen(f"Go to slice (0..{last})", str(self.s.z)), done)
-
     def action_zoom(self, d: int, at: tuple[float, float] | None = None) -> None:
         """+/- (and Ctrl+wheel): zoom in or out keeping the image point ``at`` (x, y image
         pixel: the pointer's) where it is on screen; with keys, the cursor's point."""
-        s, vs = self.s, self.viewstate
+        s, vs = self.s, self.ws.viewstate
         pv = planes.plane_view(s.volume, s.plane)
-        iv = next((v for p, _view, v in self._targets() if p == s.plane), None)
+        iv = next((v for p, _view, v in self.ws.targets() if p == s.plane), None)
         old = vs.zoom
         point = at if at is not None else planes.cursor_in(pv, s.zyx, s.shape)
         seen = None
@@ -172,11 +151,11 @@ class NavMixin:
         if seen is not None and new > 1.0 and new != old:
             k = old / new
             vs.pan_to((point[0] - (point[0] - seen[0]) * k, point[1] - (point[1] - seen[1]) * k), cursor=s.zyx)
-        self._repaint_cursor()
+        self.ws.repaint_cursor()
 
     # ------------------------------------------------------------------ windows and views
     def action_window_cycle(self) -> None:
-        name, win = self.viewstate.next_window(self.s.window_presets())
+        name, win = self.ws.viewstate.next_window(self.s.window_presets())
         self.s.window = win
         self.refresh_view()
         self.set_status(f"Window {name}: C {win[0]:g} W {win[1]:g}")
@@ -194,132 +173,65 @@ class NavMixin:
                 self.app.notify("Window: give centre and width, e.g. '40 400'", severity="error")
                 return
             self.s.window = (c, w)
-            self.viewstate.window_name = "custom"
+            self.ws.viewstate.window_name = "custom"
             self.refresh_view()
 
         c, w = self.s.window
         self.app.push_screen(PromptScreen("Window centre and width (e.g. 40 400)", f"{c:g} {w:g}"), done)
 
-    def _layout(self, *, grid: bool = False, ortho: bool = False) -> None:
-        self.viewstate.set_layout(grid=grid, ortho=ortho)
-        self.query_one("#grid").set_class(grid, "on")
-        self.query_one("#ortho").set_class(ortho, "on")
-        self.query_one("#main-box").set_class(grid or ortho, "off")
-        for iv in self.query(ImageView):
-            iv.token = None
-        self.refresh_view()
-
     def action_view_cycle(self) -> None:
-        if self.viewstate.grid_mode:
-            self._layout()
+        if self.ws.viewstate.grid_mode:
+            self.ws.set_layout()
             return
         self.s.plane = planes.slice_plane(self.s.volume)
         self.s.view = VIEWS[(VIEWS.index(self.s.view) + 1) % len(VIEWS)]
-        self._layout(ortho=self.viewstate.ortho_mode)
+        self.ws.set_layout(ortho=self.ws.viewstate.ortho_mode)
 
     def action_grid(self) -> None:
         self.s.plane = planes.slice_plane(self.s.volume)
-        self._layout(grid=not self.viewstate.grid_mode)
+        self.ws.set_layout(grid=not self.ws.viewstate.grid_mode)
 
     def action_plane(self, plane: str) -> None:
         """1/2/3: axial, sagittal or coronal alone (from a 2x2 layout too: a click picks a pane there)."""
         self.s.plane = plane
-        self._layout()
+        self.ws.set_layout()
         self.set_status(f"{plane.capitalize()} view: arrows move in it, PageUp/PageDown step across it")
 
     def action_ortho(self) -> None:
-        if not self.viewstate.ortho_mode and (self.size.width < 100 or self.size.height < 30):
+        if not self.ws.viewstate.ortho_mode and (self.ws.size.width < 100 or self.ws.size.height < 30):
             self.app.notify("The 2x2 layout needs a terminal of at least 100x30: 1/2/3 show one plane",
                             severity="warning", timeout=4)
             return
-        self._layout(ortho=not self.viewstate.ortho_mode)
-        if self.viewstate.ortho_mode:
-            self.request_3d()
-
-    def on_click(self, event) -> None:
-        """Click on a view moves the cursor there (and makes its plane the active one)."""
-        widget = getattr(event, "widget", None)
-        if not isinstance(widget, ImageView) or widget.id in (None, "o-3d"):
-            return
-        off = event.get_content_offset(widget)
-        pos = None if off is None else widget.display_to_image(off.x, off.y)
-        if pos is None:
-            return
-        wid = widget.id or ""
-        plane = wid[2:] if wid.startswith("o-") else (planes.slice_plane(self.s.volume) if wid.startswith("g-") else self.s.plane)
-        s = self.s
-        s.plane = plane
-        pv = planes.plane_view(s.volume, plane)
-        s.z, s.y, s.x = planes.voxel_of(pv, pos[0], pos[1], s.zyx, s.shape)
-        s.clamp()
-        self.refresh_view()
-
-    # ------------------------------------------------------------------ propagation
-    def action_propagate(self, direction: str) -> None:
-        from ctui.screens.propagation import start_propagation  # the segmentation engine (scipy) loads with the first segmentation
-
-        start_propagation(self, direction)
-
-    def action_segment_here(self) -> None:
-        """S: the current object from the cursor, with the segmentation panel's options (actions.segment)."""
-        from ctui.screens.propagation import start_segment  # the segmentation engine (scipy) loads with the first segmentation
-
-        start_segment(self, "both")
-
-    def action_segment_panel(self) -> None:
-        from ctui.screens.segpanel import SegmentPanel  # the segmentation engine (scipy) loads with the first segmentation
-
-        def done(ok: bool | None) -> None:
-            if ok:
-                self.set_status(f"Segmentation: {describe(self.s)}. S segments from the cursor")
-                self.update_panel()
-
-        self.app.push_screen(SegmentPanel(self.s), done)
-
-    def action_accept(self) -> None:
-        from ctui.screens.propagation import accept  # the segmentation engine (scipy) loads with the first segmentation
-
-        if not self._busy():
-            accept(self)
-
-    def action_reject(self) -> None:
-        from ctui.screens.propagation import reject  # the segmentation engine (scipy) loads with the first segmentation
-
-        reject(self)
-
-    def action_cancel(self) -> None:
-        cancelled = self.jobs.cancel()
-        if cancelled == "segmentation":
-            self.set_status("Cancelling propagation...")
-        elif cancelled == "job":
-            self.show_progress(None)
-            self.set_status("Cancelled")
-        elif self.edit_tools.lift():
-            self.set_status("Brush lifted")
-            self.update_panel()
+        self.ws.set_layout(ortho=not self.ws.viewstate.ortho_mode)
+        if self.ws.viewstate.ortho_mode:
+            self.ws.request_3d()
 
     # ------------------------------------------------------------------ other screens
     def action_filters(self) -> None:
         from ctui.screens.pipeline_editor import PipelineEditor  # a screen's module loads when it first opens: the workspace paints sooner
 
-        if self._busy():
+        if self.ws.edit.busy():
             return
         self.app.push_screen(PipelineEditor(self.s), lambda _=None: self._after_pipeline())
 
     def _after_pipeline(self) -> None:
         self.s.dirty = True
-        self._layout(grid=self.viewstate.grid_mode, ortho=self.viewstate.ortho_mode)
+        self.ws.set_layout(grid=self.ws.viewstate.grid_mode, ortho=self.ws.viewstate.ortho_mode)
 
     def action_drift(self) -> None:
         from ctui.screens.drift_screen import DriftScreen  # a screen's module loads when it first opens: the workspace paints sooner
 
-        if not self._busy():
-            self.app.push_screen(DriftScreen(self.s), lambda _=None: (self.labels_changed(), self.refresh_view()))
+        if not self.ws.edit.busy():
+            self.app.push_screen(DriftScreen(self.s), lambda _=None: self._after_drift())
+
+    def _after_drift(self) -> None:
+        self.ws.labels_changed()
+        self.refresh_view()
 
     def action_auto_draft(self) -> None:
         from ctui.screens.auto_screen import open_auto  # a screen's module loads when it first opens
 
-        open_auto(self)
+        open_auto(self.ws)
 
     def action_render3d(self) -> None:
         from ctui.screens.view3d import View3DScreen  # a screen's module loads when it first opens: the workspace paints sooner
@@ -334,13 +246,13 @@ class NavMixin:
     def action_export(self) -> None:
         from ctui.screens.export import export_dialog  # a screen's module loads when it first opens: the workspace paints sooner
 
-        export_dialog(self)
+        export_dialog(self.ws)
 
     def action_open(self) -> None:
-        self.app.action_open()
+        cast("CtuiApp", self.app).action_open()  # the workspace runs in no other app
 
 
-def panel_text(ws) -> Text:
+def panel_text(ws: WorkspaceHost) -> Text:
     """The side panel: slice, cursor, value, window, view, tools, pipeline, objects."""
     s, v = ws.s, ws.s.volume
     nz = s.shape[0]
@@ -355,8 +267,7 @@ def panel_text(ws) -> Text:
     slice_pos = float(v.slice_positions[s.z]) if v.slice_positions is not None and len(v.slice_positions) == nz else zmm
     t.append(f"Slice {s.z}/{nz - 1}", style="bold")
     t.append(f"  {slice_pos:.1f} mm\n")
-    size = getattr(ws, "size", None)
-    compact = size is not None and 0 < size.height < 30  # 80x24: the objects (their volumes) must show
+    compact = 0 < ws.size.height < 30  # 80x24: the objects (their volumes) must show
     t.append(f"Cursor x {s.x}  y {s.y}\n")
     if not compact:
         t.append(f"  ({xmm:.1f}, {ymm:.1f}, {zmm:.1f}) mm\n", style="dim")
@@ -404,16 +315,16 @@ def panel_text(ws) -> Text:
     return t
 
 
-def _notes_text(ws, t: Text, lead: str = "") -> None:
+def _notes_text(ws: WorkspaceHost, t: Text, lead: str = "") -> None:
     """The pending proposal's warnings (in the panel, not toasts over the image)."""
-    pending = getattr(ws, "pending", None)  # a test's stand-in workspace may have no proposals
-    if pending is not None and pending.proposal is not None and pending.notes:
+    pending = ws.pending
+    if pending.proposal is not None and pending.notes:
         t.append(f"{lead}Notes on the proposal\n", style="bold yellow")
         for note in pending.notes:
             t.append(f"• {note}\n", style="yellow")
 
 
-def _window_text(ws, t: Text) -> None:
+def _window_text(ws: WorkspaceHost, t: Text) -> None:
     s, vs = ws.s, ws.viewstate
     c, w = s.window
     t.append(f"Window C {c:g} W {w:g}")
@@ -426,15 +337,13 @@ def _window_text(ws, t: Text) -> None:
 _BARS = " ▁▂▃▄▅▆▇█"
 
 
-def _seed_text(ws, t: Text) -> None:
+def _seed_text(ws: WorkspaceHost, t: Text) -> None:
     """The segmentation settings (G) and the range S would use at the cursor, with the neighbourhood's
     histogram (a sparkline, the range's part bright)."""
     s = ws.s
     t.append("Segment ", style="bold")
     t.append(f"{describe(s)}\n", style="dim")
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
-    if not hasattr(ws, "run_worker"):  # no screen around it (a test of the text): no range
-        return
     if not ws.seed_range.painted:
         # the segmentation engine (scipy, 0.2-0.3 s on the main thread) loads once the workspace is painted
         ws.seed_range.painted = True
@@ -471,7 +380,7 @@ def _seed_text(ws, t: Text) -> None:
         t.append(f"  {' and '.join(f'{k} {v:.0f}' for k, v in stops.items())}: a neighbour joins past it\n", style="dim")
 
 
-def _objects_text(ws, t: Text, compact: bool = False) -> None:
+def _objects_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
     s = ws.s
     t.append("\nObjects", style="bold underline")
     t.append("  (n new, Tab next)\n")

@@ -1,5 +1,5 @@
-"""The workspace's mouse (a mixin of :class:`ctui.screens.workspace.WorkspaceScreen`), the
-review of a pending proposal, the ROI box, background seeds and the 3D edit tools.
+"""The workspace's mouse (:class:`MouseOwner`, composed by :class:`ctui.screens.workspace.WorkspaceScreen`),
+the ROI box and background seeds.
 
 Mouse (any terminal that reports mouse events: xterm SGR, tmux with ``mouse on``, SSH):
 
@@ -24,11 +24,10 @@ Every display <-> voxel conversion goes through :mod:`ctui.screens.planes`.
 
 from __future__ import annotations
 
-import weakref
+from typing import Any
 
 from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.actions.edit import review
 from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.graphics import cell_pixels
@@ -36,8 +35,8 @@ from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
 from ctui.screens.ws_keys import panel_text
+from ctui.screens.ws_host import Owner, WorkspaceHost
 from ctui.screens.ws_state import mm
-from ctui.screens.ws_tools import ToolsMixin
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): click = cursor (z: click fills; "
@@ -47,7 +46,7 @@ MOUSE_HELP = ("[b]Mouse[/b] (terminals that report it; tmux: set -g mouse on): c
               "click an object in the side panel to select it, the review strip to go to a slice. "
               "g takes a slice, x,y or x,y,z.\n")
 
-MOUSE_BINDINGS = keys("""
+MOUSE_BINDINGS = keys(via="do", table="""
 z                    click_fills      Click fills on/off                                                hidden
 B                    background_seed  Background seed here on/off                                       hidden
 y                    box_corner       ROI box corner here (or drag)                                     hidden
@@ -60,7 +59,7 @@ P                    scissors_point   Polygon point here (then clicks)          
 """)
 
 
-def _plane_of(ws, widget) -> str:
+def _plane_of(ws: WorkspaceHost, widget) -> str:
     wid = widget.id or ""
     if wid.startswith("o-"):
         return wid[2:]
@@ -78,13 +77,14 @@ def _corner_box(a, b, normal: int, shape, slices=None):
     return tuple(box)
 
 
-class MouseMixin(ToolsMixin):
-    """Mouse handlers and the review/box/seed/3D-edit actions; the host provides ``s``,
-    ``app``, ``refresh_view``, ``update_panel``, ``set_status``, ``labels_changed``,
-    ``action_fill``, ``dab``, ``stroke``, ``_editable`` and ``proposal``."""
+class MouseOwner(Owner):
+    """The screen's mouse events (the screen hands each on) and the box/seed/goto keys."""
 
-    _drag: tuple | None = None
-    _box_end: tuple[int, int, int] | None = None  # the voxel under the mouse while a box is dragged
+    def __init__(self, ws: WorkspaceHost) -> None:
+        super().__init__(ws)
+        self.drag: tuple | None = None  # what a held button drags: ("pan" | "box" | "paint" | "cursor" | "strip", ...)
+        self.box_end: tuple[int, int, int] | None = None  # the voxel under the mouse while a box is dragged
+        self.move_pending: Any = None  # the latest mouse move not drawn yet (moves coalesce)
 
     # ------------------------------------------------------------------ where the mouse is
     def _voxel_at(self, widget: ImageView, event, *, inside: bool = True):
@@ -97,44 +97,44 @@ class MouseMixin(ToolsMixin):
         h, w = widget.rgb.shape[:2]
         if inside and not (-0.5 <= pos[0] < w - 0.5 and -0.5 <= pos[1] < h - 0.5):
             return None
-        plane = _plane_of(self, widget)
+        plane = _plane_of(self.ws, widget)
         pv = planes.plane_view(self.s.volume, plane)
         return plane, planes.voxel_of(pv, pos[0], pos[1], self.s.zyx, self.s.shape)
 
     def _under(self, event):
         """The widget under the mouse (a terminal's events reach the screen without one)."""
         try:
-            return self.get_widget_at(int(event.screen_x), int(event.screen_y))[0]
+            return self.ws.get_widget_at(int(event.screen_x), int(event.screen_y))[0]
         except Exception:  # off the screen
             return getattr(event, "widget", None)
 
     def _image_view(self, event) -> ImageView | None:
         """The slice view under the mouse (in sixel/kitty modes the widget there is its image child)."""
         w = self._under(event)
-        while w is not None and w is not self and not isinstance(w, ImageView):
+        while w is not None and w is not self.ws and not isinstance(w, ImageView):
             w = w.parent
         if isinstance(w, ImageView) and w.id not in (None, "o-3d"):
             return w
         return None
 
     # ------------------------------------------------------------------ mouse events
-    def on_mouse_down(self, event) -> None:
+    def mouse_down(self, event) -> None:
         w = self._under(event)
         if isinstance(w, ReviewStrip):
             z = w.slice_at(int(event.screen_x - w.content_region.x))
             if z is not None:
-                self._go_slice(z)
-                self._drag = ("strip", w, z)  # a drag along the strip picks the slice limits
+                self.ws.review.go_slice(z)
+                self.drag = ("strip", w, z)  # a drag along the strip picks the slice limits
                 w.capture_mouse()
             return
         iv = self._image_view(event)
         if iv is None:
             return
         if event.button == 2 or (event.button == 1 and (event.shift or event.meta)):
-            if self.viewstate.zoom <= 1:
+            if self.ws.viewstate.zoom <= 1:
                 self.set_status("Zoom in first (+ or Ctrl+wheel) to pan")
                 return
-            self._drag = ("pan", iv, event.screen_x, event.screen_y, self.viewstate.pan_center or self._view_center())
+            self.drag = ("pan", iv, event.screen_x, event.screen_y, self.ws.viewstate.pan_center or self.ws.view_center())
             iv.capture_mouse()
             return
         got = self._voxel_at(iv, event)
@@ -154,11 +154,11 @@ class MouseMixin(ToolsMixin):
         self._click(iv, plane, zyx)
 
     def _click(self, iv: ImageView, plane: str, zyx) -> None:
-        s, tools = self.s, self.edit_tools
+        s, tools = self.s, self.ws.edit_tools
         s.plane = plane
         if tools.box_corner is not None:  # drawing the box: the cursor (the seed, say) stays where it is
-            self._box_end = zyx
-            self._drag = ("box", iv, plane, zyx, s.roi_box)
+            self.box_end = zyx
+            self.drag = ("box", iv, plane, zyx, s.roi_box)
             iv.capture_mouse()
             return
         s.z, s.y, s.x = zyx
@@ -169,37 +169,37 @@ class MouseMixin(ToolsMixin):
             self.refresh_view()
             return
         if tools.pen in ("brush", "eraser"):
-            if self._editable():
+            if self.ws.edit.editable():
                 n = 0
                 try:
-                    n = self.dab(tools.pen)
+                    n = self.ws.edit.dab(tools.pen)
                 except EDIT_ERRORS as exc:
                     self.app.notify(str(exc), severity="error")
                 if n:  # a dab over what is painted already changes nothing: no new version
-                    self.labels_changed()
-            self._drag = ("paint", iv, plane, s.zyx)
+                    self.ws.labels_changed()
+            self.drag = ("paint", iv, plane, s.zyx)
         elif tools.click_fills:
             self.refresh_view()
-            self.action_fill()
+            self.ws.edit.action_fill()
             return
         else:
-            self._drag = ("cursor", iv, plane, s.zyx)
+            self.drag = ("cursor", iv, plane, s.zyx)
         iv.capture_mouse()
         self.refresh_view()
 
-    def on_mouse_move(self, event) -> None:
+    def mouse_move(self, event) -> None:
         """Drag steps are coalesced: the moves queued while one is drawn collapse into the latest
         (a stroke joins the positions with a line, so no pixel of the path is skipped)."""
-        if self._drag is None:
+        if self.drag is None:
             return
-        pending = getattr(self, "_move_pending", None)
-        self._move_pending = event
+        pending = self.move_pending
+        self.move_pending = event
         if pending is None:
-            self.call_later(self._drag_step)
+            self.ws.call_later(self.drag_step)
 
-    def _drag_step(self) -> None:
-        event, self._move_pending = getattr(self, "_move_pending", None), None
-        drag = self._drag
+    def drag_step(self) -> None:
+        event, self.move_pending = self.move_pending, None
+        drag = self.drag
         if drag is None or event is None:
             return
         if drag[0] == "pan":
@@ -213,8 +213,8 @@ class MouseMixin(ToolsMixin):
         _plane, zyx = got
         s = self.s
         if drag[0] == "box":
-            if zyx != self._box_end:
-                self._box_end = zyx
+            if zyx != self.box_end:
+                self.box_end = zyx
                 pv = planes.plane_view(s.volume, drag[2])
                 s.roi_box = _corner_box(drag[3], zyx, pv.normal, s.shape, s.limits.slices)
                 self.refresh_view()
@@ -224,16 +224,16 @@ class MouseMixin(ToolsMixin):
         before = s.zyx
         s.z, s.y, s.x = zyx
         s.clamp()
-        if drag[0] == "paint" and not self.jobs.segmenting:
-            self.stroke(before, s.zyx)
+        if drag[0] == "paint" and not self.ws.jobs.segmenting:
+            self.ws.edit.stroke(before, s.zyx)
         self.refresh_view()
 
     def _pan_drag(self, event) -> None:
-        if self._drag is None:
+        if self.drag is None:
             return
-        _kind, iv, sx0, sy0, c0 = self._drag
+        _kind, iv, sx0, sy0, c0 = self.drag
         vm = iv.view_map
-        if vm is None or self.viewstate.zoom <= 1:
+        if vm is None or self.ws.viewstate.zoom <= 1:
             return
         if iv.mode in ("sixel", "kitty"):
             cw, ch = (float(v) for v in cell_pixels())
@@ -241,20 +241,20 @@ class MouseMixin(ToolsMixin):
             cw, ch = 1.0, 2.0  # half blocks: a cell is one pixel wide, two high
         dx = (event.screen_x - sx0) * cw / vm.sx
         dy = (event.screen_y - sy0) * ch / vm.sy
-        self.viewstate.pan_to((c0[0] - dx, c0[1] - dy))
+        self.ws.viewstate.pan_to((c0[0] - dx, c0[1] - dy))
         self.refresh_view()
 
-    def on_mouse_up(self, event) -> None:
-        if self._drag is not None and getattr(self, "_move_pending", None) is not None:
-            self._drag_step()  # the last queued move first
-        drag, self._drag = self._drag, None
+    def mouse_up(self, event) -> None:
+        if self.drag is not None and self.move_pending is not None:
+            self.drag_step()  # the last queued move first
+        drag, self.drag = self.drag, None
         if drag is None:
             return
         drag[1].release_mouse()
         if drag[0] == "strip":
             self._strip_limits(drag[1], drag[2], int(event.screen_x - drag[1].content_region.x))
         elif drag[0] == "box":
-            self._finish_box(drag[2], drag[3], self._box_end, previous=drag[4])
+            self._finish_box(drag[2], drag[3], self.box_end, previous=drag[4])
         elif drag[0] == "paint":
             lim = self.s.limits
             within = f"; within {lim.describe()}" if lim.slices is not None or lim.values is not None else ""
@@ -272,14 +272,14 @@ class MouseMixin(ToolsMixin):
         self.set_status(f"Slice limits {lo}..{hi} from the strip: edits and propagation stay inside (i changes them)")
         self.update_panel()
 
-    def on_click(self, event) -> None:
+    def click(self, event) -> None:
         """Clicks on views are handled on press (above); a click on the side panel selects an object."""
         iv = self._image_view(event)
         if iv is not None:
             event.prevent_default()  # the press already moved the cursor (no second handler)
-            t = self.edit_tools  # a double click segments from there (S at the cursor its press put there)
+            t = self.ws.edit_tools  # a double click segments from there (S at the cursor its press put there)
             if event.chain == 2 and event.button == 1 and not (event.ctrl or event.shift or event.meta or t.pen or t.polygon_mode or t.box_corner):
-                self.action_segment_here()
+                self.ws.segment.action_segment_here()
             return
         w = self._under(event)
         if w is not None and w.id == "panel":
@@ -290,7 +290,7 @@ class MouseMixin(ToolsMixin):
         """A click on the seed range's line: its text takes the range, two bars of its histogram
         give the two ends (no numbers typed)."""
         start = line.index(" ", len("Seed range here ")) + 1  # the bars follow "Seed range here LO..HI "
-        got = self.seed_range.pick(col - start if col >= start else None)
+        got = self.ws.seed_range.pick(col - start if col >= start else None)
         if got is None:
             self.set_status("One end of the range picked: click the bar of the other end")
             return
@@ -299,7 +299,7 @@ class MouseMixin(ToolsMixin):
         self.update_panel()
 
     def _panel_click(self, panel, row: int, col: int = 0) -> None:
-        lines = panel_text(self).plain.split("\n")
+        lines = panel_text(self.ws).plain.split("\n")
         if 0 <= row < len(lines) and lines[row].startswith("Seed range here ") and ".." in lines[row]:
             self._pick_range(lines[row], col)
             return
@@ -308,7 +308,7 @@ class MouseMixin(ToolsMixin):
         if not 0 <= row < len(lines) or "██" not in lines[row]:
             return
         s = self.s
-        vols = self.volumes.of(self.s)
+        vols = self.ws.volumes.of(self.s)
         ids = sorted(set(s.seg.objects) | set(vols) | {s.current})
         k = sum(1 for line in lines[:row] if "██" in line)
         if k < len(ids):
@@ -316,16 +316,16 @@ class MouseMixin(ToolsMixin):
             self.set_status(f"Object {s.current} selected")
             self.update_panel()
 
-    def on_mouse_scroll_up(self, event) -> None:
+    def scroll_up(self, event) -> None:
         self._wheel(event, 1)
 
-    def on_mouse_scroll_down(self, event) -> None:
+    def scroll_down(self, event) -> None:
         self._wheel(event, -1)
 
     def _wheel(self, event, d: int) -> None:
         w = self._under(event)
         if isinstance(w, ReviewStrip):  # the strip's axis is the slice index
-            self._go_slice(self.s.z + d)
+            self.ws.review.go_slice(self.s.z + d)
             return
         iv = self._image_view(event)
         if iv is None:
@@ -337,12 +337,12 @@ class MouseMixin(ToolsMixin):
             if got is not None:
                 self.s.plane = got[0]
                 self.s.z, self.s.y, self.s.x = got[1]
-            self.action_zoom(d, at=at if _plane_of(self, iv) == self.s.plane else None)
+            self.ws.nav.action_zoom(d, at=at if _plane_of(self.ws, iv) == self.s.plane else None)
             return
-        plane = _plane_of(self, iv)
+        plane = _plane_of(self.ws, iv)
         if plane != self.s.plane:
             self.s.plane = plane
-        self.action_slice(d)
+        self.ws.nav.action_slice(d)
 
     # ------------------------------------------------------------------ keys
     def action_goto(self) -> None:
@@ -372,7 +372,7 @@ class MouseMixin(ToolsMixin):
         self.app.push_screen(PromptScreen(f"Go to slice (0..{nz - 1}), x,y or x,y,z", str(s.z)), done)
 
     def action_click_fills(self) -> None:
-        fills = self.edit_tools.toggle_click_fills()
+        fills = self.ws.edit_tools.toggle_click_fills()
         self.set_status("A click on the image fills there (as Enter)" if fills
                         else "A click on the image moves the cursor")
         self.update_panel()
@@ -386,7 +386,7 @@ class MouseMixin(ToolsMixin):
 
     def action_box_corner(self) -> None:
         """y: first press, a corner at the cursor (or drag the box with the mouse); second, the opposite corner."""
-        s, tools = self.s, self.edit_tools
+        s, tools = self.s, self.ws.edit_tools
         if tools.box_corner is None:
             tools.box_corner = s.zyx
             self.set_status("Box: first corner set. Move and press y again, or drag the box with the mouse (Y: no box)")
@@ -397,7 +397,7 @@ class MouseMixin(ToolsMixin):
     def _finish_box(self, plane: str, a, b, *, previous) -> None:
         """The box of corners ``a``, ``b`` drawn on ``plane``; a zero-size one restores ``previous``."""
         s = self.s
-        self.edit_tools.take_corner()
+        self.ws.edit_tools.take_corner()
         pv = planes.plane_view(s.volume, plane)
         if a[pv.rows] == b[pv.rows] or a[pv.cols] == b[pv.cols]:
             s.roi_box = previous
@@ -408,7 +408,7 @@ class MouseMixin(ToolsMixin):
         s.roi_box = _corner_box(a, b, pv.normal, s.shape, s.limits.slices)
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
         one = a[0] == b[0] and z0 != z1  # drawn on one axial slice, spanning more: scissors ask which
-        self.edit_tools.box_drawn_on = int(a[0]) if one else None
+        self.ws.edit_tools.box_drawn_on = int(a[0]) if one else None
         drawn = f" (drawn on slice {a[0]}: scissors ask which slices)" if one else ""
         self.set_status(f"ROI box x {x0}..{x1}, y {y0}..{y1}, slices {z0}..{z1}{drawn}: fills, painting and edits "
                         "stay inside (Y removes it)")
@@ -417,138 +417,6 @@ class MouseMixin(ToolsMixin):
     def action_box_clear(self) -> None:
         s = self.s
         s.roi_box = None
-        self.edit_tools.clear_shapes()
+        self.ws.edit_tools.clear_shapes()
         self.set_status("ROI box and polygon off")
         self.refresh_view()
-
-    # ------------------------------------------------------------------ review of a proposal
-    def _seed_mask(self, p):
-        return self.s.seg.labels[p.start_slice] == p.object_id
-
-    def review_source(self):
-        """What the strip reviews: the pending proposal, else the current object when it spans
-        three slices or more (``review.Stack``, cached per labels version), else None."""
-        if self.pending.proposal is not None:
-            return self.pending.proposal
-        s = self.s
-        key = (self.volumes.version, s.current)
-        cache = getattr(self, "_object_stack", None)
-        if cache is not None and cache[0] == key:
-            return cache[1]
-        info = s.seg.objects.get(s.current)
-        seeds = list(getattr(info, "seeds", []) or [])
-        start = int(seeds[-1][2]) if seeds else None
-        seg, full = s.seg, getattr(self, "_object_full", None)  # (version, object, seg, labels, revision, Stack)
-        rev = int(getattr(seg, "revision", -1))
-        since = None
-        if full is not None and full[1] == s.current and full[2]() is seg and full[3]() is seg.labels \
-                and hasattr(seg, "changes_since"):
-            since = seg.changes_since(full[4])
-            if since is not None and self.volumes.version - full[0] > rev - full[4]:
-                since = None  # more versions than journalled edits: the labels changed some other way
-        # after brush/erase/undo/redo only the slices they touched are read again (a whole 1,000-slice scan: 2.3 s)
-        whole = (review.of_labels(seg.labels, s.current, start) if since is None
-                 else review.restack(full[5], seg.labels, s.current, since[1], start))
-        self._object_full = (self.volumes.version, s.current, weakref.ref(seg), weakref.ref(seg.labels), rev, whole)
-        stack = whole if whole.masks and max(whole.masks) - min(whole.masks) >= 2 else None
-        self._object_stack = (key, stack)
-        return stack
-
-    def review_marks(self) -> list:
-        src = self.review_source()
-        if src is None:
-            return []
-        cache = getattr(self, "_marks_cache", None)
-        if cache is not None and cache[0] is src:
-            return cache[1]
-        seed = self._seed_mask(src) if src is self.pending.proposal else None
-        info = self.s.seg.objects.get(self.s.current) if seed is None else None  # an accepted object: its leaks
-        leaks = list(getattr(src, "leak_entries", None) or (getattr(info, "settings", None) or {}).get("leaks", []))
-        found = review.marks(src, spacing_yx=tuple(self.s.volume.spacing[1:]), seed_mask=seed, leaks=leaks)
-        self._marks_cache = (src, found)
-        return found
-
-    def update_strip(self) -> None:
-        """The strip shows the proposal, or (on a terminal 30 rows high or more) the current object."""
-        strips = self.query("#strip")
-        if not strips:
-            return
-        strip = strips.first(ReviewStrip)
-        p = self.pending.proposal
-        if p is None and not self.viewstate.painted:
-            # an opened project's object is reviewed once the workspace is on screen (its slices' outlines
-            # and marks take 0.1-0.4 s for a large object)
-            self.viewstate.painted = True
-            self.call_after_refresh(self.update_strip)
-            strip.set_class(False, "on")
-            return
-        src = p if p is not None else (self.review_source() if self.size.height >= 30 else None)
-        if src is None:
-            strip.set_class(False, "on")
-            return
-        seed_area = int(self._seed_mask(p).sum()) if p is not None else 0
-        prof = review.profile(src, self.s.shape[0], seed_area=seed_area)
-        marks = [m.z for m in self.review_marks()]
-        leaked = [m.z for m in self.review_marks() if "leak" in m.kind]
-        keys = "} { marks, C cut, A accept to here" if p is not None else "} { marks"
-        hint = f"{len(marks)} mark{'s' if len(marks) != 1 else ''}: {keys}" if marks else ("no marks" if p is not None else "")
-        strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}",
-                       leaked=leaked)
-        strip.set_class(True, "on")
-
-    def _go_slice(self, z: int) -> None:
-        s = self.s
-        s.z = int(z)
-        s.clamp()
-        if not self.viewstate.ortho_mode:  # the strip's axis is the file's slices: show them
-            s.plane = planes.slice_plane(s.volume)
-        self.refresh_view()
-        why = {m.z: m.why for m in self.review_marks()}.get(s.z)
-        if why and self.pending.proposal is not None:
-            self.set_status(self._mark_status(s.z, why))  # at a leak's entry: the cursor on the voxel to click
-        elif why:
-            self.set_status(f"Slice {s.z}: {why}. t: keep the island / scissors on this slice; {{ }} other marks")
-
-    def action_mark(self, step: int) -> None:
-        if self.review_source() is None:
-            self.app.notify("Nothing to review: p propagates (or draw the object on three slices or more)", timeout=2)
-            return
-        z = review.next_mark(self.review_marks(), self.s.z, step)
-        if z is None:
-            self.app.notify(f"No marked slice {'after' if step > 0 else 'before'} slice {self.s.z}", timeout=2)
-            return
-        self._go_slice(z)
-
-    def _proposal_to_review(self, none: str):
-        """The pending proposal when one waits and no segmentation runs; else None (``none``:
-        the notification when there is no proposal)."""
-        p = self.pending.proposal
-        if p is None:
-            self.app.notify(none, timeout=2)
-            return None
-        return None if self._busy() else p
-
-    def action_cut_here(self) -> None:
-        p = self._proposal_to_review("No proposal to cut: p propagates")
-        if p is None:
-            return
-        z, start = self.s.z, int(p.start_slice)
-        marked = z != start and z in {m.z for m in self.review_marks()}
-        if marked:  # a mark is where it leaks (the area jumps, the centre moves): keep the slice before it
-            z += -1 if z > start else 1
-        cut = review.cut_at(p, z, seed_mask=self._seed_mask(p))
-        self.pending.replace(cut)
-        rng = cut.slices
-        where = f"before the marked slice {self.s.z}, kept to {z}" if marked else f"at slice {z}"
-        self.set_status(f"Cut {where}: {cut.voxels} voxels (was {p.voxels}), "
-                        f"{'slices %d..%d' % rng if rng else 'nothing left'}; a accepts, x rejects")
-        self.refresh_view()
-
-    def action_accept_to_here(self) -> None:
-        from ctui.screens.propagation import accept  # the segmentation engine (scipy) loads with the first segmentation
-
-        p = self._proposal_to_review("No pending proposal")
-        if p is None:
-            return
-        self.pending.replace(review.keep_to(p, self.s.z, seed_mask=self._seed_mask(p)))
-        accept(self)

@@ -5,14 +5,14 @@ from __future__ import annotations
 import cv2
 
 from ctui.screens import planes
-from ctui.screens.vessel_tool import draw_vessel
+from ctui.screens.ws_host import WorkspaceHost
 
 SEED_COLOR = (0, 230, 255)
 BOX_COLOR = (255, 150, 0)
 POLY_COLOR = (255, 220, 60)
 
 
-def draw_overlay(ws, plane: str, grid, vm) -> None:
+def draw_overlay(ws: WorkspaceHost, plane: str, grid, vm) -> None:
     """Background seeds (cyan crosses), the ROI box (orange), with the brush or eraser down its
     footprint (a circle of the brush radius in mm), and the vessels' paths on a display grid."""
     s = ws.s
@@ -48,8 +48,9 @@ def draw_overlay(ws, plane: str, grid, vm) -> None:
             cv2.rectangle(grid, (p[0] - 1, p[1] - 1), (p[0] + 1, p[1] + 1), POLY_COLOR, 1)
     if tools.pen in ("brush", "eraser"):
         xd, yd = disp(s.zyx)
-        ax = (max(int(round((s.brush / pv.spacing_yx[1] + 0.5) * vm.sx)), 1),
-              max(int(round((s.brush / pv.spacing_yx[0] + 0.5) * vm.sy)), 1))
+        r = s.brush or 0.0  # mm (the session sets it when it opens)
+        ax = (max(int(round((r / pv.spacing_yx[1] + 0.5) * vm.sx)), 1),
+              max(int(round((r / pv.spacing_yx[0] + 0.5) * vm.sy)), 1))
         col = (80, 255, 80) if tools.pen == "brush" else (255, 80, 255)
         cv2.ellipse(grid, (int(xd), int(yd)), ax, 0, 0, 360, col, 1)
-    draw_vessel(ws, pv, idx, grid, disp)  # the vessels' paths and points
+    ws.vessel.draw(pv, idx, grid, disp)  # the vessels' paths and points

@@ -243,7 +243,7 @@ class ProposalState:
             self._full = (id(p), full)
         return planes.take(self._full[1], pv, index)
 
-    def accept(self, seg) -> tuple[int, object]:
+    def accept(self, seg) -> tuple[int, Any]:
         """Write the proposal into the segmentation ``seg`` (one undo step); a proposal from a
         seed registers its object with the seed and settings (as a fill does). Returns
         (voxels added, the proposal). No proposal: ValueError."""
@@ -365,9 +365,9 @@ class ObjectVolumes:
         return vols
 
 
-def mm(v: float) -> str:
-    """A length for people: one decimal, none when whole (3.22266 -> "3.2", 3.0 -> "3")."""
-    return f"{float(v):.1f}".removesuffix(".0")
+def mm(v: float | None) -> str:
+    """A length for people: one decimal, none when whole (3.22266 -> "3.2", 3.0 -> "3"); None: "0"."""
+    return f"{float(v or 0.0):.1f}".removesuffix(".0")
 
 
 def value_unit(s: Session) -> str:

@@ -1,4 +1,4 @@
-"""The workspace's 3D edit tools (a mixin under :class:`ctui.screens.ws_mouse.MouseMixin`),
+"""The workspace's 3D edit tools (:class:`ToolOwner`, composed by the workspace screen),
 from the ``t`` menu: keep or remove the island under the cursor (3D or its slice), scissors
 inside or outside the ROI box or a polygon (this slice, the box's slices, all slices),
 smoothing with a size in mm. Each is one undo step of the engine's ``Segmentation``
@@ -12,27 +12,13 @@ from ctui.engine.actions import defaults
 from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
 from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen, PromptScreen
+from ctui.screens.ws_host import Owner
 
 EDIT_ERRORS = (CtuiError, ValueError, IndexError)
 
 
-class ToolsMixin:
-    """3D edit actions; the host provides ``s``, ``app``, ``pending``, ``_editable``, ``labels_changed``,
-    ``set_status`` and ``refresh_view``."""
-
-    def _mark_status(self, z: int, why: str) -> str:
-        """The status line at the pending proposal's marked slice ``z``. Where a leak enters, the cursor goes to
-        the voxel its flag gives as a background seed: ``B`` places it there, ``p`` segments again (no typing)."""
-        leaks = getattr(self.pending.proposal, "leak_entries", None) or []
-        click = next((lk["click"] for lk in leaks if int(lk.get("slice", -1)) == z and "click" in lk), None)
-        if click is None:
-            return f"Slice {z}: {why}. C cuts here, A accepts from the seed to here, {{ }} other marks"
-        s = self.s
-        s.x, s.y, s.z = (int(v) for v in click)
-        s.clamp()
-        self.refresh_view()
-        return (f"Slice {z}: {why}. The cursor is on that voxel: B makes it a background seed, then p segments "
-                "again (or C cuts here)")
+class ToolOwner(Owner):
+    """The 3D edit actions of the ``t`` menu (module docstring)."""
 
     # ------------------------------------------------------------------ 3D edit tools (t menu)
     def _tool(self, fn, msg: str, *, main_body: bool = False) -> None:
@@ -40,7 +26,7 @@ class ToolsMixin:
         ``defaults.EDIT_CONFIRM_SHARE`` of the object (or, ``main_body``, the island it
         removed was the object's main body) it is undone, the voxels it would remove are drawn
         in red and a dialog asks before doing it again (the same step, redone)."""
-        if not self._editable():
+        if not self.ws.edit.editable():
             return
         s, oid = self.s, self.s.current
         bb = s.seg.object_bbox(oid)
@@ -62,7 +48,7 @@ class ToolsMixin:
         self._tool_done(r, msg)
 
     def _tool_done(self, r: dict, msg: str) -> None:
-        self.labels_changed()
+        self.ws.labels_changed()
         self.set_status(msg.format(**r, obj=self.s.current))
         self.refresh_view()
 
@@ -70,11 +56,11 @@ class ToolsMixin:
         s = self.s
         ml = r["removed"] * float(np.prod(s.volume.spacing)) / 1000.0
         what = "the object's main body: " if body else ""
-        self.edit_tools.doomed = doomed
+        self.ws.edit_tools.doomed = doomed
         self.refresh_view()
 
         def done(yes: bool | None) -> None:
-            self.edit_tools.doomed = None
+            self.ws.edit_tools.doomed = None
             if yes:
                 s.seg.redo()
                 self._tool_done(r, msg)
@@ -109,13 +95,13 @@ class ToolsMixin:
         slice, the box's slices (a polygon: the slice limits, else all) or all slices. A box
         drawn on one slice that spans more: asks whether to cut that slice only or all of them."""
         s = self.s
-        poly = self.edit_tools.polygon if len(self.edit_tools.polygon) >= 3 else None
+        poly = self.ws.edit_tools.polygon if len(self.ws.edit_tools.polygon) >= 3 else None
         if poly is None and s.roi_box is None:
             self.app.notify("Scissors cut with the ROI box or a polygon: set one first (y / P, or drag after y)",
                             severity="warning")
             return
-        drawn = self.edit_tools.box_drawn_on
-        if where == "box" and poly is None and drawn is not None:
+        drawn = self.ws.edit_tools.box_drawn_on
+        if where == "box" and poly is None and drawn is not None and s.roi_box is not None:
             (z0, z1), _, _ = s.roi_box
             self.app.push_screen(ChoiceScreen(
                 "The box was drawn on one slice: cut on", [
@@ -139,7 +125,7 @@ class ToolsMixin:
     def action_scissors_point(self) -> None:
         """P: a polygon point at the cursor (the file's slice plane); clicks then add points too."""
         s = self.s
-        n = self.edit_tools.add_point(s.x, s.y)
+        n = self.ws.edit_tools.add_point(s.x, s.y)
         self.set_status(f"Polygon: {n} point(s); click or P adds points, t then Scissors cuts "
                         "(3 points or more), Y clears")
         self.refresh_view()
@@ -172,7 +158,7 @@ class ToolsMixin:
                 self.app.notify("Smooth: write a method and a size in mm, e.g. 'median 3'", severity="error")
                 return
             self._tool(lambda: et.smooth(s.seg, object_id=s.current, method=method, size_mm=size,
-                                         spacing=tuple(s.volume.spacing), box=s.roi_box),
+                                         spacing=s.volume.spacing, box=s.roi_box),
                        f"Smoothed ({method} {size:g} mm) object " + "{obj}: {ml_before:.1f} -> {ml:.1f} ml "
                        "(-{removed} +{added} voxels; u undoes)")
 
@@ -187,7 +173,7 @@ class ToolsMixin:
                 return
             try:
                 s.roi_box = et.parse_box(val.strip(), s.shape)
-                self.edit_tools.box_drawn_on = None
+                self.ws.edit_tools.box_drawn_on = None
             except CtuiError as exc:
                 self.app.notify(f"{exc} (box unchanged)", severity="warning")
                 return
