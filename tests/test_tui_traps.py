@@ -98,7 +98,7 @@ async def test_box_drawn_on_one_slice_asks_which_slices_to_cut():
         (z0, z1), _, _ = s.roi_box
         assert (z0, z1) == (0, 19) and ws.edit_tools.box_drawn_on == 10
         panel = str(ws.query_one("#panel").render())
-        assert "z 0..19 (drawn 10)" in panel
+        assert "slices 0..19, drawn on 10" in panel
         await _tool(pilot, "scissors_in_box")
         await wait_for(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="which slices")
         await choose(pilot, "drawn")

@@ -281,7 +281,9 @@ def panel_text(ws: WorkspaceHost) -> Text:
     if not compact:
         _window_text(ws, t)
     dom = value_unit(s)
-    t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None else f"Tolerance ±{s.tolerance:g} {dom}\n")
+    # with no range, S uses the automatic range (shown by _seed_text); the tolerance is Enter's one-slice fill
+    t.append(f"Range [{s.range_[0]:g}, {s.range_[1]:g}] {dom}\n" if s.range_ is not None
+             else f"Enter fills ±{s.tolerance:g} {dom}\n")
     if not compact:
         t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
     _seed_text(ws, t)
@@ -295,7 +297,7 @@ def panel_text(ws: WorkspaceHost) -> Text:
     if s.roi_box is not None:
         (z0, z1), (y0, y1), (x0, x1) = s.roi_box
         drawn = ws.edit_tools.box_drawn_on
-        t.append(f"Box x {x0}..{x1} y {y0}..{y1} z {z0}..{z1}{'' if drawn is None else f' (drawn {drawn})'}\n",
+        t.append(f"Box x {x0}..{x1} y {y0}..{y1}\n    slices {z0}..{z1}{'' if drawn is None else f', drawn on {drawn}'}\n",
                  style="rgb(255,150,0)")
     if s.background_seeds:
         t.append(f"Background seeds {len(s.background_seeds)}\n", style="cyan")

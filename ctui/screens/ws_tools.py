@@ -69,9 +69,10 @@ class ToolOwner(Owner):
                             f"{ml:.1f} mL)")
             self.refresh_view()
 
+        stay = "1 voxel stays" if r["voxels"] == 1 else f"{r['voxels']} voxels stay"
         self.app.push_screen(ConfirmScreen(
             f"This removes {what}{r['removed']} voxels, {ml:.1f} mL, {share:.0%} of object {s.current} "
-            f"(red on the image; {r['voxels']} voxels stay). Remove them?", yes="Remove", no="Keep",
+            f"(red on the image; {stay}). Remove them?", yes="Remove", no="Keep",
             at_bottom=True), done)
 
     def _island(self, keep: bool, in_slice: bool) -> None:
