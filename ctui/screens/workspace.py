@@ -47,7 +47,7 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
     WorkspaceScreen #grid, WorkspaceScreen #ortho { grid-size: 2 2; grid-gutter: 0 1; display: none; width: 1fr; }
     WorkspaceScreen #grid.on, WorkspaceScreen #ortho.on { display: block; }
     WorkspaceScreen #main-box.off { display: none; }
-    WorkspaceScreen .cell-label { height: 1; color: $text-muted; }
+    WorkspaceScreen .cell-label { height: 1; width: 1fr; color: $text-muted; }
     WorkspaceScreen #oc-3d { height: auto; max-height: 3; }
     WorkspaceScreen #progress-row { height: 1; display: none; }
     WorkspaceScreen #progress-row.on { display: block; }
@@ -180,9 +180,9 @@ class WorkspaceScreen(VesselMixin, MouseMixin, EditMixin, NavMixin, GuardMixin, 
     def _captions(self) -> None:
         if self.viewstate.ortho_mode:
             for p in planes.PLANES:
-                self.query_one(f"#oc-{p}", Label).update(self.caption(p))
+                self.query_one(f"#oc-{p}", Label).update(self.caption(p), layout=False)  # fixed size: no relayout
         else:
-            self.query_one("#main-caption", Label).update(self.caption(self.s.plane))
+            self.query_one("#main-caption", Label).update(self.caption(self.s.plane), layout=False)
 
     @work(thread=True, exclusive=True, group="views")
     def compute_stage_views(self, z: int, token: int) -> None:
