@@ -197,7 +197,7 @@ def compose(gray8: np.ndarray, labels2d: np.ndarray | None, proposal2d: np.ndarr
     (bool) hatched in its object's colour with a yellow outline, so it never looks accepted."""
     rgb = np.repeat(gray8[:, :, None], 3, axis=2)
     box = _label_box(labels2d) if labels2d is not None else None
-    if box is not None:  # blended and outlined within the objects' box (and a pixel round it): the same pixels
+    if labels2d is not None and box is not None:  # blended and outlined within the objects' box (and a pixel round it): the same pixels
         lab, sub = labels2d[box], rgb[box]
         m = lab > 0
         col = _LUT[lab[m]]
