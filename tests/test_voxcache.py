@@ -97,9 +97,9 @@ def test_cached_nifti_equals_the_in_memory_load(tmp_path):
 
 
 def test_overview_is_the_strided_load(series):
+    ref = load(series, downsample=(2, 2, 2))  # decoded (no entry yet)
     vol = load(series, cache=True)
     ov = voxcache.overview(vol, 2)
-    ref = load(series, downsample=(2, 2, 2))
     assert np.array_equal(np.asarray(ov.data), ref.data) and ov.spacing == ref.spacing
     assert (voxcache.lookup(series, series=None, spacing=None, shape=None, dtype=None, crop=None, downsample=None,
                             offset=None, resample=True) / "overview2.npy").is_file()
@@ -203,3 +203,24 @@ def test_eviction_skips_an_entry_another_process_has_open(tmp_path):
         p.kill() if p.poll() is None else None
     assert int(out.strip()) == int(load(b).data.sum())  # the holder still read its voxels
     assert voxcache.evict(limit=1) == [os.path.basename(eb)]  # released: now it goes too
+
+
+@pytest.mark.parametrize("f", [2, 4])
+def test_a_downsampled_load_of_a_cached_series_reads_its_overview(series, f):
+    """A render from a 2x/4x overview (the memory plan's "overview": ``downsample=(f, f, f)``) of a series
+    another command cached reads the entry's overview file: no decode, and no read of the full voxels
+    once the overview exists; the same voxels and geometry as the decoded downsampled load."""
+    ref = load(series, downsample=(f, f, f))
+    load(series, cache=True)
+    n0 = voxcache.decoded
+    got = load(series, downsample=(f, f, f))
+    assert voxcache.decoded == n0 and got.meta["overview"] == f
+    _same(ref, got)
+    entry = voxcache.lookup(series, series=None, spacing=None, shape=None, dtype=None, crop=None, downsample=None,
+                            offset=None, resample=True)
+    full = np.load(entry / "voxels.npy", mmap_mode="r+")
+    full[:] = 0  # the full-resolution voxels spoiled: a later downsampled load still has the right ones
+    full.flush()
+    del full
+    _same(ref, load(series, downsample=(f, f, f)))
+    assert "overview" not in load(series, downsample=(f, f, 1)).meta  # not a uniform overview: decoded as before

@@ -279,6 +279,19 @@ def load_cached(path: Any, *, loader: Callable[..., Volume], **load_options: Any
     return vol
 
 
+def cached_overview(path: Any, factor: int, **load_options: Any) -> Volume | None:
+    """``load(path, downsample=(f, f, f), **load_options)`` from the cache when the series has an
+    entry (another command decoded it there): its ``factor``-times overview, read from the entry's
+    ``overview<f>.npy`` (no decode; made from the map on first use); None without an entry."""
+    entry = lookup(path, **dict(load_options, downsample=None))
+    if entry is None or int(factor) not in (2, 4):
+        return None
+    try:
+        return overview(_open(entry), factor)
+    except (OSError, ValueError, EOFError, pickle.UnpicklingError):
+        return None  # removed meanwhile or broken: the caller decodes
+
+
 def overview(vol: Volume, factor: int) -> Volume:
     """A ``factor``-times coarser copy of a cached Volume (every ``factor``-th voxel along each
     axis: what ``load(..., downsample=(f, f, f))`` gives), itself memory-mapped from the entry's

@@ -202,6 +202,14 @@ def load(
     if cache and not headers_only:
         return _through_cache(path, series=series, spacing=spacing, shape=shape, dtype=dtype, progress=progress,
                               crop=crop, downsample=downsample, offset=offset, resample=resample)
+    if not headers_only and isinstance(downsample, (tuple, list)) and len(downsample) == 3 \
+            and len(set(downsample)) == 1 and int(downsample[0]) in (2, 4):  # a series in the voxel cache: its overview
+        from ctui.engine.io.voxcache import cached_overview  # a lookup only when a uniform 2x/4x overview is asked
+
+        ov = cached_overview(path, int(downsample[0]), series=series, spacing=spacing, shape=shape, dtype=dtype,
+                             crop=crop, offset=offset, resample=resample)
+        if ov is not None:
+            return ov
     single, files = _as_paths(path)
     common = dict(crop=crop, downsample=downsample, progress=progress, memory_limit=memory_limit)
     skipped: list[dict[str, str]] = []
