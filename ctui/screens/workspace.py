@@ -19,6 +19,7 @@ from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
+from ctui.screens.linestatic import LineStatic
 from ctui.screens.messages import (AutoReady, CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
                                    SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
@@ -31,7 +32,7 @@ from ctui.screens.vessel_tool import VESSEL_BINDINGS, VesselMixin
 from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
 
 
-class SidePanel(Static):
+class SidePanel(LineStatic):  # a step repaints only the panel's lines that changed
     DEFAULT_CSS = """
     SidePanel { width: 38; height: 1fr; padding: 0 1; background: $panel; }
     """
