@@ -115,13 +115,14 @@ _held: dict[str, int] = {}  # entry folder -> the descriptor holding its shared 
 def _hold(entry: Path) -> None:
     """A shared lock on the entry while this process may use it (eviction skips it) and its use time."""
     key = str(entry)
-    if key not in _held:
-        fd = os.open(entry / "lock", os.O_RDWR | os.O_CREAT, 0o600)
-        fcntl.flock(fd, fcntl.LOCK_SH)
-        _held[key] = fd
-    used = entry / "used"
-    used.touch()
-    os.utime(used)  # touch() leaves the time of an existing file on some systems
+    with contextlib.suppress(OSError):  # a read-only cache folder: used unlocked (nothing evicts there either)
+        if key not in _held:
+            fd = os.open(entry / "lock", os.O_RDWR | os.O_CREAT, 0o600)
+            fcntl.flock(fd, fcntl.LOCK_SH)
+            _held[key] = fd
+        used = entry / "used"
+        used.touch()
+        os.utime(used)  # touch() leaves the time of an existing file on some systems
 
 
 def _open(entry: Path) -> Volume:
