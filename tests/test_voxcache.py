@@ -97,9 +97,9 @@ def test_cached_nifti_equals_the_in_memory_load(tmp_path):
 
 
 def test_overview_is_the_strided_load(series):
+    ref = load(series, downsample=(2, 2, 2))  # decoded (no entry yet)
     vol = load(series, cache=True)
     ov = voxcache.overview(vol, 2)
-    ref = load(series, downsample=(2, 2, 2))
     assert np.array_equal(np.asarray(ov.data), ref.data) and ov.spacing == ref.spacing
     assert (voxcache.lookup(series, series=None, spacing=None, shape=None, dtype=None, crop=None, downsample=None,
                             offset=None, resample=True) / "overview2.npy").is_file()
@@ -141,3 +141,86 @@ def test_tui_load_goes_through_the_cache_and_says_so(series, monkeypatch):
     vol = load_volume(str(series))
     assert isinstance(vol.data, np.memmap) and np.array_equal(np.asarray(vol.data), ref.data)
     assert vol.meta["memory_plan"].startswith("memory plan: cache: open needs")
+
+
+def _series_of(tmp_path, name: str, value: int):
+    out = tmp_path / name
+    data = _phantom()
+    data[0, 0, 0] = value  # another series, another entry
+    write_series(out, Volume(data=data, spacing=(1.5, 0.7, 0.8), modality="CT"))
+    return out
+
+
+_LOAD = "import sys; from ctui.engine.io.series import load; v = load(sys.argv[1], cache=True); print(v.meta['voxel_cache'])"
+
+
+def _load_elsewhere(path) -> str:
+    """The series loaded through the cache by another process (which then ends): its entry folder."""
+    import subprocess
+    import sys
+
+    got = subprocess.run([sys.executable, "-c", _LOAD, str(path)], capture_output=True, text=True, timeout=120,
+                         env=dict(os.environ))
+    assert got.returncode == 0, got.stderr
+    return got.stdout.strip()
+
+
+def test_cache_max_evicts_the_least_recently_used_entries(tmp_path, monkeypatch):
+    a, b, c = (_series_of(tmp_path, n, v) for n, v in (("a", 1), ("b", 2), ("c", 3)))
+    ea = _load_elsewhere(a)
+    eb = _load_elsewhere(b)
+    os.utime(os.path.join(ea, "used"), (1_000_000, 1_000_000))  # a: used long ago, b: later
+    os.utime(os.path.join(eb, "used"), (2_000_000, 2_000_000))
+    size = sum(os.path.getsize(os.path.join(ea, f)) for f in os.listdir(ea))
+    monkeypatch.setenv("CTUI_CACHE_MAX", str(int(2.5 * size)))  # room for two entries
+    assert voxcache.max_bytes() == int(2.5 * size)
+    ec = _load_elsewhere(c)  # a third entry: the least recently used one (a) goes
+    assert not os.path.exists(ea) and os.path.isdir(eb) and os.path.isdir(ec)
+    assert not [n for n in os.listdir(os.path.dirname(ea)) if n.startswith(".")]  # nothing left half-removed
+    again = load(a, cache=True)  # an evicted series is decoded again, bit for bit
+    assert np.array_equal(np.asarray(again.data), load(a).data)
+    monkeypatch.setenv("CTUI_CACHE_MAX", "1M")
+    assert voxcache.max_bytes() == 1 << 20
+
+
+def test_eviction_skips_an_entry_another_process_has_open(tmp_path):
+    import subprocess
+    import sys
+
+    a, b = _series_of(tmp_path, "a", 1), _series_of(tmp_path, "b", 2)
+    ea = _load_elsewhere(a)
+    hold = ("import sys; from ctui.engine.io.series import load; import numpy as np; v = load(sys.argv[1], cache=True); "
+            "print(v.meta['voxel_cache'], flush=True); sys.stdin.readline(); print(int(np.asarray(v.data).sum()))")
+    p = subprocess.Popen([sys.executable, "-c", hold, str(b)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                         env=dict(os.environ))
+    try:
+        eb = p.stdout.readline().strip()  # type: ignore[union-attr]
+        assert os.path.isdir(eb)
+        removed = voxcache.evict(limit=1)  # everything over the cap: only the entry nobody holds goes
+        assert removed == [os.path.basename(ea)] and not os.path.exists(ea) and os.path.isdir(eb)
+        out, _ = p.communicate("\n", timeout=60)
+    finally:
+        p.kill() if p.poll() is None else None
+    assert int(out.strip()) == int(load(b).data.sum())  # the holder still read its voxels
+    assert voxcache.evict(limit=1) == [os.path.basename(eb)]  # released: now it goes too
+
+
+@pytest.mark.parametrize("f", [2, 4])
+def test_a_downsampled_load_of_a_cached_series_reads_its_overview(series, f):
+    """A render from a 2x/4x overview (the memory plan's "overview": ``downsample=(f, f, f)``) of a series
+    another command cached reads the entry's overview file: no decode, and no read of the full voxels
+    once the overview exists; the same voxels and geometry as the decoded downsampled load."""
+    ref = load(series, downsample=(f, f, f))
+    load(series, cache=True)
+    n0 = voxcache.decoded
+    got = load(series, downsample=(f, f, f))
+    assert voxcache.decoded == n0 and got.meta["overview"] == f
+    _same(ref, got)
+    entry = voxcache.lookup(series, series=None, spacing=None, shape=None, dtype=None, crop=None, downsample=None,
+                            offset=None, resample=True)
+    full = np.load(entry / "voxels.npy", mmap_mode="r+")
+    full[:] = 0  # the full-resolution voxels spoiled: a later downsampled load still has the right ones
+    full.flush()
+    del full
+    _same(ref, load(series, downsample=(f, f, f)))
+    assert "overview" not in load(series, downsample=(f, f, 1)).meta  # not a uniform overview: decoded as before

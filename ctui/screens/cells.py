@@ -205,32 +205,43 @@ def _style(key: int) -> Style:
     return s
 
 
+_RUNS = [UPPER_HALF * n for n in range(1024)]  # the text of a run of n cells
+
+
 def halfblock_strips(grid: np.ndarray) -> list[Strip]:
     """(2R, C, 3) uint8 RGB -> R Strips of C half-block cells.
 
     An odd last row is paired with black. Runs of identical cells become one Segment.
+    The runs of every row are found at once; each distinct cell colour pair looks its Style
+    up once per call.
     """
     g = grid.astype(np.int64, copy=False)
     if g.shape[0] % 2:
         g = np.concatenate([g, np.zeros((1,) + g.shape[1:], np.int64)], axis=0)
     packed = (g[:, :, 0] << 16) | (g[:, :, 1] << 8) | g[:, :, 2]
     keys = (packed[0::2] << 24) | packed[1::2]  # (R, C)
-    cols = keys.shape[1]
-    strips: list[Strip] = []
-    # run boundaries per row, vectorised
-    change = np.ones(keys.shape, bool)
+    rows, cols = keys.shape
+    if rows == 0 or cols == 0:
+        return [Strip([], cols) for _ in range(rows)]
+    change = np.ones(keys.shape, bool)  # a run starts here
     change[:, 1:] = keys[:, 1:] != keys[:, :-1]
+    rr, cc = np.nonzero(change)  # row-major: the runs of row 0, then row 1...
+    ends = np.empty_like(cc)
+    ends[:-1] = cc[1:]
+    last = np.ones(len(cc), bool)  # the last run of its row
+    last[:-1] = rr[1:] != rr[:-1]
+    ends[last] = cols
+    uniq, inverse = np.unique(keys[rr, cc], return_inverse=True)
     cache = _STYLE_CACHE
-    for r in range(keys.shape[0]):
-        row = keys[r]
-        starts = np.flatnonzero(change[r]).tolist()
-        vals = row[starts].tolist()
-        starts.append(cols)
-        segs = []
-        for i, k in enumerate(vals):
-            st = cache.get(k) or _style(k)
-            segs.append(Segment(UPPER_HALF * (starts[i + 1] - starts[i]), st))
-        strips.append(Strip(segs, cols))
+    styles = [cache.get(k) or _style(k) for k in uniq.tolist()]
+    runs = _RUNS
+    segs = [Segment(runs[n] if n < 1024 else UPPER_HALF * n, styles[i])
+            for n, i in zip((ends - cc).tolist(), inverse.ravel().tolist())]
+    strips: list[Strip] = []
+    a = 0
+    for b in (np.flatnonzero(last) + 1).tolist():
+        strips.append(Strip(segs[a:b], cols))
+        a = b
     return strips
 
 

@@ -179,17 +179,31 @@ def outline(labels2d: np.ndarray) -> np.ndarray:
     return edge & (lab > 0)
 
 
+def _label_box(labels2d: np.ndarray) -> tuple[slice, slice] | None:
+    """(rows, cols) slices of the labelled pixels' bounding box grown by one pixel (the outline
+    compares each pixel with its 4 neighbours), clipped to the image; None when nothing is labelled."""
+    rows = np.flatnonzero(labels2d.any(axis=1))
+    if not len(rows):
+        return None
+    cols = np.flatnonzero(labels2d[rows[0]:rows[-1] + 1].any(axis=0))
+    h, w = labels2d.shape
+    return (slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, h)),
+            slice(max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, w)))
+
+
 def compose(gray8: np.ndarray, labels2d: np.ndarray | None, proposal2d: np.ndarray | None = None, *,
             proposal_id: int = 0, alpha: float = 0.4) -> np.ndarray:
     """RGB uint8 (h, w, 3): objects filled at ``alpha`` with solid outlines; a proposal
     (bool) hatched in its object's colour with a yellow outline, so it never looks accepted."""
     rgb = np.repeat(gray8[:, :, None], 3, axis=2)
-    if labels2d is not None and labels2d.any():
-        m = labels2d > 0
-        col = _LUT[labels2d[m]]
-        rgb[m] = (rgb[m].astype(np.float32) * (1.0 - alpha) + col * alpha + 0.5).astype(np.uint8)
-        e = outline(labels2d)
-        rgb[e] = _LUT[labels2d[e]].astype(np.uint8)
+    box = _label_box(labels2d) if labels2d is not None else None
+    if labels2d is not None and box is not None:  # blended and outlined within the objects' box (and a pixel round it): the same pixels
+        lab, sub = labels2d[box], rgb[box]
+        m = lab > 0
+        col = _LUT[lab[m]]
+        sub[m] = (sub[m].astype(np.float32) * (1.0 - alpha) + col * alpha + 0.5).astype(np.uint8)
+        e = outline(lab)
+        sub[e] = _LUT[lab[e]].astype(np.uint8)
     if proposal2d is not None and proposal2d.any():
         h, w = proposal2d.shape
         yy, xx = np.ogrid[:h, :w]

@@ -90,9 +90,14 @@ class ReviewStrip(Widget):
                  leaked=()) -> None:
         """``hint``: a short text drawn right of the bars when it fits (e.g. the keys); ``leaked``: the marked
         slices where a leak enters."""
-        self.profile = profile
-        self.marked = set(int(z) for z in marked)
-        self.leaked = {int(z) for z in leaked}
+        marked, leaked = set(int(z) for z in marked), {int(z) for z in leaked}
+        same_profile = (profile is None and self.profile is None) or (
+            profile is not None and self.profile is not None and np.array_equal(profile, self.profile))
+        if same_profile and (marked, leaked, int(cursor), seed, hint) == (self.marked, self.leaked, self.cursor, self.seed, self.hint):
+            return  # nothing new to draw (the side panel updated for another reason): no repaint
+        self.profile = None if profile is None else np.array(profile)  # a copy: compared with the next call's
+        self.marked = marked
+        self.leaked = leaked
         self.cursor = int(cursor)
         self.seed = seed
         self.hint = hint

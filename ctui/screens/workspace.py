@@ -27,6 +27,7 @@ from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
+from ctui.screens.linestatic import LineStatic
 from ctui.screens.messages import (AutoReady, CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
                                    SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
@@ -44,7 +45,7 @@ from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState,
 from ctui.screens.ws_tools import ToolOwner
 
 
-class SidePanel(Static):
+class SidePanel(LineStatic):  # a step repaints only the panel's lines that changed
     DEFAULT_CSS = """
     SidePanel { width: 38; height: 1fr; padding: 0 1; background: $panel; }
     """
@@ -64,7 +65,7 @@ class WorkspaceScreen(GuardMixin, Screen):
     WorkspaceScreen #grid, WorkspaceScreen #ortho { grid-size: 2 2; grid-gutter: 0 1; display: none; width: 1fr; }
     WorkspaceScreen #grid.on, WorkspaceScreen #ortho.on { display: block; }
     WorkspaceScreen #main-box.off { display: none; }
-    WorkspaceScreen .cell-label { height: 1; color: $text-muted; }
+    WorkspaceScreen .cell-label { height: 1; width: 1fr; color: $text-muted; }
     WorkspaceScreen #oc-3d { height: auto; max-height: 3; }
     WorkspaceScreen #progress-row { height: 1; display: none; }
     WorkspaceScreen #progress-row.on { display: block; }
@@ -216,9 +217,9 @@ class WorkspaceScreen(GuardMixin, Screen):
     def captions(self) -> None:
         if self.viewstate.ortho_mode:
             for p in planes.PLANES:
-                self.query_one(f"#oc-{p}", Label).update(self.caption(p))
+                self.query_one(f"#oc-{p}", Label).update(self.caption(p), layout=False)  # fixed size: no relayout
         else:
-            self.query_one("#main-caption", Label).update(self.caption(self.s.plane))
+            self.query_one("#main-caption", Label).update(self.caption(self.s.plane), layout=False)
 
     @work(thread=True, exclusive=True, group="views")
     def compute_stage_views(self, z: int, token: int) -> None:

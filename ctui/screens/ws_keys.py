@@ -337,6 +337,7 @@ def _window_text(ws: WorkspaceHost, t: Text) -> None:
 
 
 _BARS = " ▁▂▃▄▅▆▇█"
+SEED_RANGE_REST_S = 0.15  # the seed range is computed once the cursor stays this long (s) on a voxel
 
 
 def _seed_text(ws: WorkspaceHost, t: Text) -> None:
@@ -364,7 +365,11 @@ def _seed_text(ws: WorkspaceHost, t: Text) -> None:
             if ws.seed_range.store(key, rc):  # a message: dropped when the screen is gone (no widget touched here)
                 ws.post_message(SeedRangeReady())
 
-        ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
+        def start() -> None:  # once the cursor rested there: a held key steps faster than it is computed
+            if ws.seed_range.key == key and ws.seed_range.result is None and ws.is_attached:
+                ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
+
+        ws.set_timer(SEED_RANGE_REST_S, start)
         t.append("Seed range here ...\n", style="dim")
         return
     rc = ws.seed_range.result

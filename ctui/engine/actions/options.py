@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from ctui.engine.core.errors import CtuiError
+from ctui.engine.core.limits import parse_memory
 
 
 def _key(option: str) -> str | None:
@@ -121,8 +122,6 @@ def load_options(*, series: Any = None, spacing: Any = None, shape: Any = None, 
     if not resample:
         kw["resample"] = False
     if memory not in (None, ""):
-        from ctui.engine.io.memplan import parse_memory  # (this module is imported by `ctui --help`)
-
         kw["memory_limit"] = parse_memory(memory)
     if cache:
         kw["cache"] = True

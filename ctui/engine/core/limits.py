@@ -31,6 +31,20 @@ def fmt_bytes(n: float) -> str:
     return f"{n:.1f} TB"  # pragma: no cover
 
 
+def parse_memory(text: Any, option: str = "memory") -> int:
+    """``"4G"``, ``"512M"``, ``"1.5GB"`` or a number of bytes -> bytes; one-line error otherwise."""
+    key = "memory" if option == "memory" else None  # CTUI_MEMORY is no option of an action
+    t = str(text).strip().upper().removesuffix("B").removesuffix("I")
+    mult = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}.get(t[-1:], 1)
+    try:
+        val = float(t[:-1] if t[-1:] in "KMGT" else t)
+    except (ValueError, IndexError):
+        raise CtuiError(f"{option} {text!r}: expected a size such as 4G, 512M or bytes", option=key) from None
+    if not (val > 0 and val * mult < 1 << 60):
+        raise CtuiError(f"{option} {text!r}: expected a positive size such as 4G", option=key)
+    return int(val * mult)
+
+
 def _cgroup_limit() -> int:
     """memory.max - memory.current of this process's cgroup (v2), or v1's limit."""
     try:

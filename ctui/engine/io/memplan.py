@@ -19,7 +19,7 @@ from typing import Any
 
 from ctui.engine.core import limits
 from ctui.engine.core.errors import CtuiError
-from ctui.engine.core.limits import fmt_bytes
+from ctui.engine.core.limits import fmt_bytes, parse_memory
 from ctui.engine.io.series import scan
 from ctui.engine.io.series._common import make_plan
 from ctui.engine.io.voxcache import cache_root, disk_free
@@ -77,20 +77,6 @@ class MemoryPlan:
 
     def summary(self) -> str:
         return f"memory plan: {self.mode}: {self.reason}"
-
-
-def parse_memory(text: Any, option: str = "memory") -> int:
-    """``"4G"``, ``"512M"``, ``"1.5GB"`` or a number of bytes -> bytes; one-line error otherwise."""
-    key = "memory" if option == "memory" else None  # CTUI_MEMORY is no option of an action
-    t = str(text).strip().upper().removesuffix("B").removesuffix("I")
-    mult = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}.get(t[-1:], 1)
-    try:
-        val = float(t[:-1] if t[-1:] in "KMGT" else t)
-    except (ValueError, IndexError):
-        raise CtuiError(f"{option} {text!r}: expected a size such as 4G, 512M or bytes", option=key) from None
-    if not (val > 0 and val * mult < 1 << 60):
-        raise CtuiError(f"{option} {text!r}: expected a positive size such as 4G", option=key)
-    return int(val * mult)
 
 
 def _address_space() -> int | None:

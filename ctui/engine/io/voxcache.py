@@ -11,6 +11,11 @@ out of memory), together with 2x/4x overviews for navigation, MIP and DVR.
   whose files changed is never found again (stale entries are left for the user to delete).
 * Written atomically: into ``voxels/.tmp-<key>-<pid>/``, then renamed to ``voxels/<key>/`` (a
   process that loses the race to another uses the other's entry).
+* Bounded: after an entry is written, the least recently used entries are removed until the
+  cache holds at most ``CTUI_CACHE_MAX`` (``4G``, ``512M`` or bytes; default 8G; 0: no limit).
+  An entry a process has open holds a shared ``flock`` on its ``lock`` file and is never
+  removed; one that is free is renamed away first (atomic: another process either opens it
+  whole or decodes again) and then deleted. Each open marks an entry used (``used``'s time).
 * The voxels are what :func:`ctui.engine.io.series.load` gives (int16 HU for CT), bit for bit;
   the map is copy-on-write (``mmap_mode="c"``): an edit of the array never reaches the file.
 
@@ -22,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import fcntl
 import glob
 import hashlib
 import os
@@ -32,10 +38,12 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from ctui.engine.core.limits import parse_memory
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series._common import ALLOCATOR
 
 FORMAT = 1  # bump when the entry's layout changes
+DEFAULT_MAX = 8 << 30  # CTUI_CACHE_MAX when unset: the cache's size cap (bytes)
 decoded = 0  # series decoded into the cache by this process (tests count re-decodes)
 _SLAB = 16  # slices copied at a time (overviews, a loader that returned another array)
 
@@ -101,12 +109,95 @@ def lookup(path: Any, **load_options: Any) -> Path | None:
     return d if (d / "volume.pkl").is_file() and (d / "voxels.npy").is_file() else None
 
 
+_held: dict[str, int] = {}  # entry folder -> the descriptor holding its shared lock (for this process's life)
+
+
+def _hold(entry: Path) -> None:
+    """A shared lock on the entry while this process may use it (eviction skips it) and its use time."""
+    key = str(entry)
+    with contextlib.suppress(OSError):  # a read-only cache folder: used unlocked (nothing evicts there either)
+        if key not in _held:
+            fd = os.open(entry / "lock", os.O_RDWR | os.O_CREAT, 0o600)
+            fcntl.flock(fd, fcntl.LOCK_SH)
+            _held[key] = fd
+        used = entry / "used"
+        used.touch()
+        os.utime(used)  # touch() leaves the time of an existing file on some systems
+
+
 def _open(entry: Path) -> Volume:
+    _hold(entry)
     with open(entry / "volume.pkl", "rb") as fh:
         vol: Volume = pickle.load(fh)  # written by this module into the user's own cache folder
     vol.data = np.load(entry / "voxels.npy", mmap_mode="c")
     vol.meta["voxel_cache"] = str(entry)
     return vol
+
+
+def max_bytes() -> int:
+    """The cache's size cap: ``CTUI_CACHE_MAX`` (``4G``, ``512M``, bytes; 0: none), else ``DEFAULT_MAX``."""
+    text = os.environ.get("CTUI_CACHE_MAX", "").strip()
+    if not text:
+        return DEFAULT_MAX
+    if text == "0":
+        return 0
+    return parse_memory(text, option="CTUI_CACHE_MAX")
+
+
+def _size(entry: Path) -> int:
+    total = 0
+    for f in entry.iterdir():
+        with contextlib.suppress(OSError):
+            total += f.stat().st_size
+    return total
+
+
+def _last_use(entry: Path) -> float:
+    for name in ("used", "volume.pkl"):
+        with contextlib.suppress(OSError):
+            return (entry / name).stat().st_mtime
+    return 0.0
+
+
+def evict(*, keep: Path | None = None, limit: int | None = None) -> list[str]:
+    """Remove the least recently used entries until the cache holds at most ``limit`` bytes
+    (default :func:`max_bytes`; 0: no limit), never ``keep`` nor an entry another process holds
+    open (its shared lock). Returns the keys removed."""
+    limit = max_bytes() if limit is None else int(limit)
+    folder = cache_root() / "voxels"
+    if limit <= 0 or not folder.is_dir():
+        return []
+    entries = [e for e in folder.iterdir() if e.is_dir() and not e.name.startswith(".")]
+    sizes = {e: _size(e) for e in entries}
+    total = sum(sizes.values())
+    removed: list[str] = []
+    for e in sorted(entries, key=_last_use):
+        if total <= limit:
+            break
+        if keep is not None and e.resolve() == Path(keep).resolve():
+            continue
+        if str(e) in _held:  # this process uses it
+            continue
+        try:
+            fd = os.open(e / "lock", os.O_RDWR | os.O_CREAT, 0o600)
+        except OSError:
+            continue
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                continue  # another process has it open
+            gone = folder / f".evict-{e.name}-{os.getpid()}"
+            try:
+                os.rename(e, gone)  # atomic: from now on no process finds it
+            except OSError:
+                continue
+        finally:
+            os.close(fd)
+        shutil.rmtree(gone, ignore_errors=True)
+        total -= sizes[e]
+        removed.append(e.name)
+    return removed
 
 
 @contextlib.contextmanager
@@ -184,7 +275,22 @@ def load_cached(path: Any, *, loader: Callable[..., Volume], **load_options: Any
                 raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return _open(entry)
+    vol = _open(entry)
+    evict(keep=entry)
+    return vol
+
+
+def cached_overview(path: Any, factor: int, **load_options: Any) -> Volume | None:
+    """``load(path, downsample=(f, f, f), **load_options)`` from the cache when the series has an
+    entry (another command decoded it there): its ``factor``-times overview, read from the entry's
+    ``overview<f>.npy`` (no decode; made from the map on first use); None without an entry."""
+    entry = lookup(path, **dict(load_options, downsample=None))
+    if entry is None or int(factor) not in (2, 4):
+        return None
+    try:
+        return overview(_open(entry), factor)
+    except (OSError, ValueError, EOFError, pickle.UnpicklingError):
+        return None  # removed meanwhile or broken: the caller decodes
 
 
 def overview(vol: Volume, factor: int) -> Volume:
@@ -207,5 +313,6 @@ def overview(vol: Volume, factor: int) -> Volume:
         tmp = target.with_name(f".tmp-{target.name}-{os.getpid()}.npy")
         _write_copy(sub, tmp)
         os.replace(tmp, target)
+        evict(keep=Path(entry))
     out.data = np.load(target, mmap_mode="c")
     return out

@@ -204,9 +204,9 @@ def load(
     """
     if options:
         raise CtuiError(f"unknown load option(s): {', '.join(sorted(options))}", path=path)
-    if cache and not headers_only:
-        return _through_cache(path, series=series, spacing=spacing, shape=shape, dtype=dtype, progress=progress,
-                              crop=crop, downsample=downsample, offset=offset, resample=resample)
+    opts = dict(series=series, spacing=spacing, shape=shape, dtype=dtype, crop=crop, offset=offset, resample=resample)
+    if not headers_only and (got := _through_cache(path, cache, downsample=downsample, progress=progress, **opts)):
+        return got
     single, files = _as_paths(path)
     common = dict(crop=crop, downsample=downsample, progress=progress, memory_limit=memory_limit)
     skipped: list[dict[str, str]] = []
@@ -237,10 +237,21 @@ def load(
                                common=common))
 
 
-def _through_cache(path: Any, **options: Any) -> Volume:
-    from ctui.engine.io.voxcache import load_cached  # only for series that do not fit in memory
+def _through_cache(path: Any, cache: bool, *, downsample: Any, **options: Any) -> Volume | None:
+    """``cache``: the series through the voxel cache; else, asked for a uniform 2x/4x overview
+    (``downsample=(f, f, f)``, a volume render's plan), the overview of its cache entry if it has
+    one (no decode); else None (decode as usual)."""
+    if cache:
+        from ctui.engine.io.voxcache import load_cached  # only for series that do not fit in memory
 
-    return load_cached(path, loader=load, **options)
+        return load_cached(path, loader=load, downsample=downsample, **options)
+    if not (isinstance(downsample, (tuple, list)) and len(downsample) == 3 and len(set(downsample)) == 1
+            and int(downsample[0]) in (2, 4)):
+        return None
+    from ctui.engine.io.voxcache import cached_overview  # a lookup only when a uniform 2x/4x overview is asked
+
+    options.pop("progress", None)
+    return cached_overview(path, int(downsample[0]), **options)
 
 
 def _check_exists(p: Path) -> None:
