@@ -343,3 +343,23 @@ def test_medulla_wrapped_in_cortex_warns(abdomen, organ):
     again = segment(cvol, [seed], [(lo, hi)], options=SegmentOptions())
     assert any("ball that fits at the seed" in w for w in again.objects[0].warnings)
     assert not any("wrapped" in w for w in again.objects[0].warnings)
+
+
+@pytest.mark.shared_data
+def test_a_seed_near_the_edge_sweeps_as_far_as_the_organs_middle(abdomen):
+    """Same organ, same answer (issue 34, point 4): the neck sweep tried radii up to 0.55x the depth within 10 mm
+    of the seed, so a seed near the spleen's edge (14.7 mm there, the spleen 21 mm deep) never reached the 18 mm
+    neck its last leak closes at, which a deeper seed's sweep cuts (Dice 0.82, 1.32x, with the defaults). The
+    sweep now goes on to the organ's depth (the deepest point joined to the seed's through voxels deeper than
+    0.8x its local depth), unless that width is wider than the object at the seed itself (a cut at full
+    resolution would lose the seed's own part: a right kidney's seed 6.7 mm deep, a 19 mm neck, 0.08x)."""
+    vol, labels = abdomen
+    ref = labels == ORGANS["spleen"]
+    for mode in ("slice", "3d"):
+        deep = segment(vol, [(19, 36, 22)], [], options=SegmentOptions(mode=mode))  # a seed 17.7 mm deep
+        res = segment(vol, [(13, 50, 18)], [], options=SegmentOptions(mode=mode))
+        got = res.segmentation.labels == res.objects[0].id
+        assert dice(got, ref) >= 0.86, (mode, dice(got, ref), res.objects[0].neck["reason"])
+        assert dice(got, deep.segmentation.labels == deep.objects[0].id) >= 0.95
+        assert 0.8 <= got.sum() / ref.sum() <= 1.1
+        assert res.objects[0].neck["width_mm"] == deep.objects[0].neck["width_mm"] == 18.0
