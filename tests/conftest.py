@@ -1,25 +1,20 @@
-"""Shared test fixtures.
+"""Fixtures and guards for every test; helpers that are not fixtures are in ``support.py``.
 
 ``shared_data`` points at ``../shared/data`` (real public data sets); tests that need
-it skip with a reason when it is absent. ``egl_ok`` tells whether an EGL context can
-be created.
+it skip with a reason when it is absent. Each folder's conftest.py holds that folder's fixtures.
 """
 
 from __future__ import annotations
 
-import contextlib
 import gc
-import io
-import os
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = Path(os.environ.get("CTUI_SHARED_DATA", ROOT.parent / "shared" / "data"))
-SAMPLE_DATA = ROOT / "sample_data"
+from support import SAMPLE_DATA, SHARED_DATA, put_test_folders_on_path
+
+put_test_folders_on_path()
 
 
 @pytest.fixture(scope="session")
@@ -29,37 +24,9 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
-def shared(name: str) -> Path:
-    """Path of one data set in ../shared/data, or skip the test with a reason."""
-    p = SHARED_DATA / name
-    if not p.exists():
-        pytest.skip(f"real data set {p} is missing")
-    return p
-
-
 @pytest.fixture(scope="session")
 def sample_dir() -> Path:
     return SAMPLE_DATA
-
-
-def lobster() -> np.ndarray:
-    """The volvis lobster from ../shared/data as (56, 324, 301) uint8, or skip."""
-    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
-    if not path.is_file():
-        pytest.skip(f"{path} missing")
-    return np.fromfile(path, np.uint8).reshape(56, 324, 301)
-
-
-def cli_streams(args: list[str]) -> tuple[int, str, str]:
-    """``ctui ARGS`` in this process: its exit status, stdout and stderr, caught by redirecting the streams for
-    the call (capsys read nothing once in the full suite under load: an earlier app's teardown had put
-    back its own streams)."""
-    from ctui.cli import main as cli_main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli_main(args)
-    return rc, out.getvalue(), err.getvalue()
 
 
 class _Redirect:
