@@ -13,18 +13,9 @@ from ctui.engine.core.meshdata import Mesh
 from ctui.engine.core.volume import Volume
 from ctui.engine.measure.stats import mesh_stats
 from ctui.engine.mesh.surface import mask_surface
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import wait_for, wait_workspace
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _r(n=40):

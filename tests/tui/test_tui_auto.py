@@ -19,20 +19,12 @@ pytest.importorskip("nibabel")
 from test_ai_totalseg import SHAPE, env, truth  # noqa: F401  (env: the fixture)
 
 from ctui.engine.core.colors import MAX_OBJECTS
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.auto_screen import AutoScreen, fit_problem
 from ctui.screens.session import Session, load_volume
 from ctui.screens.testing import wait_for, wait_workspace
 
 ABDOMEN = ["liver", "spleen", "kidney_left", "kidney_right", "pancreas", "gallbladder", "stomach"]
-
-
-@pytest.fixture(autouse=True)
-def _tui(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 def _session(series) -> tuple[Session, np.ndarray]:

@@ -10,18 +10,10 @@ import numpy as np
 import pytest
 
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics, planes
+from ctui.screens import planes
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import answer_prompt, wait_for, wait_workspace
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _cylinder(nz: int = 30, n: int = 48, spacing=(1.0, 1.0, 1.0), r: float = 10.0) -> Session:

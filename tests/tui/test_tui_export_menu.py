@@ -5,21 +5,11 @@ pre-filled prompt says how to clear it."""
 
 from __future__ import annotations
 
-import pytest
 from support import shared
 
 from ctui.engine.actions.formats import FORMATS
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.testing import choose, wait_workspace
-
-
-@pytest.fixture(autouse=True)
-def _halfblock(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 async def test_export_menu_and_default_names_on_a_nifti_ct(tmp_path):

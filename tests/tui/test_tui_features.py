@@ -19,14 +19,6 @@ from ctui.screens.testing import answer_prompt, choose, goto_voxel, wait_for, wa
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
-
-
 def _obj(name):
     return next(o for o in load_truth()["objects"] if o["name"] == name)
 

@@ -8,20 +8,10 @@ from __future__ import annotations
 import re
 
 import numpy as np
-import pytest
 
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics
 from ctui.screens.session import Session
 from ctui.screens.testing import cell_of_voxel, wait_for, workspace_of
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 def _two_balls() -> tuple[Session, np.ndarray, np.ndarray]:

@@ -17,14 +17,6 @@ from ctui.screens.session import Session
 from ctui.screens.testing import answer_prompt, cell_of_voxel, choose, drag, wait_workspace, wheel
 
 
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
-
-
 def _cylinder(nz: int = 30, n: int = 48, r: float = 10.0) -> Session:
     yy, xx = np.mgrid[0:n, 0:n]
     disk = (yy - n / 2) ** 2 + (xx - n / 2) ** 2 <= r**2

@@ -12,18 +12,13 @@ import pytest
 
 from support import shared
 from ctui.screens import app as app_mod
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp, LoadingScreen
 from ctui.screens.testing import wait_for, wait_workspace
 
 
 @pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
+def _preview_small(monkeypatch):
     monkeypatch.setattr(app_mod, "PREVIEW_MIN_VOXELS", 0)  # the real data set is small: preview it anyway
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _held_load(monkeypatch) -> tuple[threading.Event, list]:

@@ -6,23 +6,13 @@ seed, A accepts from the seed to here."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from ctui.engine.core.volume import Volume
 from ctui.engine.segment.propagate import Proposal
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.strip import ReviewStrip, columns
 from ctui.screens.testing import wait_workspace
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def test_strip_columns():

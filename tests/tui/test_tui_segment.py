@@ -11,19 +11,10 @@ import pytest
 from ctui.cli import main as cli_main
 from ctui.engine.io.labels import load_labels
 from ctui.engine.io.series import load
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import wait_for, wait_workspace
 from support import shared
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 @pytest.mark.shared_data

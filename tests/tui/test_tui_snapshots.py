@@ -9,18 +9,11 @@ import numpy as np
 import pytest
 
 from ctui.engine.io.phantom import load_truth, make_phantom
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import goto_voxel, wait_for
 
 SIZES = [(100, 30), (160, 50)]
-
-
-@pytest.fixture(autouse=True)
-def _halfblock(monkeypatch):
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 @pytest.fixture(scope="module")

@@ -14,19 +14,10 @@ import numpy as np
 import pytest
 
 from ctui.engine.io.phantom import SAMPLE_DIR, load_truth
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp, LoadingScreen
 from ctui.screens.testing import answer_prompt, goto_voxel, wait_for, wait_workspace
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _copy_sample(dst: Path) -> Path:

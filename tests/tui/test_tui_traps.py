@@ -9,19 +9,11 @@ import numpy as np
 import pytest
 
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics, planes
+from ctui.screens import planes
 from ctui.screens.app import CtuiApp
 from ctui.screens.dialogs import ChoiceScreen, ConfirmScreen
 from ctui.screens.session import Session
 from ctui.screens.testing import cell_of_voxel, choose, drag, wait_for, wait_workspace, wheel
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _body_and_island(nz: int = 20, n: int = 48) -> Session:

@@ -9,18 +9,9 @@ import pytest
 
 from ctui.engine import render
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import wait_for, wait_workspace
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):  # the public switch, given back after the test
-        yield
 
 
 def _ball_session(n: int = 40) -> Session:

@@ -7,18 +7,10 @@ import numpy as np
 import pytest
 
 from ctui.engine.actions.vessel import vessel
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.session import Session
 from ctui.screens.testing import wait_for, wait_workspace
 from test_vessel import Z0, u_bend
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setattr(graphics, "_chosen", "halfblock")
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
 
 
 async def test_vessel_tool_start_waypoint_end_accept():
