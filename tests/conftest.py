@@ -6,7 +6,6 @@ it skip with a reason when it is absent. Each folder's conftest.py holds that fo
 
 from __future__ import annotations
 
-import gc
 import sys
 from pathlib import Path
 
@@ -37,7 +36,10 @@ class _Redirect:
     its ``with`` blocks then put back the streams of *its* test in the middle of a later test, whose
     capsys then reads nothing (CI: ``test_bad_input_gives_one_line_naming_the_file[info dir/missing-0]``,
     ``test_failure_is_one_line``). A full collection after each test hid it at the cost of ten minutes
-    of the suite, and still missed a coroutine that became garbage only later."""
+    of the suite, and still missed a coroutine that became garbage only later. (A collection after each
+    test that made an app was dropped too: the streams' other thief was numba's error highlighting,
+    now off in ctui/__init__.py; tests/architecture/test_harness_streams.py and test_numba_streams.py
+    check both guards.)"""
 
     def __init__(self, name: str, new: object) -> None:
         self._name, self._new, self._old = name, new, None
@@ -60,32 +62,3 @@ def _guard_textual_redirects() -> None:
 
 
 _guard_textual_redirects()
-
-
-_APPS_MADE = [0]
-
-
-def _count_apps() -> None:
-    """Count every Textual app made, so that only the tests that made one pay for a full collection."""
-    from textual.app import App
-
-    init = App.__init__
-
-    def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
-        _APPS_MADE[0] += 1
-        init(self, *args, **kwargs)
-
-    App.__init__ = counting_init  # type: ignore[method-assign]
-
-
-_count_apps()
-
-
-@pytest.fixture(autouse=True)
-def _collect_after_apps():
-    """After a test that made a Textual app, collect what it left in reference cycles (an app coroutine
-    left pending), so that it ends inside that test (see ``_Redirect``)."""
-    made = _APPS_MADE[0]
-    yield
-    if _APPS_MADE[0] != made:
-        gc.collect()
