@@ -166,6 +166,7 @@ DRIVER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_read_only_output_folder(files, tmp_path):
     from ctui.engine.render import egl_available
 

@@ -78,6 +78,7 @@ def test_info_no_positions_warning():
     assert any("InstanceNumber" in w for w in j["warnings"]) and j["shape_zyx"] == [129, 128, 129]
 
 
+@pytest.mark.slow
 def test_demo_writes_series_and_truth(tmp_path):
     out = tmp_path / "ph"
     r = ctui("demo", out, "--no-drift", "--seed", "3")

@@ -81,6 +81,7 @@ def test_project_objects_both_methods(tmp_path, capsys, sample):
     assert rc == 2 and "no object 9" in se
 
 
+@pytest.mark.slow
 def test_project_terraced_all_objects_in_one_pass(tmp_path, capsys, sample):
     """--terraced: the label map's plain marching cubes, both kidneys from one pass;
     each closed, volumes near the voxel volumes (terraced surfaces cut the corners)."""

@@ -76,6 +76,7 @@ def test_segment_writes_project_mask_mric(capsys, truth, sample, tmp_path):
     assert len(m.slices[z]) == 1 and len(m.slices[first - 1]) == 0 and len(m.slices[last]) == 1
 
 
+@pytest.mark.slow
 def test_drift_from_project_and_seeds(capsys, truth, sample, tmp_path):
     k = _kidneys(truth)[1]
     z, y, x = k["seed_zyx"]

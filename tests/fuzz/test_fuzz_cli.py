@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from fuzz_cli import ROOT, Seed, oracle
 
 
@@ -23,6 +25,7 @@ def _script_env() -> dict:
             "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "CTUI_NO_PROGRESS": "1", "PYTHONHASHSEED": "0"}
 
 
+@pytest.mark.slow
 def test_fuzz_commands(tmp_path):
     """A few hundred mutated inputs through the commands: no traceback, hang, runaway
     allocation, multi-line error or exit-0 wrong result (see the module docstring)."""
@@ -37,6 +40,7 @@ def test_fuzz_commands(tmp_path):
     assert summary["counts"]["ok"] + summary["counts"]["error"] == n, summary["findings"][:8]
 
 
+@pytest.mark.slow
 def test_fuzz_round_four_families(tmp_path):
     """Issue 41's families alone (deflate bombs, JPEG-LS frames, enhanced geometry, FIFO sources,
     C1 folder names, resource limits, closed streams, temp races): every seed once unmutated,
@@ -98,6 +102,7 @@ def _polite(argv):
     return 2
 
 
+@pytest.mark.slow
 def test_rules_catch_every_kind_of_failure(tmp_path):
     """run_case classifies a traceback, an allocation over the cap, a CPU hog, a multi-line
     and an unnamed error as findings, and a one-line error naming the file as clean."""

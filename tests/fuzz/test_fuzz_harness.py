@@ -37,6 +37,8 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable
 
+import pytest
+
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -459,6 +461,7 @@ def selftest_campaign(ctx: Ctx) -> None:
         ctx.check(f, b"0123456789", tag=f.__name__.strip("_"))
 
 
+@pytest.mark.slow
 def test_harness_detects_every_kind_of_failure():
     res = run_campaign("test_fuzz_harness", "selftest_campaign", examples=1, timeout_s=8.0, stall_s=40)  # greedy: 200 MiB under load
     kinds = {f["tag"]: f["kind"] for f in res["findings"]}

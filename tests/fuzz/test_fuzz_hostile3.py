@@ -469,6 +469,7 @@ def test_segment_and_drift_take_loader_options(files, tmp_path, capsys):
 
 
 # ----------------------------------------------------------------- 15: info samples large volume files
+@pytest.mark.slow
 def test_info_samples_a_huge_compressed_nifti(tmp_path):
     """A small .nii.gz declaring 2000x2000x1000 uint8 (and vox_offset 0): info reads the
     header and the first slice only (sampled range, a warning), well under the memory the

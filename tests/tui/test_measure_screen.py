@@ -51,6 +51,7 @@ def _slab_session() -> Session:
     return s
 
 
+@pytest.mark.slow
 async def test_measure_screen_messages():
     s = _slab_session()
     app = CtuiApp(session=s, autosave_s=1e9)

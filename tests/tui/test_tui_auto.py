@@ -40,6 +40,7 @@ def _status(ws) -> str:
     return str(ws.query_one("#status").render())
 
 
+@pytest.mark.slow
 async def test_draft_imports_named_objects_as_one_undo_step(env):  # noqa: F811
     series, _, bindir = env
     s, mine = _session(series)
@@ -71,6 +72,7 @@ async def test_draft_imports_named_objects_as_one_undo_step(env):  # noqa: F811
         assert np.array_equal(s.seg.labels, before)
 
 
+@pytest.mark.slow
 async def test_replace_takes_the_place_of_the_object_of_that_name(env):  # noqa: F811
     series, _, _ = env
     s, mine = _session(series)

@@ -31,6 +31,7 @@ def _disk_count(r: int) -> int:
     return int((yy**2 + xx**2 <= r * r + 1e-6).sum())
 
 
+@pytest.mark.slow
 async def test_brush_and_eraser_counts_and_undo():
     s = _cylinder()
     app = CtuiApp(session=s, autosave_s=1e9)

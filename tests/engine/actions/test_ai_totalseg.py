@@ -138,6 +138,7 @@ def run(args, capsys):
     return proc.returncode, proc.stdout, proc.stderr
 
 
+@pytest.mark.slow
 def test_classes_named_on_the_grid(env, tmp_path, capsys):
     series, _, bindir = env
     out = tmp_path / "auto.ctui"
@@ -163,6 +164,7 @@ def test_classes_named_on_the_grid(env, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("merge", ["add", "replace", "keep"])
+@pytest.mark.slow
 def test_merge_policy(env, tmp_path, capsys, merge):
     series, _, _ = env
     base = tmp_path / "base.ctui"
@@ -196,6 +198,7 @@ def test_merge_policy(env, tmp_path, capsys, merge):
         assert np.array_equal(labels == spleen, want["spleen"] & ~mine)
 
 
+@pytest.mark.slow
 def test_missing_weights(env, tmp_path, capsys, monkeypatch):
     series = env[0]
     monkeypatch.setenv("TOTALSEG_HOME_DIR", str(tmp_path / "empty"))
@@ -204,6 +207,7 @@ def test_missing_weights(env, tmp_path, capsys, monkeypatch):
     assert "has no weights in" in err and "totalseg_download_weights -t total" in err
 
 
+@pytest.mark.slow
 def test_licensed_task(env, capsys):
     series, home, _ = env
     rc, _, err = run(["auto", str(series), "--task", "tissue_types"], capsys)
@@ -216,12 +220,14 @@ def test_licensed_task(env, capsys):
     assert project(Path("ct-auto.ctui"))[1][0]["name"] == "liver"  # the default output name
 
 
+@pytest.mark.slow
 def test_not_installed(env, capsys, monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path / "nothing"))
     rc, _, err = run(["auto", str(env[0])], capsys)
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "pip install TotalSegmentator" in err
 
 
+@pytest.mark.slow
 def test_failure_is_one_line(env, capsys):
     install(env[2], fail=True)
     rc, _, err = run(["auto", str(env[0]), "--roi-subset", "liver"], capsys)

@@ -170,6 +170,7 @@ def test_disk_full_tmpfs(small_fs):
     assert all("space" in m.lower() or "cannot write" in m for m in msgs.values()), msgs
 
 
+@pytest.mark.slow
 def test_file_too_large_rlimit(tmp_path):
     """RLIMIT_FSIZE (EFBIG) in a subprocess: works without root."""
     script = textwrap.dedent(
@@ -240,6 +241,7 @@ def _permission_script() -> str:
     )
 
 
+@pytest.mark.slow
 def test_permission_denied(tmp_path):
     folder = tmp_path / "locked"
     folder.mkdir()

@@ -163,6 +163,7 @@ def _sections(mask, path, sp, origin=(0.0, 0.0, 0.0), step_mm=0.5):
     return rows, np.array([r["s_mm"] for r in rows]), np.array([r["status"] for r in rows])
 
 
+@pytest.mark.slow
 def test_helix_with_side_branches_anisotropic():
     """A helical tube (r 5 mm, 1.1 turns, 185 mm) in 3 mm x 0.8 mm voxels with a side
     branch in the section plane and an oblique one: the path follows the helix for its
@@ -203,6 +204,7 @@ def test_helix_with_side_branches_anisotropic():
     assert np.abs(area / (np.pi * R * R) - 1).max() < 0.10  # no branch or cap left in
 
 
+@pytest.mark.slow
 def test_bifurcation_path_and_flags():
     """A trunk (r 8 mm, 90 mm along z) splitting into two limbs (r 5.5 mm, 70 and 55 mm,
     29 degrees off z), all cut by axial planes: the path runs from the trunk's end into
@@ -237,6 +239,7 @@ def test_bifurcation_path_and_flags():
 
 
 @pytest.mark.parametrize("sheet", [False, True], ids=["clean", "sheet-at-end"])
+@pytest.mark.slow
 def test_aorta_like_tube_ends_inside_with_true_end_sections(sheet):
     """An aorta-like tube (r 10 mm, 120 mm of a 300 mm arc, 11 degrees off z at its ends)
     cut by axial slice planes, as a label map ends; optionally a sheet of mask stuck to its

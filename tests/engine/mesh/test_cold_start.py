@@ -31,6 +31,7 @@ def _mesh_cmd(out, env_extra):
                           timeout=600)
 
 
+@pytest.mark.slow
 def test_fresh_cache_mesh_equals_compiled(tmp_path):
     cache = tmp_path / "numba-cache"
     cache.mkdir()

@@ -90,6 +90,7 @@ def test_no_flags_without_drift_and_robust_fit():
     np.testing.assert_allclose(smooth_fit(t, method="poly", degree=1), t, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_plot_png(tmp_path, phantom_seg):
     vol, truth, seg = phantom_seg
     out = tmp_path / "drift.png"
