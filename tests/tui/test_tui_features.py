@@ -212,11 +212,14 @@ async def test_autosave_writes_when_dirty(tmp_path):
         await pilot.pause()
         assert app.session.dirty
         app._autosave_tick()
-        auto = tmp_path / "autosave"
-        await wait_for(pilot, lambda: auto.exists() and any(auto.iterdir()), what="the autosave")
+        final = autosave_path(app.session.project_path or app.session.source_path)
+        assert final.parent == tmp_path / "autosave"
+        # the final file (put in place by an atomic rename), never any file: the writer's temporary file
+        # is in the same folder while it writes
+        await wait_for(pilot, lambda: final.exists(), what="the autosave")
         from ctui.engine.io.project import load_project
 
-        p = load_project(next(auto.iterdir()))
+        p = load_project(final)
         assert np.array_equal(p.labels, app.session.seg.labels)
 
 
