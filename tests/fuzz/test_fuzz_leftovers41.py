@@ -101,6 +101,7 @@ def test_seg_in_another_frame_of_reference_is_said(two_series):
 
 
 # ----------------------------------------------------------------- a 255-segment DICOM-SEG: one decode, not 255
+@pytest.mark.slow
 def test_255_segment_seg_is_decoded_in_one_call_and_exactly(two_series, monkeypatch):
     import highdicom as hd
     import numpy as np

@@ -4,6 +4,7 @@ and hypothesis-driven mutations of a small valid file (see test_fuzz_harness).""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
 
@@ -41,6 +42,7 @@ def campaign(ctx) -> None:
             ctx.check(read_mric, bytes(b), name="x.mric", tag="mric-count")
 
 
+@pytest.mark.slow
 def test_fuzz_mric():
     res = run_campaign("test_fuzz_mric", "campaign", examples=fuzz_examples(1500))
     assert_clean("mric", res, min_cases=2500)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from test_fuzz_harness import assert_clean, fuzz_examples, run_campaign, standard_campaign
 
@@ -76,6 +77,7 @@ def campaign(ctx) -> None:
     ctx.check(load_project, _zip({"project.json": "[" * 100000 + "]" * 100000}), name="x.ctui", tag="project-json")
 
 
+@pytest.mark.slow
 def test_fuzz_project():
     res = run_campaign("test_fuzz_project", "campaign", examples=fuzz_examples(1000))
     assert_clean("project", res, min_cases=2000)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 
 from ctui.engine.core.volume import Volume
 from ctui.screens.session import Session
@@ -98,6 +99,7 @@ async def test_the_g_panel_opens_on_its_first_field_so_two_tabs_reach_the_neck()
         assert s.segment_options["neck"] == 0.0
 
 
+@pytest.mark.slow
 async def test_80x24_panel_keeps_the_objects_in_view_above_a_proposals_notes():
     from ctui.screens.ws_keys import panel_text
 

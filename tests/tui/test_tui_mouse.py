@@ -110,6 +110,7 @@ async def test_click_fills_and_drag_paints_and_erases():
         assert not app.internal_errors
 
 
+@pytest.mark.slow
 async def test_panel_click_goto_and_box_drag_confines_paint():
     s = _cylinder()
     app = CtuiApp(session=s, autosave_s=1e9)
@@ -174,6 +175,7 @@ async def test_panel_click_goto_and_box_drag_confines_paint():
         assert not app.internal_errors
 
 
+@pytest.mark.slow
 async def test_edit_tools_bad_input_keeps_labels_and_undo():
     s = _cylinder()
     app = CtuiApp(session=s, autosave_s=1e9)
@@ -307,6 +309,7 @@ async def test_polygon_scissors_by_clicks():
         assert not app.internal_errors
 
 
+@pytest.mark.slow
 async def test_shift_drag_pans_and_ortho_click_sets_plane():
     s = _cylinder()
     app = CtuiApp(session=s, autosave_s=1e9)

@@ -217,6 +217,7 @@ def _closed_port() -> int:
     return port
 
 
+@pytest.mark.slow
 def test_dead_server_one_line_exit_2(series, tmp_path):
     url = f"http://127.0.0.1:{_closed_port()}"
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3]), "CTUI_NNI_SERVER": url}

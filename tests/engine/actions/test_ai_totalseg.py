@@ -235,6 +235,7 @@ def test_failure_is_one_line(env, capsys):
     assert "TotalSegmentator failed (exit 1): ERROR: CUDA out of memory" in err
 
 
+@pytest.mark.slow
 def test_folder_layout(env, tmp_path):
     """Without --ml TotalSegmentator writes one NIfTI per class: read as classes named by their files."""
     series, _, bindir = env

@@ -35,6 +35,7 @@ def _rows(path):
     return {r["name"]: r for r in csv.DictReader(open(path))}
 
 
+@pytest.mark.slow
 def test_batch_three_right_rows_one_failed_then_skips(manifest):
     from ctui.engine.actions.batch import run_batch
 

@@ -159,6 +159,7 @@ def _fill(folder: Path) -> None:
             pass
 
 
+@pytest.mark.slow
 def test_disk_full_tmpfs(small_fs):
     writers = _writers()
     for name, w in writers.items():

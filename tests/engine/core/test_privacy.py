@@ -261,6 +261,7 @@ def _project_without_source_path(p: Path) -> bytes:
     return json.dumps(d).encode() + rest
 
 
+@pytest.mark.slow
 def test_named_series_reaches_no_output(named_series, tmp_path, capsys, monkeypatch):
     from ctui.cli import main
     from ctui.engine.render import egl_available

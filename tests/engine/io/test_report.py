@@ -70,6 +70,7 @@ def _groups_by_highdicom(path):
     return sr, sr.content.get_volumetric_roi_measurement_groups(), sr.content.get_planar_roi_measurement_groups()
 
 
+@pytest.mark.slow
 def test_sr_numbers_equal_ctui_measure_json(case, capsys):
     from ctui.engine.actions.report import read_report
 
@@ -153,6 +154,7 @@ def test_measure_lists_the_report(case, capsys):
     assert doc["kind"] == "dicom-sr" and len([g for g in doc["groups"] if g["kind"] == "object"]) == 2
 
 
+@pytest.mark.slow
 def test_given_seg_and_seg_input(case, capsys):
     from ctui.engine.actions.report import read_report, write_report
 

@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 from ctui.engine.core.meshdata import Mesh
 from ctui.engine.mesh import meshtools
@@ -44,6 +45,7 @@ def test_small_label_mesh_and_report_import_no_numba():
     assert out.split() == ["True", "False"]
 
 
+@pytest.mark.slow
 def test_target_started_without_blas_probe_keeps_linear_algebra():
     out = _python("""
         import sys

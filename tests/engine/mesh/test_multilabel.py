@@ -76,6 +76,7 @@ def test_label_surfaces_terraced_uses_one_pass_and_objects_filter():
     assert multilabel_marching_cubes(np.zeros((4, 4, 4), np.uint8)) == {}
 
 
+@pytest.mark.slow
 def test_any_integer_ids_keep_their_ids():
     lab = _labels().astype(np.int64)
     ref = multilabel_marching_cubes(lab)

@@ -103,6 +103,7 @@ def test_clear_object_is_undoable():
     assert seg.voxels(1) == 18 and seg.slice_range(1) == (1, 2)
 
 
+@pytest.mark.slow
 def test_random_edits_undo_all_and_redo_all():
     from hypothesis import given, settings
     from hypothesis import strategies as st
