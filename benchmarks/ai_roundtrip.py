@@ -1,6 +1,6 @@
 """nnInteractive round trips on loopback: claim, image upload and prompts for a 134 x 512 x 512 series.
 
-The server is the protocol server of ``tests/ai_server.py`` (its "model" is a ball around the
+The server is the protocol server of ``tests/engine/actions/ai_server.py`` (its "model" is a ball around the
 point: a few ms), on 127.0.0.1. Two clients side by side in one run:
 
 * peer: the bare ``nninteractive-client`` session (what SlicerNNInteractive drives): claim,
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "engine" / "actions"))
 sys.path.insert(0, str(ROOT))
 
 from ai_server import PromptServer  # noqa: E402

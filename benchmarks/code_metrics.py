@@ -105,8 +105,8 @@ def thread_calls(root: Path) -> dict[str, int]:
 
 
 def cli_literals(root: Path) -> list[str]:
-    """The CLI's add_argument default=/choices= written as literals (tests/test_single_definition.py's rule)."""
-    sys.path.insert(0, str(HERE / "tests"))
+    """The CLI's add_argument default=/choices= written as literals (tests/architecture/test_single_definition.py's rule)."""
+    sys.path.insert(0, str(HERE / "tests" / "architecture"))
     try:
         from test_single_definition import literal_options
     finally:
@@ -141,7 +141,7 @@ def propagation_defaults_written(root: Path) -> int:
 def screen_cycles(root: Path) -> list[list[str]]:
     import grimp
 
-    sys.path.insert(0, str(HERE / "tests"))
+    sys.path.insert(0, str(HERE / "tests" / "architecture"))
     try:
         from test_import_cycles import import_cycles
     finally:

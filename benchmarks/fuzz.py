@@ -1,6 +1,6 @@
 """The long command-fuzzing campaign (issue 16): ``python benchmarks/fuzz.py --cases 10000``.
 
-Runs the engine of tests/fuzz_cli.py (mutated ctui projects, NIfTI, NRRD, MRIC,
+Runs the engine of tests/fuzz/fuzz_cli.py (mutated ctui projects, NIfTI, NRRD, MRIC,
 meshes, DICOM, and real files from ../shared/data through `ctui info/measure/mesh`, each
 case in a fork with RLIMIT_AS capped and a 30 s alarm) on ONE core, and prints the
 figures: cases, tracebacks, runs over 30 s, allocations over the cap, exit-0 wrong
@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 for var in ("CTUI_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(var, "1")
 os.environ.setdefault("CTUI_NO_PROGRESS", "1")
-sys.path[:0] = [str(ROOT / "tests"), str(ROOT)]
+sys.path[:0] = [str(ROOT / "tests" / "fuzz"), str(ROOT / "tests"), str(ROOT)]
 
 
 def main() -> int:

@@ -31,7 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "tui"))
 
 COLS, ROWS, CELL = 140, 38, (9, 17)
 #: a cheap signature of the image layer (sampled pixels), and a wait for it to change, in the page

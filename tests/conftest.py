@@ -1,25 +1,19 @@
-"""Shared test fixtures.
+"""Fixtures and guards for every test; helpers that are not fixtures are in ``support.py``.
 
 ``shared_data`` points at ``../shared/data`` (real public data sets); tests that need
-it skip with a reason when it is absent. ``egl_ok`` tells whether an EGL context can
-be created.
+it skip with a reason when it is absent. Each folder's conftest.py holds that folder's fixtures.
 """
 
 from __future__ import annotations
 
-import contextlib
-import gc
-import io
-import os
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = Path(os.environ.get("CTUI_SHARED_DATA", ROOT.parent / "shared" / "data"))
-SAMPLE_DATA = ROOT / "sample_data"
+from support import SAMPLE_DATA, SHARED_DATA, put_test_folders_on_path
+
+put_test_folders_on_path()
 
 
 @pytest.fixture(scope="session")
@@ -29,37 +23,9 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
-def shared(name: str) -> Path:
-    """Path of one data set in ../shared/data, or skip the test with a reason."""
-    p = SHARED_DATA / name
-    if not p.exists():
-        pytest.skip(f"real data set {p} is missing")
-    return p
-
-
 @pytest.fixture(scope="session")
 def sample_dir() -> Path:
     return SAMPLE_DATA
-
-
-def lobster() -> np.ndarray:
-    """The volvis lobster from ../shared/data as (56, 324, 301) uint8, or skip."""
-    path = shared("lobster") / "lobster_301x324x56_uint8.raw"
-    if not path.is_file():
-        pytest.skip(f"{path} missing")
-    return np.fromfile(path, np.uint8).reshape(56, 324, 301)
-
-
-def cli_streams(args: list[str]) -> tuple[int, str, str]:
-    """``ctui ARGS`` in this process: its exit status, stdout and stderr, caught by redirecting the streams for
-    the call (capsys read nothing once in the full suite under load: an earlier app's teardown had put
-    back its own streams)."""
-    from ctui.cli import main as cli_main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli_main(args)
-    return rc, out.getvalue(), err.getvalue()
 
 
 class _Redirect:
@@ -70,7 +36,10 @@ class _Redirect:
     its ``with`` blocks then put back the streams of *its* test in the middle of a later test, whose
     capsys then reads nothing (CI: ``test_bad_input_gives_one_line_naming_the_file[info dir/missing-0]``,
     ``test_failure_is_one_line``). A full collection after each test hid it at the cost of ten minutes
-    of the suite, and still missed a coroutine that became garbage only later."""
+    of the suite, and still missed a coroutine that became garbage only later. (A collection after each
+    test that made an app was dropped too: the streams' other thief was numba's error highlighting,
+    now off in ctui/__init__.py; tests/architecture/test_harness_streams.py and test_numba_streams.py
+    check both guards.)"""
 
     def __init__(self, name: str, new: object) -> None:
         self._name, self._new, self._old = name, new, None
@@ -93,32 +62,3 @@ def _guard_textual_redirects() -> None:
 
 
 _guard_textual_redirects()
-
-
-_APPS_MADE = [0]
-
-
-def _count_apps() -> None:
-    """Count every Textual app made, so that only the tests that made one pay for a full collection."""
-    from textual.app import App
-
-    init = App.__init__
-
-    def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
-        _APPS_MADE[0] += 1
-        init(self, *args, **kwargs)
-
-    App.__init__ = counting_init  # type: ignore[method-assign]
-
-
-_count_apps()
-
-
-@pytest.fixture(autouse=True)
-def _collect_after_apps():
-    """After a test that made a Textual app, collect what it left in reference cycles (an app coroutine
-    left pending), so that it ends inside that test (see ``_Redirect``)."""
-    made = _APPS_MADE[0]
-    yield
-    if _APPS_MADE[0] != made:
-        gc.collect()

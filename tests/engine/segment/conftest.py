@@ -1,0 +1,1 @@
+"""Tests of ``ctui.engine.segment``; shared fixtures are in ../conftest.py and helpers in tests/support.py."""
