@@ -10,7 +10,7 @@ from ctui.commands.info import add_load_options, load_kwargs
 from ctui.commands.segment import load_volume, parse_range, parse_seed
 from ctui.engine.core.errors import CtuiError
 
-LUMEN_CHOICES = ("contrast", "wall")  # actions.vessel.LUMENS (checked by tests/test_vessel_cli.py)
+LUMEN_CHOICES = ("contrast", "wall")  # actions.vessel.LUMENS (checked by tests/architecture/test_single_definition.py)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

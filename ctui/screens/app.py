@@ -262,7 +262,7 @@ class CtuiApp(App):
 
     def make_workspace(self, session: Session) -> WorkspaceScreen:
         """The workspace on ``session``. An app with more tools returns a subclass with them
-        (ARCHITECTURE.md, "A TUI tool or key"; tests/test_tui_tool.py)."""
+        (ARCHITECTURE.md, "A TUI tool or key"; tests/tui/test_tui_tool.py)."""
         from ctui.screens.workspace import WorkspaceScreen  # imported when a series opens (startup time)
 
         return WorkspaceScreen(session)

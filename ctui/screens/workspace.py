@@ -57,7 +57,7 @@ class WorkspaceScreen(GuardMixin, Screen):
 
     BINDINGS = BINDINGS + MOUSE_BINDINGS + VESSEL_BINDINGS
     #: more owners (built with the screen) whose ``action_<name>`` the key actions ``do('<name>')`` reach:
-    #: tools a subclass adds (ARCHITECTURE.md, "A TUI tool or key"; tests/test_tui_tool.py)
+    #: tools a subclass adds (ARCHITECTURE.md, "A TUI tool or key"; tests/tui/test_tui_tool.py)
     TOOLS: ClassVar[tuple[type[Owner], ...]] = ()
 
     DEFAULT_CSS = """

@@ -84,3 +84,12 @@ def test_segment_options_and_propagation_settings_share_their_defaults() -> None
                     if isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name) \
                             and st.target.id in SHARED:
                         assert not isinstance(st.value, ast.Constant), f"{path}: {node.name}.{st.target.id} is a literal"
+
+
+def test_vessel_lumen_choices_are_the_engines():
+    """The CLI keeps ``--lumen``'s choices as a constant (its --help does not load the vessel engine):
+    they must be the engine's ``LUMENS``, in order."""
+    from ctui.commands.vessel import LUMEN_CHOICES
+    from ctui.engine.vessel.build import LUMENS
+
+    assert LUMEN_CHOICES == tuple(LUMENS)

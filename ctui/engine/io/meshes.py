@@ -204,7 +204,7 @@ def _load_stl_ascii(p: Path) -> Mesh:
     if len(vals) == 0 or len(vals) % 3:
         raise FormatError(f"{p}: ASCII STL has {len(vals)} vertices (not a positive multiple of 3)")
     tri = np.asarray(vals, np.float32).reshape(-1, 3, 3)
-    if not np.isfinite(tri).all():  # "nan", "inf", 1e999 (found by FMT's tests/test_fuzz_mesh.py)
+    if not np.isfinite(tri).all():  # "nan", "inf", 1e999 (found by FMT's tests/fuzz/test_fuzz_mesh.py)
         raise FormatError(f"{p}: ASCII STL has non-finite vertex coordinates")
     v, f = _weld_triangles(tri)
     return Mesh(vertices=v, faces=f, meta={"source": p.name, "format": "stl-ascii"})

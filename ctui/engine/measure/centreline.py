@@ -12,7 +12,7 @@ leaves the object, and the path stops there, inside (both the voxel mask and the
 smoothed border the sections measure). On a helical tube with side branches in
 3 mm x 0.8 mm voxels the path is within 1% of the helix's length and 0.2 mm (median)
 of its axis; on an aorta-like tube cut by the slice planes, within 1% of the length
-between the planes (tests/test_centreline.py).
+between the planes (tests/engine/measure/test_centreline.py).
 
 The path helpers (:func:`~ctui.engine.measure.paths.path_from_points`,
 :func:`~ctui.engine.measure.paths.parse_points`, arc lengths, resampling, voxel <->

@@ -3,7 +3,7 @@ before numba has compiled them (a fresh install's first contour mesh).
 
 Same algorithm, same floating-point operations in the same order (IEEE doubles, no
 fused multiply-add: numba compiles without ``fastmath``), same tie-breaking, so the
-triangles are identical to the compiled kernels' (``tests/test_cold_start.py`` checks a
+triangles are identical to the compiled kernels' (``tests/engine/mesh/test_cold_start.py`` checks a
 real kidney meshed with a cold and a warm numba cache). About 1-2 us per table cell.
 """
 

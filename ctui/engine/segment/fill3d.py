@@ -5,7 +5,7 @@ slice; :func:`fill3d_seeds` the voxels connected to any of a list of seed voxels
 Until a process has loaded the numba kernel, a large mask with few x-runs (an organ's
 range in its box) is filled by joining its runs (:func:`_runs`, scipy's connected
 components of the run graph), which does not load numba (:data:`RUN_FILL_RUNS`). Every path
-gives the same voxels (tests/test_propagate.py, tests/test_segment_memory.py).
+gives the same voxels (tests/engine/segment/test_propagate.py, tests/engine/segment/test_segment_memory.py).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ def fill3d(inrange: np.ndarray, z: int, start_mask: np.ndarray, *, connectivity:
     below for ``connectivity=8``. A numba scanline flood fill (runs along x, so memory
     is read in order) visits only the component: on 300x512x512 it took 0.15 s on a
     70%-noisy block and a few ms on solid objects, against about 0.4 s for
-    ``scipy.ndimage.label`` of the whole mask (equal results: tests/test_propagate.py).
+    ``scipy.ndimage.label`` of the whole mask (equal results: tests/engine/segment/test_propagate.py).
     A plain voxel-by-voxel depth-first numba fill was slower than scipy (cache misses)
     and was dropped. scipy labels instead when numba is missing, and for small volumes while numba
     is not loaded yet (:data:`SMALL_FILL`); large masks with few runs are filled by their runs then.

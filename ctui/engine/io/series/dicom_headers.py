@@ -229,7 +229,7 @@ class _Capped:
     CPython's buffered ``read(n)`` allocates ``n`` bytes up front, and pydicom reads
     file-meta elements whole (``defer_size`` does not apply there), so a corrupted
     0x7FFFFFFF element length in a 1 kB file allocated 2 GiB (found by FMT's
-    tests/test_fuzz_dicom.py).
+    tests/fuzz/test_fuzz_dicom.py).
     """
 
     def __init__(self, fh: Any, size: int) -> None:
@@ -253,7 +253,7 @@ def _quiet_pydicom() -> None:
 
     pydicom's value validation warns *and logs* (logger "pydicom") with the offending
     value, which for a corrupted header can include the patient's name and ID (found
-    by FMT's tests/test_privacy.py). ctui judges values itself, so validation on
+    by FMT's tests/engine/core/test_privacy.py). ctui judges values itself, so validation on
     reading is turned off and the logger's non-error records are dropped.
     """
     global _QUIET

@@ -120,7 +120,7 @@ def _inflate(path: Path, offset: int, expected: int) -> bytes:
                 out += d.decompress(chunk, max(0, expected - len(out)) or 1)
                 if len(out) >= expected:
                     break
-    except zlib.error as exc:  # corrupted stream (found by FMT's tests/test_fuzz_stacks.py)
+    except zlib.error as exc:  # corrupted stream (found by FMT's tests/fuzz/test_fuzz_stacks.py)
         raise LoadError(f"corrupted compressed data ({exc})", path=path) from None
     return bytes(out[:expected])
 

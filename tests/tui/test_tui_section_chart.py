@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.dialogs import ChoiceScreen
 from ctui.screens.imageview import ImageView
@@ -17,14 +16,6 @@ from ctui.screens.session import Session
 from ctui.screens.testing import choose, wait_for, wait_workspace
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 async def test_80x24_section_chart_starts_at_zero():

@@ -9,24 +9,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shared
+from support import shared
 
 from ctui.engine.actions.opened import open_input
 from ctui.engine.io.series import load
-from ctui.screens import graphics
 from ctui.screens.dialogs import ChoiceScreen
 from ctui.screens.session import Session
 from ctui.screens.testing import cell_of_voxel, drag, wait_for, workspace_of
 
 pytestmark = [pytest.mark.slow, pytest.mark.shared_data]
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 def _dice(a: np.ndarray, b: np.ndarray) -> float:

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from ctui.engine.core.volume import Volume
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp
 from ctui.screens.keyhelp import task_rows
 from ctui.screens.keytable import keys
@@ -40,13 +39,6 @@ class StampWorkspace(WorkspaceScreen):
 class StampApp(CtuiApp):
     def make_workspace(self, session: Session) -> WorkspaceScreen:
         return StampWorkspace(session)
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 def _session() -> Session:

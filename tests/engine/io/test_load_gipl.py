@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, shared
+from support import ROOT, shared
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.io.series import load, scan
 

@@ -7,19 +7,10 @@ import io
 
 import pytest
 
-from ctui.screens import graphics
 from ctui.screens.app import CtuiApp, LoadingScreen
 from ctui.screens.testing import wait_for
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):
-        yield
 
 
 def _screen_text(app) -> str:

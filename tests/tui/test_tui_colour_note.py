@@ -18,14 +18,6 @@ from ctui.screens.testing import wait_for, wait_workspace
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(autouse=True)
-def _env(monkeypatch, tmp_path):
-    monkeypatch.setenv("CTUI_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-    monkeypatch.chdir(tmp_path)
-    with graphics.using_graphics("halfblock"):
-        yield
-
-
 def _screen_rows(app) -> list[str]:
     """The screen's text, row by row (from Textual's SVG screenshot)."""
     svg = app.export_screenshot()
