@@ -27,7 +27,7 @@ from ctui.screens import planes
 from ctui.screens.guard import GuardMixin
 from ctui.screens.imageview import ImageView
 from ctui.screens.keybar import KeyBar
-from ctui.screens.linestatic import LineStatic
+from ctui.screens.sidepanel import SidePanel
 from ctui.screens.messages import (AutoReady, CellRendered, JobFailed, JobFinished, JobProgress, LabelsChanged, ProposalReady,
                                    SeedRangeReady, SegmentationFailed, StageViewsReady, Status)
 from ctui.screens.session import VIEWS, Session
@@ -43,12 +43,6 @@ from ctui.screens.ws_review import ReviewOwner
 from ctui.screens.ws_segment import SegmentRunner
 from ctui.screens.ws_state import EditTools, Jobs, ObjectVolumes, ProposalState, SeedRange, ViewState
 from ctui.screens.ws_tools import ToolOwner
-
-
-class SidePanel(LineStatic):  # a step repaints only the panel's lines that changed
-    DEFAULT_CSS = """
-    SidePanel { width: 38; height: 1fr; padding: 0 1; background: $panel; }
-    """
 
 
 class WorkspaceScreen(GuardMixin, Screen):
@@ -121,7 +115,7 @@ class WorkspaceScreen(GuardMixin, Screen):
                     with Vertical(classes="cell"):
                         yield Label(p, id=f"oc-{p}", classes="cell-label")
                         yield ImageView(id=f"o-{p}")
-            yield SidePanel(id="panel")
+            yield SidePanel(self.seed_range, id="panel")
         with Horizontal(id="progress-row"):
             yield Label("", id="progress-label")
             yield ProgressBar(total=100, id="progress", show_eta=False)
@@ -253,7 +247,9 @@ class WorkspaceScreen(GuardMixin, Screen):
             self.request_3d()
 
     def update_panel(self) -> None:
-        self.query_one("#panel", SidePanel).update(panel_text(self), layout=False)  # fixed size: no relayout
+        panel = self.query_one("#panel", SidePanel)
+        panel.update(panel_text(self), layout=False)  # fixed size: no relayout
+        panel.follow(self.s)  # the seed range the text asked for, computed by the panel
         self.review.update_strip()
 
     def set_status(self, msg: str) -> None:

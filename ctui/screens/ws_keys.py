@@ -12,7 +12,6 @@ from rich.text import Text
 from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
 from ctui.screens.keytable import keys
-from ctui.screens.messages import SeedRangeReady
 from ctui.screens.session import VIEWS
 from ctui.screens.ws_host import Owner, WorkspaceHost
 from ctui.screens.ws_state import describe, mm, value_unit
@@ -337,7 +336,6 @@ def _window_text(ws: WorkspaceHost, t: Text) -> None:
 
 
 _BARS = " ▁▂▃▄▅▆▇█"
-SEED_RANGE_REST_S = 0.15  # the seed range is computed once the cursor stays this long (s) on a voxel
 
 
 def _seed_text(ws: WorkspaceHost, t: Text) -> None:
@@ -353,25 +351,7 @@ def _seed_text(ws: WorkspaceHost, t: Text) -> None:
         ws.call_after_refresh(ws.update_panel)
         t.append("Seed range here ...\n", style="dim")
         return
-    from ctui.engine.actions.segment import suggest_range  # loads the segmentation engine: after the first paint
-    if ws.seed_range.wants(key):
-
-        def work() -> None:  # a thread: filters on the neighbourhood may take a while
-            try:
-                with s._lock:
-                    rc = suggest_range(s.volume, (s.x, s.y, s.z), pipeline=s.pipeline)
-            except Exception:  # off the image, a filter error: the views report it
-                return
-            if ws.seed_range.store(key, rc):  # a message: dropped when the screen is gone (no widget touched here)
-                ws.post_message(SeedRangeReady())
-
-        def start() -> None:  # once the cursor rested there: a held key steps faster than it is computed
-            if ws.seed_range.key == key and ws.seed_range.result is None and ws.is_attached:
-                ws.run_worker(work, thread=True, exclusive=True, group="seed-range", name="seed-range")
-
-        ws.set_timer(SEED_RANGE_REST_S, start)
-        t.append("Seed range here ...\n", style="dim")
-        return
+    ws.seed_range.wants(key)  # the side panel computes it once the cursor rests here (SidePanel.follow)
     rc = ws.seed_range.result
     if rc is None:
         t.append("Seed range here ...\n", style="dim")
