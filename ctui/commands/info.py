@@ -99,7 +99,7 @@ def _lines(vol, d: dict) -> list[str]:
     if len(objects) > 50 or len(skipped) > 50:
         lines.append(f"  ... and {max(0, len(objects) - 50) + max(0, len(skipped) - 50)} more (--json lists all)")
     plan = d.get("memory_plan") or {}
-    modes = [f"{c} {plan[c]['mode']}" for c in ("open", "segment", "mesh", "render") if c in plan]
+    modes = [f"{c} {plan[c]['mode']}" for c in plan if isinstance(plan[c], dict)]  # the engine's order
     if modes:  # "cache": the voxels memory-mapped from the cache folder (ctui info --json says why)
         from ctui.engine.core.limits import fmt_bytes
 

@@ -335,12 +335,12 @@ def write_outputs(args: argparse.Namespace, volume, seg, pipeline, settings: lis
     mask, mric = getattr(args, "mask", None), getattr(args, "mric", None)
     if mask or mric:
         from ctui.engine.actions.export import export
-        from ctui.engine.actions.formats import format_for_path
+        from ctui.engine.actions.formats import LABELMAP_KINDS, format_for_path
         from ctui.engine.actions.opened import Opened
 
         opened = Opened.of_volume(volume, seg.labels, path=args.path, project=project)
         if mask:
-            fmt = format_for_path(mask, kinds=("nifti", "nrrd"))
+            fmt = format_for_path(mask, kinds=LABELMAP_KINDS)
             if fmt is None:
                 raise _err(f"--mask {mask}: a label map's name ends in .nii, .nii.gz, .nrrd or .seg.nrrd")
             export(opened, format=fmt.name, out=mask)

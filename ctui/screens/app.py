@@ -27,7 +27,7 @@ from ctui.engine.actions.project import source_load_options
 from ctui.engine.actions.series import preview
 from ctui.engine.core.progress import Cancelled
 from ctui.screens.dialogs import PromptScreen
-from ctui.screens.graphics import colour_advice
+from ctui.screens.graphics import CELL_MODES, colour_advice
 from ctui.screens.loading import LoadingScreen, PreviewReady
 from ctui.screens.messages import JobProgress, LoadFailed, SessionReady
 from ctui.screens.projects import project_from_session, session_from_project
@@ -73,7 +73,7 @@ class CtuiApp(App):
         if graphics:
             from ctui.screens.graphics import use_graphics
 
-            if graphics in ("halfblock", "ascii"):
+            if graphics in CELL_MODES:
                 use_graphics(graphics)
             else:  # sixel/kitty need the terminal probed before Textual starts: half-blocks unless it was
                 use_graphics("halfblock", unless_chosen=True)

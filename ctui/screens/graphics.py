@@ -28,6 +28,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
+PIXEL_MODES = ("sixel", "kitty")  # images drawn by the terminal (pixels), not with characters
+CELL_MODES = ("halfblock", "ascii")  # images drawn with characters
 #: ``ctui web`` sets ``CTUI_WEB=1`` for the TUI it serves to a browser: sixel images (xterm.js draws
 #: them; the kitty protocol blanks the page and "auto" finds no tty), at most WEB_MAX_PIXELS
 #: (w, h) each (sixel bytes grow with the area), redrawn at most every WEB_DEBOUNCE_S seconds
@@ -54,7 +56,7 @@ def prepare_graphics(mode: str | None = None) -> str:
         raise ValueError(f"unknown graphics mode {mode!r}; choose one of {', '.join(MODES)}")
     if web_mode() and mode in ("auto", "kitty"):
         mode = "sixel"  # in a browser: never kitty, and auto would fall back to half-blocks (no tty)
-    if mode in ("halfblock", "ascii"):
+    if mode in CELL_MODES:
         _chosen = mode
         return mode
     try:

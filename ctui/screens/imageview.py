@@ -22,7 +22,7 @@ from textual.timer import Timer
 from textual.widget import Widget
 
 from ctui.screens import cells
-from ctui.screens.graphics import WEB_DEBOUNCE_S, cell_pixels, graphics_mode, pixel_cap
+from ctui.screens.graphics import PIXEL_MODES, WEB_DEBOUNCE_S, cell_pixels, graphics_mode, pixel_cap
 
 
 class ImageView(Widget):
@@ -79,7 +79,7 @@ class ImageView(Widget):
     def target_pixels(self) -> tuple[int, int]:
         """(width, height) of this widget in display pixels for the current mode."""
         w, h = self.size.width, self.size.height
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             cw, ch = cell_pixels()
             cap = pixel_cap()
             if cap is not None:  # web mode: whole cells within the cap
@@ -90,7 +90,7 @@ class ImageView(Widget):
     # --------------------------------------------------------------- internals
     def _invalidate(self) -> None:
         self._strips = None
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             wait = WEB_DEBOUNCE_S - (time.perf_counter() - self._tii_sent)
             if pixel_cap() is None or (wait <= 0 and self._tii_timer is None):
                 self._flush_tii()
@@ -121,7 +121,7 @@ class ImageView(Widget):
         return grid
 
     def compose(self):
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             from textual_image.widget import SixelImage, TGPImage
 
             cls = SixelImage if self.mode == "sixel" else TGPImage
@@ -172,7 +172,7 @@ class ImageView(Widget):
         return self._strips
 
     def render_line(self, y: int) -> Strip:
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             return Strip.blank(self.size.width)
         strips = self._ensure_strips()
         if y == len(strips) - 1:
@@ -190,7 +190,7 @@ class ImageView(Widget):
         thousands of distinct fg/bg pairs of a grey image, costing more than the
         whole render.
         """
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             return super().render_lines(crop)
         strips = self._ensure_strips()
         W = self.size.width
@@ -216,7 +216,7 @@ class ImageView(Widget):
         """Image pixel under a widget cell (for mouse clicks)."""
         if self.view_map is None:
             return None
-        if self.mode in ("sixel", "kitty"):
+        if self.mode in PIXEL_MODES:
             cw, ch = cell_pixels()
             return self.view_map.to_image((col + 0.5) * cw, (row + 0.5) * ch)
         return self.view_map.to_image(col + 0.5, 2 * row + 1.0)

@@ -11,7 +11,7 @@ from textual.events import MouseMove, MouseScrollDown, MouseScrollUp
 from textual.widgets import OptionList
 
 from ctui.screens import planes
-from ctui.screens.graphics import cell_pixels
+from ctui.screens.graphics import PIXEL_MODES, cell_pixels
 
 if TYPE_CHECKING:
     from ctui.screens.session import Session
@@ -100,7 +100,7 @@ def cell_of_voxel(app, zyx, widget_id: str = "#main", plane: str | None = None) 
     pv = planes.plane_view(s.volume, plane or s.plane)
     c, r = planes.cursor_in(pv, tuple(zyx), s.shape)
     xd, yd = iv.view_map.to_display(c, r)
-    if iv.mode in ("sixel", "kitty"):
+    if iv.mode in PIXEL_MODES:
         cw, ch = cell_pixels()
         return int(xd // cw), int(yd // ch)
     return int(xd), int(yd // 2)

@@ -30,7 +30,7 @@ from ctui.engine.actions import edit as et
 from ctui.engine.core.errors import CtuiError
 from ctui.screens import planes
 from ctui.screens.dialogs import PromptScreen
-from ctui.screens.graphics import cell_pixels
+from ctui.screens.graphics import PIXEL_MODES, cell_pixels
 from ctui.screens.imageview import ImageView
 from ctui.screens.keytable import keys
 from ctui.screens.strip import ReviewStrip
@@ -235,7 +235,7 @@ class MouseOwner(Owner):
         vm = iv.view_map
         if vm is None or self.ws.viewstate.zoom <= 1:
             return
-        if iv.mode in ("sixel", "kitty"):
+        if iv.mode in PIXEL_MODES:
             cw, ch = (float(v) for v in cell_pixels())
         else:
             cw, ch = 1.0, 2.0  # half blocks: a cell is one pixel wide, two high

@@ -3,6 +3,7 @@ screens read them from here, so both give the same numbers for the same object."
 
 from __future__ import annotations
 
+from ctui.engine.io.suffixes import LABELMAP_SUFFIXES
 from ctui.engine.core.rendermodes import ANTIALIAS, FRAMES
 from ctui.engine.measure import DEFAULT_SECTION_STEP_MM
 from ctui.engine.mesh import CONTOUR_TILINGS  # the mesh package's list (plain data)
@@ -54,7 +55,7 @@ DRIFT_ESTIMATE = DRIFT_ESTIMATES[0]
 
 #: Input kinds by file name.
 PROJECT_SUFFIXES = (".ctui", ".ctui.autosave")
-LABEL_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
+LABEL_SUFFIXES = LABELMAP_SUFFIXES
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb", ".gltf")
 MRIC_SUFFIXES = (".mric",)
 #: ``ctui report --format``: a DICOM SR (TID 1500) over a DICOM-SEG, the measurements as JSON, one CSV row per object

@@ -33,6 +33,7 @@ ExportJob = Any
 
 #: What a format may need from the input: nothing, or the DICOM series the labels were drawn on.
 NEEDS = ("", "dicom")
+LABELMAP_KINDS = ("nifti", "nrrd")  # the formats a --mask label map is written in
 #: Suffixes of input files, removed to get the stem that output names start from.
 INPUT_SUFFIXES = (".ctui.autosave", ".ctui", ".seg.nrrd", ".nii.gz", ".nii", ".nrrd", ".nhdr", ".mha", ".mhd",
                   ".gipl.gz", ".gipl", ".dcm", ".ima", ".tiff", ".tif", ".png", ".npy", ".raw", ".gz", ".zip")

@@ -53,7 +53,7 @@ def memory_plans(shape: Sequence[int], memory: Any = None) -> dict:
     limit, source = memplan.memory_limit(memory)
     out: dict[str, Any] = {"limit_bytes": limit, "limit_source": source}
     if len(shape) == 3:
-        for cmd in ("open", "segment", "mesh", "render"):
+        for cmd in memplan.REPORTED:
             nz, ny, nx = (int(v) for v in shape)
             p = memplan.decide(cmd, (nz, ny, nx), limit=limit, source=source)
             out[cmd] = {"mode": p.mode, "need_bytes": p.need_bytes, "reason": p.reason}

@@ -17,7 +17,7 @@ import numpy as np
 
 from ctui.engine.actions import defaults
 from ctui.engine.actions.export import export
-from ctui.engine.actions.formats import format_for_path
+from ctui.engine.actions.formats import LABELMAP_KINDS, format_for_path
 from ctui.engine.actions.opened import Opened
 from ctui.engine.actions.project import new_project, save_project
 from ctui.engine.actions.series import Segmentation
@@ -139,7 +139,7 @@ def save_vessel(result: VesselResult, volume: Any, *, source_path: str = "", pro
         save_project(project, proj, inputs=inputs)
         written.append(project)
     if mask:
-        fmt = format_for_path(mask, kinds=("nifti", "nrrd"))
+        fmt = format_for_path(mask, kinds=LABELMAP_KINDS)
         if fmt is None:
             raise CtuiError(f"{mask}: a label map's name ends in .nii, .nii.gz, .nrrd or .seg.nrrd", option="mask")
         export(Opened.of_volume(volume, labels, path=source_path, project=proj), format=fmt.name, out=mask)

@@ -39,8 +39,8 @@ from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.geometry import Geometry
 from ctui.engine.io.labels import load_labels
 from ctui.engine.io.series.dicom_deflate import dcmread as bounded_dcmread
+from ctui.engine.io.suffixes import GIPL_SUFFIXES, NIFTI_SUFFIXES, NRRD_SUFFIXES
 
-LABELMAP_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".seg.nrrd", ".nhdr")
 KINDS = ("dicom-seg", "rtstruct", "nifti", "nrrd", "gipl")
 
 
@@ -82,9 +82,9 @@ def label_kind(path: str | os.PathLike) -> str:
     """'dicom-seg', 'rtstruct', 'nifti' or 'nrrd' for a label file; FormatError otherwise."""
     p = Path(path)
     name = p.name.lower()
-    if name.endswith((".nii", ".nii.gz")):
+    if name.endswith(NIFTI_SUFFIXES):
         return "nifti"
-    if name.endswith((".nrrd", ".nhdr")):
+    if name.endswith(NRRD_SUFFIXES):
         return "nrrd"
     if p.is_dir():
         raise FormatError("is a folder: give the label file (DICOM-SEG, RTSTRUCT, .nii, .nii.gz, .nrrd)", path=p)
@@ -397,7 +397,7 @@ def read_label_file(path: str | os.PathLike, *, grid: Any = None, frame_of_refer
     if not p.exists():
         raise CtuiError("no such label file", path=p)
     g = None if grid is None else Geometry.of(grid)
-    if p.name.lower().endswith((".gipl", ".gipl.gz")):  # ITK-SNAP's label maps (a GIPL alone opens as a volume)
+    if p.name.lower().endswith(GIPL_SUFFIXES):  # ITK-SNAP's label maps (a GIPL alone opens as a volume)
         return _from_labelmap(p, g, "gipl")
     kind = label_kind(p)
     if kind == "dicom-seg":

@@ -38,6 +38,7 @@ from ctui.engine.core.errors import CtuiError, FormatError
 from ctui.engine.core.limits import check_allocation
 from ctui.engine.core.volume import Volume
 from ctui.engine.io.series.nrrd_data import inflate_bounded
+from ctui.engine.io.suffixes import GIPL_SUFFIXES
 
 #: Largest expansion deflate (gzip/zlib) can achieve; bounds decompressed sizes.
 DEFLATE_MAX_RATIO = 1032
@@ -67,7 +68,7 @@ def _kind(path: Path) -> str:
         return "nii"
     if name.endswith(".nrrd"):
         return "nrrd"
-    if name.endswith((".gipl", ".gipl.gz")):
+    if name.endswith(GIPL_SUFFIXES):
         return "gipl"
     raise FormatError(f"{path}: unknown label-map format (use .nii, .nii.gz, .nrrd, .seg.nrrd or .gipl)")
 

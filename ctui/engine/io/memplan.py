@@ -39,6 +39,8 @@ PEAKS: dict[str, tuple[int, float]] = {
 }
 #: address space the libraries map without using it (numba/LLVM, thread stacks): counted
 #: against RLIMIT_AS only
+#: the commands `info` reports a plan for (text and --json), in this order
+REPORTED = ("open", "segment", "mesh", "render")
 AS_OVERHEAD = 700 * MB
 #: commands that may work from an overview (``downsample``) without changing their result's meaning
 OVERVIEW_OK = {"render"}

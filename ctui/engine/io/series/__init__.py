@@ -44,6 +44,7 @@ from ctui.engine.core.progress import Progress, report
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window, ct_hint, looks_like_ct
 from ctui.engine.io.series._common import IMAGE_SUFFIXES, available_memory, fmt_bytes, list_files, make_plan, natural_key, rel
+from ctui.engine.io.suffixes import GIPL_SUFFIXES, NIFTI_SUFFIXES, NRRD_SUFFIXES
 
 __all__ = ["load", "inspect", "scan", "estimate", "LoadError"]
 
@@ -59,15 +60,15 @@ def _is_volume_file(p: Path) -> bool:
 
 def _load_volume_file(p: Path, **kw: Any) -> Volume:
     name = p.name.lower()
-    if name.endswith((".nii", ".nii.gz")):
+    if name.endswith(NIFTI_SUFFIXES):
         from ctui.engine.io.series.research import load_nifti  # loaded with its format
 
         return load_nifti(p, **kw)
-    if name.endswith((".nrrd", ".nhdr")):
+    if name.endswith(NRRD_SUFFIXES):
         from ctui.engine.io.series.research import load_nrrd  # loaded with its format
 
         return load_nrrd(p, **kw)
-    if name.endswith((".gipl", ".gipl.gz")):
+    if name.endswith(GIPL_SUFFIXES):
         from ctui.engine.io.series.gipl import load_gipl  # loaded with its format
 
         return load_gipl(p, **kw)
@@ -528,7 +529,7 @@ def scan(path: str | os.PathLike | Sequence[str | os.PathLike], *, shape: Any = 
                      "modality": {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR"}.get(hdr.get("Modality", ""), "OT"),
                      "files": 1, "shape_zyx": [dims[2], dims[1], dims[0]], "spacing_zyx_mm": [sp[2], sp[1], sp[0]],
                      "kind": "mhd"}]
-        if vf.name.lower().endswith((".gipl", ".gipl.gz")):
+        if vf.name.lower().endswith(GIPL_SUFFIXES):
             from ctui.engine.io.series import gipl  # loaded with its format
 
             return [gipl.header_info(vf)]

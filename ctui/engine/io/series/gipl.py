@@ -34,9 +34,9 @@ from ctui.engine.core.volume import Volume
 from ctui.engine.io.series.nrrd_data import inflate_bounded
 from ctui.engine.io.series.raw import _read_planned, _slice_at
 from ctui.engine.io.series.stacks import _finish, parse_spacing
+from ctui.engine.io.suffixes import GIPL_SUFFIXES
 
 #: File names read as GIPL (lower case).
-GIPL_SUFFIXES = (".gipl", ".gipl.gz")
 HEADER_BYTES = 256
 MAGIC = (0xEFFFE9B0, 0x2AE389B8)
 #: image type code -> numpy type (big-endian); 1 (binary) is one byte a voxel, as ITK reads it

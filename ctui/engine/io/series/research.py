@@ -27,6 +27,7 @@ from ctui.engine.io.series._common import allocate, check_memory, checked_axes, 
 from ctui.engine.io.series.nrrd_data import HEADER_LIMIT, header_end, read_payload, regular_file
 from ctui.engine.io.series.raw import load_raw
 from ctui.engine.io.series.stacks import parse_spacing
+from ctui.engine.io.suffixes import NIFTI_SUFFIXES
 
 _LPS_FROM_RAS = np.diag([-1.0, -1.0, 1.0])
 
@@ -123,7 +124,7 @@ def _load_nifti(path: Path, *, skipped: list, crop=None, downsample=None, progre
                               f"spacing=(dz, dy, dx) (--spacing dz,dy,dx) for true measurements", "spacing")]
     warnings += bad
     voff = int(getattr(img.dataobj, "offset", 352))  # (img.header's vox_offset is reset by nibabel)
-    if str(path).lower().endswith((".nii", ".nii.gz")) and voff < 348:
+    if str(path).lower().endswith(NIFTI_SUFFIXES) and voff < 348:
         warnings.append(f"the NIfTI header's vox_offset {voff} lies inside its 348-byte header: the first voxels "
                         "read are header bytes")
     sp, direction = _geometry_from_matrix(m)
@@ -415,7 +416,7 @@ def _nrrd_data_files(path: Path, spec: str, nz: int) -> list[Path] | None:
 def header_info(path: Path) -> dict[str, Any]:
     """scan() entry of a NIfTI or NRRD file, from its header only."""
     name = path.name.lower()
-    if name.endswith((".nii", ".nii.gz")):
+    if name.endswith(NIFTI_SUFFIXES):
         nib = _nib()
 
         try:

@@ -22,6 +22,7 @@ import numpy as np
 from ctui.engine.core.errors import CtuiError
 from ctui.engine.core.volume import Volume
 from ctui.engine.core.windows import auto_window
+from ctui.engine.io.suffixes import NIFTI_SUFFIXES, NRRD_SUFFIXES
 
 SAMPLE_ABOVE = 64 << 20  # declared bytes above which info samples slices
 COMPRESSED_REACH = 256 << 20  # decompressed bytes a sampled slice of a compressed file may lie beyond
@@ -31,13 +32,13 @@ def _declared(p: Path) -> tuple[tuple[int, int, int], int, bool] | None:
     """((nz, ny, nx), bytes a voxel, compressed) from the header, or None (not sampled)."""
     name = p.name.lower()
     try:
-        if name.endswith((".nii", ".nii.gz")):
+        if name.endswith(NIFTI_SUFFIXES):
             import nibabel as nib
 
             img = nib.load(str(p))
             shp = [int(s) for s in img.shape] + [1, 1]
             return (shp[2], shp[1], shp[0]), int(img.header.get_data_dtype().itemsize), name.endswith(".gz")
-        if name.endswith((".nrrd", ".nhdr")):
+        if name.endswith(NRRD_SUFFIXES):
             from ctui.engine.io.series.research import _TYPE, _read_nrrd_header  # loaded with its format
 
             hdr = _read_nrrd_header(p)
