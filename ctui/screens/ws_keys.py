@@ -395,7 +395,8 @@ def _objects_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
     area = np.bincount(s.seg.labels[s.z].ravel(), minlength=11)
     vols = ws.volumes.of(s)
     px_mm2 = s.volume.spacing[1] * s.volume.spacing[2]
-    ids = sorted(set(objs) | set(vols) | {s.current})
+    pending = ws.pending.proposal
+    ids = sorted(set(objs) | set(vols) | {s.current} | ({ws.pending.object_id} if pending is not None else set()))
     for i in ids:
         info = s.seg.objects.get(i)
         col = info.color if info is not None else (128, 128, 128)
@@ -410,3 +411,13 @@ def _objects_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
             t.append(f" {name:<10} {stats}\n")
         else:  # a long name gets a line of its own (the panel holds 36 columns), the figures under it
             t.append(f" {name if len(name) <= 32 else name[:31] + '…'}\n{'':15}{stats}\n")
+        if pending is not None and i == ws.pending.object_id:  # the hatched proposal's volume: before a accepts it
+            _proposed_text(pending, s.volume.spacing, t)
+
+
+def _proposed_text(p, spacing, t: Text) -> None:
+    """The pending proposal's own volume under its object's row (the object's stays as it is until ``a``):
+    "proposed 112.3 ml" for one that becomes the object, "proposed +12.3 ml" for one added to it."""
+    ml = p.voxels * float(np.prod(spacing)) / 1000.0
+    t.append(f"    proposed {'' if getattr(p, 'replace', False) else '+'}{ml:.1f} ml", style="yellow")
+    t.append(": a accepts\n", style="dim")  # 34 cells at most: one line in the 36 of the panel

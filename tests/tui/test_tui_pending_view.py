@@ -1,0 +1,49 @@
+"""What a pending proposal shows before ``a`` (issue 37's new-user pass), with Textual's Pilot on a
+synthetic ball whose volume is known: the objects list gives the proposal's volume beside its object's
+0.0 ml, the review strip draws the slice limits it sets, and the 80x24 panel keeps one whole line of each
+note instead of cutting the notes at its bottom."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ctui.engine.core.volume import Volume
+from ctui.engine.segment.proposal import Proposal
+from ctui.screens.session import Session
+from ctui.screens.testing import wait_for, workspace_of
+from ctui.screens.ws_keys import panel_text
+
+
+def _ball() -> tuple[Session, np.ndarray]:
+    """A 60 HU ball (r 12 voxels of 1 x 1 x 2 mm: 2 * 7.24 = 14.5 mL) in -100 HU fat; the cursor at its centre."""
+    nz, n = 28, 64
+    zz, yy, xx = np.mgrid[0:nz, 0:n, 0:n]
+    ball = (zz - 14) ** 2 + (yy - 32) ** 2 + (xx - 32) ** 2 <= 144
+    data = np.where(ball, 60, -100).astype(np.int16)
+    s = Session(Volume(data, spacing=(2.0, 1.0, 1.0), modality="CT"), source_path="synthetic", z=14, y=32, x=32)
+    return s, ball
+
+
+def _pending(ws, ball: np.ndarray) -> float:
+    """The ball as object 1's pending proposal (as S leaves it); returns its volume in mL."""
+    ws.pending.show(Proposal.of_mask(1, 14, ball), seed=(32, 32, 14))
+    ws.update_panel()
+    return float(ball.sum()) * 2.0 / 1000.0
+
+
+async def test_the_objects_list_gives_a_pending_proposals_volume_and_a_takes_it():
+    for size in ((160, 50), (80, 24)):
+        s, ball = _ball()
+        async with workspace_of(s, size) as (app, pilot, ws):
+            ml = _pending(ws, ball)
+            await pilot.pause()
+            lines = panel_text(ws).plain.split("\n")
+            row = next(i for i, line in enumerate(lines) if "██ object 1" in line)
+            assert "0.0ml" in lines[row]  # nothing accepted yet
+            assert f"proposed {ml:.1f} ml" in lines[row + 1]  # the proposal's own volume under it
+            assert all(len(line) <= 36 for line in lines[row:row + 2])  # one line each in the panel's 36 cells
+            await pilot.press("a")
+            await wait_for(pilot, lambda: ws.pending.proposal is None, what="the accepted proposal")
+            await wait_for(pilot, lambda: f"{ml:6.1f}ml" in panel_text(ws).plain, what="the object's volume")
+            assert "proposed" not in panel_text(ws).plain
+            assert s.seg.voxels(1) == int(ball.sum())
