@@ -47,3 +47,34 @@ async def test_the_objects_list_gives_a_pending_proposals_volume_and_a_takes_it(
             await wait_for(pilot, lambda: f"{ml:6.1f}ml" in panel_text(ws).plain, what="the object's volume")
             assert "proposed" not in panel_text(ws).plain
             assert s.seg.voxels(1) == int(ball.sum())
+
+
+async def test_a_drag_along_the_review_strip_draws_the_slice_limits_it_sets():
+    from ctui.screens.strip import ReviewStrip
+    from ctui.screens.testing import drag
+
+    s, ball = _ball()
+    async with workspace_of(s, (80, 24)) as (app, pilot, ws):
+        _pending(ws, ball)
+        await pilot.pause()
+        strip = ws.query_one("#strip", ReviewStrip)
+        cols = strip._cols()
+        col = {z: next(c for c, (a, b) in enumerate(cols) if a <= z <= b) for z in (8, 20)}
+        assert "[" not in strip.render_line(1).text and "]" not in strip.render_line(1).text  # no limits yet
+        await drag(pilot, "#strip", [(col[8], 0), (col[20], 0)])
+        await pilot.pause()
+        lo, hi = s.limits.slices
+        assert (lo, hi) == (strip.slice_at(col[8]), strip.slice_at(col[20]))
+        markers = strip.render_line(1).text
+        assert markers.index("[") == col[8] and markers.index("]") == col[20]  # the limits, bracketed
+        bars = list(strip.render_line(0))[:len(cols)]
+        for c, ((a, b), seg) in enumerate(zip(cols, bars)):
+            if a <= s.z <= b:
+                continue  # the slice cursor's column keeps its highlight
+            outside = b < lo or a > hi
+            # the bars outside the limits dimmed (grey), those inside in the bars' blue
+            assert (seg.style.color.triplet.blue < 100) == outside, (c, a, b, seg)
+        s.limits.slices = None  # cleared (as i does): the brackets go
+        ws.update_panel()
+        await pilot.pause()
+        assert "[" not in strip.render_line(1).text
