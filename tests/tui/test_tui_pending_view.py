@@ -78,3 +78,52 @@ async def test_a_drag_along_the_review_strip_draws_the_slice_limits_it_sets():
         ws.update_panel()
         await pilot.pause()
         assert "[" not in strip.render_line(1).text
+
+
+_NOTES = ["the object (34 mL) is 34x the ball that fits at the seed: it probably leaked into a neighbour; "
+          "add background seeds there, narrow the range, or draw a box",
+          "leak guard at slice 17 (forward): area 900 px after 400 px, stopped",
+          "the neck cut removed 2.1 mL at slice 9; check it on the review strip",
+          "propagation cancelled; result is partial"]
+
+
+def test_a_notes_essential_line_is_its_first_clause_in_whole_words():
+    from ctui.screens.ws_keys import note_line
+
+    assert note_line(_NOTES[1], 34) == "leak guard at slice 17 (forward)"
+    assert note_line(_NOTES[3], 34) == "propagation cancelled"
+    assert note_line(_NOTES[0], 34) == "the object (34 mL) is 34x the…"  # cut after a whole word
+
+
+async def test_the_compact_panel_never_cuts_a_proposals_notes_at_its_bottom_and_help_shows_them_whole():
+    from rich.console import Console
+
+    from ctui.screens.dialogs import TextScreen
+    from ctui.screens.ws_keys import note_line
+
+    for size, crowded in (((80, 24), False), ((80, 29), False), ((80, 24), True)):
+        s, ball = _ball()
+        if crowded:  # a box and slice limits take the panel's rows: no room for a line per note
+            s.roi_box, s.limits.slices = ((0, 27), (0, 63), (0, 63)), (8, 20)
+        async with workspace_of(s, size) as (app, pilot, ws):
+            await wait_for(pilot, lambda: ws.seed_range.result is not None, what="the seed range")  # the panel settled
+            _pending(ws, ball)
+            ws.pending.notes = list(_NOTES)
+            ws.update_panel()
+            await pilot.pause()
+            panel = ws.query_one("#panel")  # its size: the text's room inside the padding
+            rows = ["".join(seg.text for seg in line).rstrip()
+                    for line in Console(width=panel.size.width).render_lines(panel_text(ws), pad=False)]
+            assert len(rows) <= panel.size.height, (size, rows)  # every row on screen: nothing cut at the bottom
+            below = rows[rows.index("Notes on the proposal") + 1:]
+            more = [r for r in below if r.startswith("+")]
+            lines = [r.removeprefix("• ") for r in below if r.startswith("• ")]
+            # one whole line each (its first clause), then how many more and where they are
+            assert lines == [note_line(n, panel.size.width - 2) for n in _NOTES[:len(lines)]], rows
+            shown_more = int(more[0].split()[0][1:]) if more else 0
+            assert len(lines) + shown_more == len(_NOTES) and (not more or more[0].endswith("? shows them"))
+            assert bool(more) == crowded  # a line each fits 80x24 and 80x29 here, not beside the box and limits
+            await pilot.press("question_mark")
+            await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), what="the help")
+            assert all(f"• {n}" in app.screen.body for n in _NOTES)  # the notes in full
+            await pilot.press("escape")
