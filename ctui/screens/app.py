@@ -366,6 +366,10 @@ class CtuiApp(App):
         cols = int(self.size.width * 0.9) - 6  # the help box's text width: groups side by side when it fits
         if screen is self.workspace:  # by task, the main actions first
             text = f"[b]Keys on this screen[/b], by task\n\n{task_help((screen, self), width=cols)}\n\n"
+            if screen.pending.proposal is not None and screen.pending.notes:  # whole (80x24's panel has no room)
+                from rich.markup import escape
+
+                text = "".join(f"• {escape(n)}\n" for n in screen.pending.notes).join(("[b]Notes on the proposal[/b]\n", "\n")) + text
         else:
             text = f"[b]Keys on this screen[/b]\n{bindings_help(screen)}\n\n"
         if self.workspace is not None and screen is not self.workspace:

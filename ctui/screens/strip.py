@@ -3,7 +3,8 @@ main view, with the slice cursor, the seed slice and the slices marked by
 :func:`ctui.engine.segment.review.marks` (the area jumps or the centre moves), and a
 second line of markers. A click on it goes to that slice (to the marked slice when the
 column holds one); ``{`` / ``}`` jump between marks (``ctui.screens.ws_mouse``). A leak's entry slice
-(:mod:`ctui.engine.segment.leaks`) is marked ``L``."""
+(:mod:`ctui.engine.segment.leaks`) is marked ``L``. The slice limits (a drag along the strip sets them) are
+bracketed ``[`` ``]`` on the markers' line, the bars outside them dimmed."""
 
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ _MARK = Style(color="rgb(255,80,80)", bgcolor="rgb(20,20,30)", bold=True)
 _SEED = Style(color="rgb(80,230,80)", bgcolor="rgb(20,20,30)")
 _CURSOR = Style(color="black", bgcolor="rgb(255,230,0)")
 _DIM = Style(color="rgb(150,150,150)", bgcolor="rgb(20,20,30)")
+_OUT = Style(color="rgb(70,70,80)", bgcolor="rgb(20,20,30)")  # a bar outside the slice limits
+_LIMIT = Style(color="rgb(255,200,0)", bgcolor="rgb(20,20,30)", bold=True)  # the limits' brackets
 
 
 def columns(nz: int, width: int) -> list[tuple[int, int]]:
@@ -70,7 +73,7 @@ def fitted(text: str, room: int) -> str:
 
 class ReviewStrip(Widget):
     """Two lines: the sparkline and the markers (``▲`` the slice, ``s`` the seed, ``!`` a mark, ``L`` where a
-    leak enters)."""
+    leak enters, ``[`` ``]`` the slice limits' first and last slices; the bars outside the limits dimmed)."""
 
     DEFAULT_CSS = """
     ReviewStrip { height: 2; width: 1fr; display: none; }
@@ -85,15 +88,18 @@ class ReviewStrip(Widget):
         self.cursor = 0
         self.seed: int | None = None
         self.hint = ""
+        self.limits: tuple[int, int] | None = None
 
     def set_data(self, profile: np.ndarray | None, marked, cursor: int, seed: int | None, hint: str = "",
-                 leaked=()) -> None:
+                 leaked=(), limits: tuple[int, int] | None = None) -> None:
         """``hint``: a short text drawn right of the bars when it fits (e.g. the keys); ``leaked``: the marked
-        slices where a leak enters."""
+        slices where a leak enters; ``limits``: the slice limits (first, last inclusive) or None."""
         marked, leaked = set(int(z) for z in marked), {int(z) for z in leaked}
         same_profile = (profile is None and self.profile is None) or (
             profile is not None and self.profile is not None and np.array_equal(profile, self.profile))
-        if same_profile and (marked, leaked, int(cursor), seed, hint) == (self.marked, self.leaked, self.cursor, self.seed, self.hint):
+        limits = None if limits is None else (int(limits[0]), int(limits[1]))
+        if same_profile and (marked, leaked, int(cursor), seed, hint, limits) == (
+                self.marked, self.leaked, self.cursor, self.seed, self.hint, self.limits):
             return  # nothing new to draw (the side panel updated for another reason): no repaint
         self.profile = None if profile is None else np.array(profile)  # a copy: compared with the next call's
         self.marked = marked
@@ -101,6 +107,7 @@ class ReviewStrip(Widget):
         self.cursor = int(cursor)
         self.seed = seed
         self.hint = hint
+        self.limits = limits
         self.refresh()
 
     def _cols(self) -> list[tuple[int, int]]:
@@ -122,6 +129,19 @@ class ReviewStrip(Widget):
         inside = sorted(z for z in self.marked if a <= z <= b)
         return inside[0] if inside else (a + b) // 2
 
+    def _inside(self, a: int, b: int) -> bool:
+        """Whether slices ``a``..``b`` (a column) reach inside the slice limits (no limits: all do)."""
+        lim = self.limits
+        return lim is None or (a <= lim[1] and b >= lim[0])
+
+    def _edge(self, a: int, b: int) -> str:
+        """``[`` on the column holding the limits' first slice, ``]`` on the last's (``|`` both), else ""."""
+        lim = self.limits
+        if lim is None:
+            return ""
+        lo, hi = a <= lim[0] <= b, a <= lim[1] <= b
+        return "|" if lo and hi else "[" if lo else "]" if hi else ""
+
     def render_line(self, y: int) -> Strip:
         cols = self._cols()
         width = self.size.width
@@ -131,11 +151,15 @@ class ReviewStrip(Widget):
         profile = self.profile
         if y == 0:
             for (a, b), h in zip(cols, bars(profile, cols)):
-                style = _CURSOR if a <= self.cursor <= b else (_MARK if any(a <= z <= b for z in self.marked) else _BAR)
+                style = _CURSOR if a <= self.cursor <= b else (_MARK if any(a <= z <= b for z in self.marked) else
+                                                               _BAR if self._inside(a, b) else _OUT)
                 segs.append(Segment(BARS[h], style))
         else:
             for a, b in cols:
-                if a <= self.cursor <= b:
+                edge, here = self._edge(a, b), a <= self.cursor <= b
+                if edge:  # a limit on the cursor's column: the bracket, in the cursor's colours
+                    segs.append(Segment(edge, _CURSOR if here else _LIMIT))
+                elif here:
                     segs.append(Segment("▲", _CURSOR))
                 elif any(a <= z <= b for z in self.marked):
                     segs.append(Segment("L" if any(a <= z <= b for z in self.leaked) else "!", _MARK))

@@ -17,6 +17,8 @@ from ctui.screens.ws_host import Owner, WorkspaceHost
 from ctui.screens.ws_state import describe, mm, value_unit
 
 if TYPE_CHECKING:
+    from textual.widget import Widget
+
     from ctui.screens.app import CtuiApp
 
 BINDINGS = keys(via="do", table="""
@@ -317,12 +319,51 @@ def panel_text(ws: WorkspaceHost) -> Text:
 
 
 def _notes_text(ws: WorkspaceHost, t: Text, lead: str = "") -> None:
-    """The pending proposal's warnings (in the panel, not toasts over the image)."""
+    """The pending proposal's warnings (in the panel, not toasts over the image). After the objects
+    (``lead``: the compact 80x24 panel) they take the rows left: whole when they fit, else one line each
+    (:func:`note_line`), else as many lines as fit and "+N notes: ? shows them" (the help lists them whole)."""
     pending = ws.pending
-    if pending.proposal is not None and pending.notes:
-        t.append(f"{lead}Notes on the proposal\n", style="bold yellow")
-        for note in pending.notes:
+    if pending.proposal is None or not pending.notes:
+        return
+    notes = pending.notes
+    t.append(f"{lead}Notes on the proposal\n", style="bold yellow")
+    if not lead:
+        for note in notes:
             t.append(f"• {note}\n", style="yellow")
+        return
+    size = cast("Widget", ws).query_one("#panel").size  # the workspace is a screen
+    cells = max(size.width, 20) if size.width else 36  # the text's width (the panel's size is inside its padding)
+    rows = size.height - _rows(t.plain, cells) if size.height else len(notes)
+    if sum(_rows(f"• {n}", cells) for n in notes) <= rows:
+        for note in notes:
+            t.append(f"• {note}\n", style="yellow")
+        return
+    shown = notes if len(notes) <= rows else notes[:max(rows - 1, 0)]
+    for note in shown:
+        t.append(f"• {note_line(note, cells - 2)}\n", style="yellow")
+    if len(shown) < len(notes):
+        t.append(f"+{len(notes) - len(shown)} notes: ? shows them\n", style="bold yellow")
+
+
+def _rows(text: str, cells: int) -> int:
+    """The panel rows ``text`` takes, its lines wrapped at ``cells`` (near enough: at words, as the panel)."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return sum(max(1, -(-len(line) // cells)) for line in lines)
+
+
+def note_line(note: str, room: int) -> str:
+    """A note's essential line in ``room`` cells: its first clause (up to ": " or "; "), cut after a whole
+    word with "…" when still longer; "leak guard at slice 17 (forward): area ..." -> "leak guard at slice
+    17 (forward)"."""
+    head = note
+    for sep in (": ", "; "):
+        head = head.split(sep, 1)[0]
+    if len(head) <= room:
+        return head
+    cut = head[:room - 1].rsplit(" ", 1)[0] if " " in head[:room - 1] else head[:room - 1]
+    return cut.rstrip(",;:") + "…"
 
 
 def _window_text(ws: WorkspaceHost, t: Text) -> None:
@@ -375,7 +416,8 @@ def _objects_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
     area = np.bincount(s.seg.labels[s.z].ravel(), minlength=11)
     vols = ws.volumes.of(s)
     px_mm2 = s.volume.spacing[1] * s.volume.spacing[2]
-    ids = sorted(set(objs) | set(vols) | {s.current})
+    pending = ws.pending.proposal
+    ids = sorted(set(objs) | set(vols) | {s.current} | ({ws.pending.object_id} if pending is not None else set()))
     for i in ids:
         info = s.seg.objects.get(i)
         col = info.color if info is not None else (128, 128, 128)
@@ -390,3 +432,13 @@ def _objects_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
             t.append(f" {name:<10} {stats}\n")
         else:  # a long name gets a line of its own (the panel holds 36 columns), the figures under it
             t.append(f" {name if len(name) <= 32 else name[:31] + '…'}\n{'':15}{stats}\n")
+        if pending is not None and i == ws.pending.object_id:  # the hatched proposal's volume: before a accepts it
+            _proposed_text(pending, s.volume.spacing, t)
+
+
+def _proposed_text(p, spacing, t: Text) -> None:
+    """The pending proposal's own volume under its object's row (the object's stays as it is until ``a``):
+    "proposed 112.3 ml" for one that becomes the object, "proposed +12.3 ml" for one added to it."""
+    ml = p.voxels * float(np.prod(spacing)) / 1000.0
+    t.append(f"    proposed {'' if getattr(p, 'replace', False) else '+'}{ml:.1f} ml", style="yellow")
+    t.append(": a accepts\n", style="dim")  # 34 cells at most: one line in the 36 of the panel

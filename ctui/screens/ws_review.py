@@ -91,7 +91,7 @@ class ReviewOwner(Owner):
         keys = "} { marks, C cut, A accept to here" if p is not None else "} { marks"
         hint = f"{len(marks)} mark{'s' if len(marks) != 1 else ''}: {keys}" if marks else ("no marks" if p is not None else "")
         strip.set_data(prof, marks, self.s.z, src.start_slice, hint=f"{'proposal' if p is not None else 'object'} · {hint}",
-                       leaked=leaked)
+                       leaked=leaked, limits=self.s.limits.slices)
         strip.set_class(True, "on")
 
     def go_slice(self, z: int) -> None:
