@@ -287,7 +287,7 @@ def panel_text(ws: WorkspaceHost) -> Text:
              else f"Enter fills ±{s.tolerance:g} {dom}\n")
     if not compact:
         t.append(f"Connectivity {s.connectivity}  propagation {s.prop_mode}\n")
-    _seed_text(ws, t)
+    _seed_text(ws, t, compact)
     if not compact:
         _notes_text(ws, t)
     tools = ws.edit_tools
@@ -379,12 +379,19 @@ def _window_text(ws: WorkspaceHost, t: Text) -> None:
 _BARS = " ▁▂▃▄▅▆▇█"
 
 
-def _seed_text(ws: WorkspaceHost, t: Text) -> None:
+def _seed_text(ws: WorkspaceHost, t: Text, compact: bool = False) -> None:
     """The segmentation settings (G) and the range S would use at the cursor, with the neighbourhood's
-    histogram (a sparkline, the range's part bright)."""
+    histogram (a sparkline, the range's part bright). ``compact`` (80x24): the settings' first two
+    parts and no line on why the range ends (the rows go to the objects and the notes)."""
     s = ws.s
     t.append("Segment ", style="bold")
-    t.append(f"{describe(s)}\n", style="dim")
+    if compact:  # the method and the range (G shows the rest)
+        o, rng = s.segment_options, s.segment_options.get("range", "given")
+        given = s.range_ if rng == "given" else (None if rng == "auto" else rng)  # "given": T's range, if any
+        rtxt = "auto" if given is None else f"{given[0]:g}:{given[1]:g}"
+        t.append(f"{o.get('method', 'fill')} {s.prop_mode}, range {rtxt}\n", style="dim")
+    else:
+        t.append(f"{describe(s)}\n", style="dim")
     key = (s.z, s.y, s.x, id(s.pipeline), tuple(s.pipeline_steps()))
     if not ws.seed_range.painted:
         # the segmentation engine (scipy, 0.2-0.3 s on the main thread) loads once the workspace is painted
@@ -404,7 +411,7 @@ def _seed_text(ws: WorkspaceHost, t: Text) -> None:
         t.append(_BARS[min(8, round(8 * h / top))], style="green" if inside else "dim")
     t.append("\n")
     stops = getattr(getattr(rc, "steps", None), "stops", None)
-    if stops:  # why the range ends there: a neighbour joins the seed's region past that bound
+    if stops and not compact:  # why the range ends there: a neighbour joins the seed's region past that bound
         t.append(f"  {' and '.join(f'{k} {v:.0f}' for k, v in stops.items())}: a neighbour joins past it\n", style="dim")
 
 

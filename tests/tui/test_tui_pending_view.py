@@ -127,3 +127,24 @@ async def test_the_compact_panel_never_cuts_a_proposals_notes_at_its_bottom_and_
             await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), what="the help")
             assert all(f"• {n}" in app.screen.body for n in _NOTES)  # the notes in full
             await pilot.press("escape")
+
+
+async def test_80x24_panel_says_the_method_and_range_in_one_row():
+    """At 80x24 the panel's segmentation line is one row (the method and the range S uses), and the
+    line on why the seed range ends is left out: the rows go to the objects and the notes."""
+    s, _ = _ball()
+    async with workspace_of(s, (80, 24)) as (app, pilot, ws):
+        def seg_line() -> str:
+            return next(x for x in panel_text(ws).plain.splitlines() if x.startswith("Segment "))
+
+        assert seg_line() == "Segment fill slice, range auto"
+        s.range_ = (10.0, 200.0)  # a range typed with T: S uses it
+        assert seg_line() == "Segment fill slice, range 10:200"
+        s.segment_options["range"] = "auto"  # G's range auto: S ignores T's
+        assert seg_line() == "Segment fill slice, range auto"
+        await wait_for(pilot, lambda: "Seed range here" in panel_text(ws).plain and ws.seed_range.result is not None,
+                       what="the seed range")
+        assert "a neighbour joins past it" not in panel_text(ws).plain
+    s, _ = _ball()
+    async with workspace_of(s, (160, 50)) as (app, pilot, ws):  # the full line at 160x50
+        assert "neck auto" in next(x for x in panel_text(ws).plain.splitlines() if x.startswith("Segment "))
