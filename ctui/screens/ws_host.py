@@ -156,6 +156,15 @@ class Owner:
     def update_panel(self) -> None:
         self.ws.update_panel()
 
+    def work_failed(self, what: str, reason: str) -> None:
+        """A worker's failure, once its owner has said the worker ended: the progress bar goes, and
+        an error notification ("cancelled": the status line says nothing changed)."""
+        self.ws.show_progress(None)
+        if reason == "cancelled":
+            self.set_status(f"{what} cancelled: nothing changed")
+            return
+        self.app.notify(f"{what} failed: {reason}", severity="error", timeout=10)
+
     def actions(self) -> dict[str, Callable[..., Any]]:
         """This owner's key actions: ``action_<name>`` methods by ``<name>``."""
         return {n[len("action_"):]: getattr(self, n) for n in dir(type(self)) if n.startswith("action_")}

@@ -92,8 +92,4 @@ class JobRunner(Owner):
     def failed(self, what: str, reason: str) -> None:
         """A job's ``JobFailed``: an error notification ("cancelled": the status line says so)."""
         self.ws.jobs.worker_ended()
-        self.ws.show_progress(None)
-        if reason == "cancelled":
-            self.set_status(f"{what} cancelled: nothing changed")
-            return
-        self.app.notify(f"{what} failed: {reason}", severity="error", timeout=10)
+        self.work_failed(what, reason)

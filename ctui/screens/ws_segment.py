@@ -109,11 +109,7 @@ class SegmentRunner(Owner):
     def failed(self, what: str, reason: str) -> None:
         """A run's ``SegmentationFailed``: no proposal."""
         self.ws.jobs.segmentation_ended()
-        self.ws.show_progress(None)
-        if reason == "cancelled":
-            self.set_status(f"{what} cancelled: nothing changed")
-            return
-        self.app.notify(f"{what} failed: {reason}", severity="error", timeout=10)
+        self.work_failed(what, reason)
 
     def accept(self) -> None:
         """``a``: the pending proposal goes into the segmentation (one undo step)."""
