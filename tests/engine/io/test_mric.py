@@ -165,7 +165,10 @@ def test_huge_counts_never_allocate(tmp_path):
             read_mric(tmp_path / "h.mric")
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        assert peak < 64 * 1024, (name, peak)
+        # tracemalloc counts every thread of the test process (a daemon of an earlier test may allocate
+        # meanwhile: 113,589 B seen under 5 suites in parallel); a count of 2**31 read as allocated would
+        # be gigabytes, so 1 MB still tells the two apart
+        assert peak < 1024 * 1024, (name, peak)
 
 
 def test_bad_marker_and_coordinates(tmp_path):
