@@ -27,9 +27,9 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-MODES = ("auto", "sixel", "kitty", "halfblock", "ascii")
 PIXEL_MODES = ("sixel", "kitty")  # images drawn by the terminal (pixels), not with characters
 CELL_MODES = ("halfblock", "ascii")  # images drawn with characters
+MODES = ("auto", *PIXEL_MODES, *CELL_MODES)
 #: ``ctui web`` sets ``CTUI_WEB=1`` for the TUI it serves to a browser: sixel images (xterm.js draws
 #: them; the kitty protocol blanks the page and "auto" finds no tty), at most WEB_MAX_PIXELS
 #: (w, h) each (sixel bytes grow with the area), redrawn at most every WEB_DEBOUNCE_S seconds
